@@ -1,0 +1,58 @@
+"""What every service's command line shares: logging, the common options, and running a service."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import sys
+from typing import Callable
+
+from .transport import add_zenoh_arguments, options_from
+
+LOG_FORMAT = "%(asctime)s %(levelname)-7s %(name)s: %(message)s"
+
+
+def setup_logging(level: str | None = None) -> None:
+    """Log to stderr at ``level`` (or ``ARROCH_LOG_LEVEL``, default INFO)."""
+    chosen = (level or os.environ.get("ARROCH_LOG_LEVEL") or "INFO").upper()
+    logging.basicConfig(level=chosen, format=LOG_FORMAT, stream=sys.stderr, force=True)
+    # zenoh's Rust logs go through its own env var; keep them quiet unless asked.
+    os.environ.setdefault("RUST_LOG", "error")
+
+
+def add_common_arguments(parser: argparse.ArgumentParser, *, site: bool = True, zenoh: bool = True) -> None:
+    """--site, --namespace, --clock, --log-level and the Zenoh options."""
+    if site:
+        parser.add_argument("--site", "--config", dest="site", metavar="FILE", help="site file (TOML); default: the packaged 'office' site")
+        parser.add_argument("--namespace", metavar="NAME", help="key namespace arroch/<NAME>/...; default: the site's name")
+        parser.add_argument("--clock", choices=("sim", "wall"), default="sim", help="site clock source (default sim: the simulator's clock messages)")
+    parser.add_argument("--log-level", default=None, choices=("DEBUG", "INFO", "WARNING", "ERROR"), help="log level (env ARROCH_LOG_LEVEL, default INFO)")
+    if zenoh:
+        add_zenoh_arguments(parser)
+
+
+def run_service(build: Callable[[], "object"]) -> int:
+    """Build a service, open it, run until SIGINT/SIGTERM, close. Returns the exit code.
+
+    ``build`` may raise ``ValueError``/``FileNotFoundError`` for bad configuration: that is
+    reported in one line and exit code 2, before any Zenoh session exists.
+    """
+    try:
+        service = build()
+    except (ValueError, FileNotFoundError) as exc:
+        logging.getLogger("arroch").error("%s", exc)
+        return 2
+    service.install_signal_handlers()  # type: ignore[attr-defined]
+    try:
+        service.open()  # type: ignore[attr-defined]
+    except Exception as exc:
+        logging.getLogger("arroch").error("could not start: %s", exc)
+        service.close()  # type: ignore[attr-defined]
+        return 1
+    service.run()  # type: ignore[attr-defined]
+    return 0
+
+
+def zenoh_options(args: argparse.Namespace):
+    return options_from(args)

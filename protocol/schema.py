@@ -1,0 +1,351 @@
+"""Declarative field checks for wire records.
+
+A wire record is a ``kw_only`` dataclass whose field types are drawn from a small set
+(``bool``, ``int``, ``float``, ``str``, ``bytes``, ``list[T]``, ``dict[str, T]``,
+``X | None``, unions of scalars, ``Json`` and nested records). From those type hints and
+the limits given with :func:`spec`, :func:`compile_record` builds one checker per field,
+once per class, so decoding a message is a flat loop of small function calls.
+
+Every check raises :class:`ProtocolError` naming the field path.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import types
+import typing
+from typing import Any, Callable
+
+import numpy as np
+
+from .errors import ProtocolError
+
+# Default limits: generous for real use, small enough that one message cannot exhaust memory.
+MAX_STR = 4096
+MAX_LIST = 100_000
+MAX_BYTES = 8 * 1024 * 1024
+MAX_JSON_DEPTH = 6
+
+ID_PATTERN = re.compile(r"^[A-Za-z][A-Za-z0-9_\-]{0,63}$")
+
+Scalar = bool | int | float | str
+
+
+class Json:
+    """Marker type: a JSON-like tree (maps with string keys, lists, scalars, ``None``)."""
+
+
+Checker = Callable[[Any, str], Any]
+
+
+def spec(
+    default: Any = dataclasses.MISSING,
+    *,
+    lo: float | None = None,
+    hi: float | None = None,
+    max_len: int | None = None,
+    choices: tuple[str, ...] | None = None,
+    ident: bool = False,
+    row_len: int | None = None,
+    factory: Callable[[], Any] | None = None,
+) -> Any:
+    """A dataclass field with wire limits.
+
+    ``lo``/``hi`` bound numbers (inclusive); ``max_len`` bounds strings, bytes, lists and maps;
+    ``choices`` restricts a string; ``ident`` requires an identifier (letters, digits, ``_``, ``-``);
+    ``row_len`` requires every row of a ``list[list[float]]`` to have that length.
+    """
+    meta = {"lo": lo, "hi": hi, "max_len": max_len, "choices": choices, "ident": ident, "row_len": row_len}
+    if factory is not None:
+        return dataclasses.field(default_factory=factory, metadata=meta)
+    return dataclasses.field(default=default, metadata=meta)
+
+
+def _fail(path: str, problem: str) -> typing.NoReturn:
+    raise ProtocolError(path, problem)
+
+
+def _type_name(value: Any) -> str:
+    return type(value).__name__
+
+
+def _check_bool(value: Any, path: str) -> bool:
+    if not isinstance(value, bool):
+        _fail(path, f"expected bool, got {_type_name(value)}")
+    return value
+
+
+def _number_checker(kind: type, lo: float | None, hi: float | None) -> Checker:
+    def check(value: Any, path: str) -> Any:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            _fail(path, f"expected {kind.__name__}, got {_type_name(value)}")
+        if kind is int:
+            if not isinstance(value, int):
+                _fail(path, f"expected int, got {_type_name(value)}")
+        else:
+            value = float(value)
+            if not math.isfinite(value):
+                _fail(path, f"must be finite, got {value}")
+        if lo is not None and value < lo:
+            _fail(path, f"{value} is below the minimum {lo}")
+        if hi is not None and value > hi:
+            _fail(path, f"{value} is above the maximum {hi}")
+        return value
+
+    return check
+
+
+def _str_checker(max_len: int, choices: tuple[str, ...] | None, ident: bool) -> Checker:
+    def check(value: Any, path: str) -> str:
+        if not isinstance(value, str):
+            _fail(path, f"expected str, got {_type_name(value)}")
+        if len(value) > max_len:
+            _fail(path, f"string of {len(value)} characters exceeds the limit {max_len}")
+        if choices is not None and value not in choices:
+            _fail(path, f"{value!r} is not one of {', '.join(choices)}")
+        if ident and value and not ID_PATTERN.match(value):
+            _fail(path, f"{value[:40]!r} is not an identifier (letter first, then letters, digits, _ or -; 64 at most)")
+        return value
+
+    return check
+
+
+def _bytes_checker(max_len: int) -> Checker:
+    def check(value: Any, path: str) -> bytes:
+        if not isinstance(value, (bytes, bytearray)):
+            _fail(path, f"expected bytes, got {_type_name(value)}")
+        if len(value) > max_len:
+            _fail(path, f"{len(value)} bytes exceeds the limit {max_len}")
+        return bytes(value)
+
+    return check
+
+
+def _list_checker(item: Checker, max_len: int, row_len: int | None) -> Checker:
+    def check(value: Any, path: str) -> list:
+        if not isinstance(value, (list, tuple)):
+            _fail(path, f"expected list, got {_type_name(value)}")
+        if len(value) > max_len:
+            _fail(path, f"list of {len(value)} items exceeds the limit {max_len}")
+        out = [item(v, f"{path}[{i}]") for i, v in enumerate(value)]
+        if row_len is not None:
+            for i, row in enumerate(out):
+                if len(row) != row_len:
+                    _fail(f"{path}[{i}]", f"expected {row_len} values, got {len(row)}")
+        return out
+
+    return check
+
+
+def _float_rows_checker(max_len: int, row_len: int, lo: float | None, hi: float | None) -> Checker:
+    """Fast path for ``list[list[float]]`` with fixed rows (trajectories, 2-D points).
+
+    Checking element by element costs ~2 µs per row in Python; one pass of type checks and one
+    numpy pass for finiteness and bounds is ~10x cheaper."""
+    element = _number_checker(float, lo, hi)
+
+    def check(value: Any, path: str) -> list:
+        if not isinstance(value, (list, tuple)):
+            _fail(path, f"expected list, got {_type_name(value)}")
+        if len(value) > max_len:
+            _fail(path, f"list of {len(value)} items exceeds the limit {max_len}")
+        for i, row in enumerate(value):
+            if not isinstance(row, (list, tuple)) or len(row) != row_len:
+                what = f"{len(row)} values" if isinstance(row, (list, tuple)) else _type_name(row)
+                _fail(f"{path}[{i}]", f"expected a row of {row_len} numbers, got {what}")
+            for x in row:
+                if type(x) is not float and type(x) is not int:
+                    _fail(f"{path}[{i}]", f"expected numbers, got {_type_name(x)}")
+        if value:
+            arr = np.asarray(value, dtype=np.float64)
+            bad = ~np.isfinite(arr)
+            if lo is not None:
+                bad |= arr < lo
+            if hi is not None:
+                bad |= arr > hi
+            if bad.any():
+                i, j = (int(k) for k in np.argwhere(bad)[0])
+                element(value[i][j], f"{path}[{i}][{j}]")  # raises with the precise reason
+        return [list(row) for row in value]
+
+    return check
+
+
+def _dict_checker(item: Checker, max_len: int) -> Checker:
+    def check(value: Any, path: str) -> dict:
+        if not isinstance(value, dict):
+            _fail(path, f"expected map, got {_type_name(value)}")
+        if len(value) > max_len:
+            _fail(path, f"map of {len(value)} entries exceeds the limit {max_len}")
+        out = {}
+        for k, v in value.items():
+            if not isinstance(k, str):
+                _fail(path, f"map key {k!r} is not a string")
+            if len(k) > 256:
+                _fail(path, "map key longer than 256 characters")
+            out[k] = item(v, f"{path}.{k}")
+        return out
+
+    return check
+
+
+def _union_checker(options: list[tuple[type, Checker]]) -> Checker:
+    names = " or ".join(t.__name__ for t, _ in options)
+
+    def check(value: Any, path: str) -> Any:
+        for kind, checker in options:
+            # bool is an int subclass: match it only against bool.
+            if isinstance(value, bool) != (kind is bool):
+                continue
+            if isinstance(value, kind) or (kind is float and isinstance(value, int)):
+                return checker(value, path)
+        _fail(path, f"expected {names}, got {_type_name(value)}")
+
+    return check
+
+
+def _check_json(value: Any, path: str, depth: int = 0) -> Any:
+    if depth > MAX_JSON_DEPTH:
+        _fail(path, f"nested deeper than {MAX_JSON_DEPTH} levels")
+    if value is None or isinstance(value, (bool, int, str)):
+        if isinstance(value, str) and len(value) > MAX_STR:
+            _fail(path, f"string exceeds the limit {MAX_STR}")
+        return value
+    if isinstance(value, float):
+        if not math.isfinite(value):
+            _fail(path, f"must be finite, got {value}")
+        return value
+    if isinstance(value, (list, tuple)):
+        if len(value) > MAX_LIST:
+            _fail(path, f"list exceeds the limit {MAX_LIST}")
+        return [_check_json(v, f"{path}[{i}]", depth + 1) for i, v in enumerate(value)]
+    if isinstance(value, dict):
+        out = {}
+        for k, v in value.items():
+            if not isinstance(k, str):
+                _fail(path, f"map key {k!r} is not a string")
+            out[k] = _check_json(v, f"{path}.{k}", depth + 1)
+        return out
+    _fail(path, f"unsupported value of type {_type_name(value)}")
+
+
+def _optional(inner: Checker) -> Checker:
+    def check(value: Any, path: str) -> Any:
+        return None if value is None else inner(value, path)
+
+    return check
+
+
+def checker_for(hint: Any, meta: typing.Mapping[str, Any]) -> Checker:
+    """Build the checker for one type hint with the field's limits."""
+    origin = typing.get_origin(hint)
+    args = typing.get_args(hint)
+    max_len = meta.get("max_len")
+    if hint is bool:
+        return _check_bool
+    if hint in (int, float):
+        return _number_checker(hint, meta.get("lo"), meta.get("hi"))
+    if hint is str:
+        return _str_checker(max_len or MAX_STR, meta.get("choices"), bool(meta.get("ident")))
+    if hint is bytes:
+        return _bytes_checker(max_len or MAX_BYTES)
+    if hint is Json:
+        return _check_json
+    if dataclasses.is_dataclass(hint):
+        return record_checker(hint)
+    if origin in (types.UnionType, typing.Union):
+        members = [a for a in args if a is not type(None)]
+        if len(members) < len(args):  # X | None
+            inner = members[0] if len(members) == 1 else typing.Union[tuple(members)]
+            return _optional(checker_for(inner, meta))
+        return _union_checker([(a, checker_for(a, {})) for a in members])
+    if origin is list and meta.get("row_len") and typing.get_args(args[0]) == (float,):
+        return _float_rows_checker(max_len or MAX_LIST, meta["row_len"], meta.get("lo"), meta.get("hi"))
+    if origin is list:
+        item_meta = {k: meta.get(k) for k in ("lo", "hi", "choices", "ident")}
+        return _list_checker(checker_for(args[0], item_meta), max_len or MAX_LIST, meta.get("row_len"))
+    if origin is dict:
+        if args[0] is not str:
+            raise TypeError(f"wire maps must have str keys, not {args[0]}")
+        return _dict_checker(checker_for(args[1], {}), max_len or 4096)
+    raise TypeError(f"unsupported wire type {hint!r}")
+
+
+@dataclasses.dataclass(frozen=True)
+class FieldPlan:
+    name: str
+    required: bool
+    check: Checker
+    to_wire: Callable[[Any], Any] | None  # None: the value goes on the wire as it is
+
+
+_PLANS: dict[type, tuple[FieldPlan, ...]] = {}
+
+
+def _wire_converter(hint: Any) -> Callable[[Any], Any] | None:
+    """How to turn a field value into plain msgpack data, or None when it already is."""
+    if dataclasses.is_dataclass(hint):
+        return record_to_wire
+    origin = typing.get_origin(hint)
+    args = typing.get_args(hint)
+    if origin in (types.UnionType, typing.Union):
+        convs = [_wire_converter(a) for a in args if a is not type(None)]
+        conv = next((c for c in convs if c is not None), None)
+        return None if conv is None else (lambda v: None if v is None else conv(v))
+    if origin is list:
+        inner = _wire_converter(args[0])
+        return None if inner is None else (lambda v: [inner(x) for x in v])
+    if origin is dict:
+        inner = _wire_converter(args[1])
+        return None if inner is None else (lambda v: {k: inner(x) for k, x in v.items()})
+    return None
+
+
+def plan_for(cls: type) -> tuple[FieldPlan, ...]:
+    """The compiled field plan of a record class (built once, then cached)."""
+    plan = _PLANS.get(cls)
+    if plan is None:
+        hints = typing.get_type_hints(cls, include_extras=False)
+        plan = tuple(
+            FieldPlan(
+                name=f.name,
+                required=f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING,
+                check=checker_for(hints[f.name], f.metadata),
+                to_wire=_wire_converter(hints[f.name]),
+            )
+            for f in dataclasses.fields(cls)
+            if f.init and not f.name.startswith("_")
+        )
+        _PLANS[cls] = plan
+    return plan
+
+
+def record_from_wire(cls: type, data: Any, path: str = "") -> Any:
+    """Check a decoded map against ``cls`` and build the record; unknown keys are ignored."""
+    if not isinstance(data, dict):
+        _fail(path or "(payload)", f"expected map, got {_type_name(data)}")
+    values = {}
+    prefix = f"{path}." if path else ""
+    for fp in plan_for(cls):
+        if fp.name in data:
+            values[fp.name] = fp.check(data[fp.name], prefix + fp.name)
+        elif fp.required:
+            _fail(prefix + fp.name, "required field is missing")
+    return cls(**values)
+
+
+def record_checker(cls: type) -> Checker:
+    def check(value: Any, path: str) -> Any:
+        return record_from_wire(cls, value, path)
+
+    return check
+
+
+def record_to_wire(record: Any) -> dict[str, Any]:
+    out = {}
+    for fp in plan_for(type(record)):
+        value = getattr(record, fp.name)
+        out[fp.name] = value if fp.to_wire is None else fp.to_wire(value)
+    return out

@@ -1,0 +1,124 @@
+"""Zenoh session configuration for every ARROCH process.
+
+Precedence, lowest first: built-in defaults → a Zenoh JSON5 config file (taken as it is) →
+environment variables → command-line options. Defaults: ``client`` mode connecting to a router
+on ``tcp/127.0.0.1:7447`` (what ``arroch router`` and ``arroch up`` start), multicast scouting off.
+
+Environment variables (each overrides the file, and is overridden by the matching option):
+
+===========================  ======================================================
+``ARROCH_ZENOH_CONFIG``       path of a Zenoh JSON5 config file
+``ARROCH_ZENOH_MODE``         ``peer``, ``client`` or ``router``
+``ARROCH_ZENOH_CONNECT``      comma-separated endpoints to connect to
+``ARROCH_ZENOH_LISTEN``       comma-separated endpoints to listen on
+``ARROCH_ZENOH_MULTICAST``    ``1`` to turn multicast scouting on
+``ARROCH_ZENOH_SHM``          ``0`` to turn shared-memory transport off
+===========================  ======================================================
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import socket
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import zenoh
+
+DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
+MODES = ("peer", "client", "router")
+
+
+@dataclass
+class ZenohOptions:
+    mode: str = "client"
+    connect: list[str] = field(default_factory=list)
+    listen: list[str] = field(default_factory=list)
+    config_file: str | None = None
+    multicast: bool = False
+    shared_memory: bool | None = None  # None: Zenoh's default
+
+    def effective_connect(self) -> list[str]:
+        """Client mode with nothing to connect to would be useless: default to the local router."""
+        if self.connect or self.mode != "client" or self.config_file:
+            return self.connect
+        return [DEFAULT_ROUTER]
+
+
+def _split(value: str | None) -> list[str]:
+    return [part.strip() for part in (value or "").split(",") if part.strip()]
+
+
+def add_zenoh_arguments(parser: argparse.ArgumentParser) -> None:
+    """The Zenoh options every service's command line has."""
+    group = parser.add_argument_group("zenoh transport")
+    group.add_argument("--zenoh-config", metavar="FILE", help="Zenoh JSON5 config file, used as it is (env ARROCH_ZENOH_CONFIG)")
+    group.add_argument("--mode", choices=MODES, help="Zenoh mode (default client; env ARROCH_ZENOH_MODE)")
+    group.add_argument("--connect", metavar="ENDPOINTS", help=f"comma-separated endpoints to connect to (default {DEFAULT_ROUTER} in client mode; env ARROCH_ZENOH_CONNECT)")
+    group.add_argument("--listen", metavar="ENDPOINTS", help="comma-separated endpoints to listen on (env ARROCH_ZENOH_LISTEN)")
+    group.add_argument("--multicast", action="store_true", default=None, help="turn multicast scouting on (off by default; env ARROCH_ZENOH_MULTICAST=1)")
+
+
+def options_from(args: argparse.Namespace | None = None, env: dict[str, str] | None = None) -> ZenohOptions:
+    """Merge environment variables and parsed command-line options (options win)."""
+    env = dict(os.environ) if env is None else env
+    opts = ZenohOptions()
+    opts.config_file = env.get("ARROCH_ZENOH_CONFIG") or None
+    if env.get("ARROCH_ZENOH_MODE"):
+        opts.mode = env["ARROCH_ZENOH_MODE"]
+    opts.connect = _split(env.get("ARROCH_ZENOH_CONNECT"))
+    opts.listen = _split(env.get("ARROCH_ZENOH_LISTEN"))
+    opts.multicast = env.get("ARROCH_ZENOH_MULTICAST", "0") == "1"
+    if env.get("ARROCH_ZENOH_SHM") is not None:
+        opts.shared_memory = env["ARROCH_ZENOH_SHM"] == "1"
+    if args is not None:
+        if getattr(args, "zenoh_config", None):
+            opts.config_file = args.zenoh_config
+        if getattr(args, "mode", None):
+            opts.mode = args.mode
+        if getattr(args, "connect", None):
+            opts.connect = _split(args.connect)
+        if getattr(args, "listen", None):
+            opts.listen = _split(args.listen)
+        if getattr(args, "multicast", None):
+            opts.multicast = True
+    if opts.mode not in MODES:
+        raise ValueError(f"zenoh mode {opts.mode!r} is not one of {', '.join(MODES)}")
+    return opts
+
+
+def build_config(opts: ZenohOptions) -> zenoh.Config:
+    """A zenoh.Config from the options; a config file is loaded as it is, then options applied."""
+    if opts.config_file:
+        path = Path(opts.config_file)
+        if not path.is_file():
+            raise FileNotFoundError(f"zenoh config file {path} does not exist")
+        config = zenoh.Config.from_file(str(path))
+        # A file is the deployment's word: only explicit options/env override it.
+        if opts.mode != "client" or os.environ.get("ARROCH_ZENOH_MODE"):
+            config.insert_json5("mode", json.dumps(opts.mode))
+    else:
+        config = zenoh.Config()
+        config.insert_json5("mode", json.dumps(opts.mode))
+        config.insert_json5("scouting/multicast/enabled", json.dumps(opts.multicast))
+    connect = opts.effective_connect()
+    if connect:
+        config.insert_json5("connect/endpoints", json.dumps(connect))
+    if opts.listen:
+        config.insert_json5("listen/endpoints", json.dumps(opts.listen))
+    if opts.shared_memory is not None:
+        config.insert_json5("transport/shared_memory/enabled", json.dumps(opts.shared_memory))
+    return config
+
+
+def open_session(opts: ZenohOptions) -> zenoh.Session:
+    return zenoh.open(build_config(opts))
+
+
+def free_tcp_port() -> int:
+    """A TCP port free on 127.0.0.1 right now (for tests and local runs)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])

@@ -16,6 +16,7 @@ from protocol.runner import setup_logging
 COMMANDS: tuple[str, ...] = (
     "protocol.site.cli",  # arroch site check|show|generate
     "protocol.router_cli",  # arroch router
+    "protocol.ping",  # arroch ping serve|send (protocol round trip)
     "services.demo",  # arroch demo
     "services.planner.cli",  # arroch planner, arroch plan
     "services.restrictor.cli",  # arroch restrictor, feedback, constraints

@@ -15,6 +15,7 @@ import sys
 import time
 from pathlib import Path
 
+from protocol.site import default_site_path
 from protocol.transport import free_tcp_port
 
 
@@ -42,10 +43,11 @@ def _wait_line(proc: subprocess.Popen, text: str, timeout: float) -> None:
 def run_demo(args: argparse.Namespace) -> int:
     run_dir = Path(args.run_dir or f"runs/{dt.datetime.now():%Y%m%d-%H%M%S}-demo")
     run_dir.mkdir(parents=True, exist_ok=True)
-    _step("checking the default site")
-    subprocess.run(_arroch("site", "check", *(["--site", args.site] if args.site else [])), check=True)
+    site_file = args.site or str(default_site_path())
+    _step(f"checking the site {site_file}")
+    subprocess.run(_arroch("site", "check", site_file), check=True)
     png = run_dir / "site.png"
-    subprocess.run(_arroch("site", "show", *(["--site", args.site] if args.site else []), "--png", str(png)), check=True)
+    subprocess.run(_arroch("site", "show", site_file, "--png", str(png)), check=True)
     print(f"    top-down picture: {png}")
 
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"

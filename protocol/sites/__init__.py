@@ -1,0 +1,1 @@
+"""Packaged site files (TOML), read with ``importlib.resources``; ``office.toml`` is the default."""

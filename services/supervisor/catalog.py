@@ -1,0 +1,173 @@
+"""What ``arroch up`` can start, and the one place where each child's command line is built.
+
+A new service slots in with one :data:`SERVICES` entry: its ``arroch`` sub-command and which of
+``up``'s options it takes (each option's flags are spelled once, in :data:`OPTION_FLAGS`).
+Every service also gets the common options of :func:`protocol.runner.add_common_arguments`
+(``--namespace``, ``--site``, ``--clock``, ``--log-level``) and its Zenoh settings: ``--connect`` to
+the supervisor's router, or ``--zenoh-config DIR/<name>.json5`` from ``arroch deploy render``.
+
+Extra children (``--child NAME=COMMAND``) are arbitrary commands; ``{python}``, ``{connect}``,
+``{namespace}`` and ``{site}`` in them are replaced, and they find the router through the
+``ARROCH_ZENOH_CONNECT`` environment variable like every ``arroch`` command does.
+"""
+
+from __future__ import annotations
+
+import re
+import shlex
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+ARROCH: tuple[str, ...] = (sys.executable, "-m", "services.cli")
+_NAME = re.compile(r"^[a-z][a-z0-9_\-]{0,31}$")
+
+
+@dataclass
+class MissionOptions:
+    """``up``'s options that shape the mission (passed to the services that take them)."""
+
+    method: str | None = None
+    mode: str | None = None  # sim clock mode: realtime, rate or lockstep
+    rate: float | None = None
+    seed: int | None = None
+
+
+# How each option is spelled on a service's command line (the services' own flags).
+OPTION_FLAGS: dict[str, Callable[["Launch"], list[str]]] = {
+    "method": lambda l: ["--method", l.mission.method] if l.mission.method else [],
+    "mode": lambda l: ["--mode", l.mission.mode] if l.mission.mode else [],
+    "rate": lambda l: ["--rate", f"{l.mission.rate:g}"] if l.mission.rate is not None else [],
+    "seed": lambda l: ["--seed", str(l.mission.seed)] if l.mission.seed is not None else [],
+    # Persisted state of this run only: a new run must not inherit the last run's constraints,
+    # while a restarted service within the run must find its own.
+    "state": lambda l: ["--state-dir", str(l.run_dir / "state")] if l.run_dir else [],
+}
+
+
+@dataclass(frozen=True)
+class ServiceSpec:
+    """A service ``arroch up`` knows: ``arroch <command...>`` plus the options of :data:`OPTION_FLAGS` it takes."""
+
+    name: str
+    command: tuple[str, ...]
+    takes: tuple[str, ...] = ()
+    help: str = ""
+    # Services (of the same run) whose liveliness token must be seen before this one starts.
+    after: tuple[str, ...] = ()
+
+
+SERVICES: dict[str, ServiceSpec] = {
+    spec.name: spec
+    for spec in (
+        ServiceSpec("planner", ("planner",), ("method",), "task and motion planner, dispatcher"),
+        ServiceSpec("restrictor", ("restrictor",), ("state",), "feedback -> constraints"),
+        # The sim starts the mission clock: the planner and restrictor must be listening by then.
+        ServiceSpec("sim", ("sim",), ("method", "mode", "rate", "seed"), "simulated robots, doors, human, tablet camera",
+                    after=("planner", "restrictor")),
+        ServiceSpec("ar", ("ar",), (), "AR client and tablet page"),
+        ServiceSpec("ping", ("ping", "serve"), (), "echo server for link checks (arroch ping send)"),
+    )
+}
+DEFAULT_SERVICES: tuple[str, ...] = ("planner", "restrictor", "sim", "ar")
+ROUTER = "router"
+SUPERVISOR_ROLE = "supervisor"
+
+
+@dataclass
+class Launch:
+    """Everything a child's command line depends on."""
+
+    namespace: str
+    connect: list[str] = field(default_factory=list)
+    zenoh_config_dir: Path | None = None
+    site: str | None = None
+    clock: str | None = None
+    log_level: str | None = None
+    mission: MissionOptions = field(default_factory=MissionOptions)
+    run_dir: Path | None = None  # this run's folder, once it exists
+
+    def config_file(self, role: str) -> Path | None:
+        return None if self.zenoh_config_dir is None else self.zenoh_config_dir / f"{role}.json5"
+
+    def zenoh_args(self, role: str) -> list[str]:
+        """A rendered per-role config when there is a config directory, else the router to dial."""
+        path = self.config_file(role)
+        if path is not None:
+            return ["--zenoh-config", str(path)]
+        return ["--connect", ",".join(self.connect)] if self.connect else []
+
+    def zenoh_env(self) -> dict[str, str]:
+        """For extra children: the same router, through the variables protocol.transport reads."""
+        env = {"ARROCH_NAMESPACE": self.namespace}
+        if self.zenoh_config_dir is None and self.connect:
+            env["ARROCH_ZENOH_CONNECT"] = ",".join(self.connect)
+        return env
+
+    def common_args(self) -> list[str]:
+        args = ["--namespace", self.namespace]
+        if self.site:
+            args += ["--site", self.site]
+        if self.clock:
+            args += ["--clock", self.clock]
+        if self.log_level:
+            args += ["--log-level", self.log_level]
+        return args
+
+
+def parse_services(text: str | None) -> list[ServiceSpec]:
+    """``planner,sim`` → specs, in order; an unknown or repeated name is an error that lists the known ones."""
+    if text is None:
+        return [SERVICES[name] for name in DEFAULT_SERVICES]
+    names = [part.strip() for part in text.split(",") if part.strip()]
+    unknown = [name for name in names if name not in SERVICES]
+    if unknown:
+        raise ValueError(f"unknown service{'s' if len(unknown) > 1 else ''} {', '.join(map(repr, unknown))} "
+                         f"(known: {', '.join(SERVICES)})")
+    repeated = sorted({name for name in names if names.count(name) > 1})
+    if repeated:
+        raise ValueError(f"service {', '.join(repeated)} listed twice")
+    return [SERVICES[name] for name in names]
+
+
+def service_argv(spec: ServiceSpec, launch: Launch) -> list[str]:
+    """``arroch <service> --namespace ... --connect ... <mission flags>``."""
+    argv = [*ARROCH, *spec.command, *launch.common_args(), *launch.zenoh_args(spec.name)]
+    for option in spec.takes:
+        argv += OPTION_FLAGS[option](launch)
+    return argv
+
+
+def router_argv(launch: Launch, listen: str | None) -> list[str]:
+    """``arroch router`` on ``listen``, or as its rendered config says."""
+    argv = [*ARROCH, ROUTER]
+    config = launch.config_file(ROUTER)
+    if config is not None:
+        argv += ["--zenoh-config", str(config)]
+    if listen:
+        argv += ["--listen", listen]
+    if launch.log_level:
+        argv += ["--log-level", launch.log_level]
+    return argv
+
+
+def parse_child(entry: str, launch: Launch) -> tuple[str, list[str]]:
+    """``NAME=COMMAND`` → (name, argv) with the placeholders filled in."""
+    name, sep, command = entry.partition("=")
+    name = name.strip()
+    if not sep or not command.strip():
+        raise ValueError(f"--child {entry!r}: expected NAME=COMMAND")
+    if not _NAME.match(name):
+        raise ValueError(f"--child {entry!r}: the name must be lower-case letters, digits, '_' or '-' (at most 32)")
+    if name in SERVICES or name in (ROUTER, "up"):
+        raise ValueError(f"--child {entry!r}: {name!r} is taken; pick another name")
+    values = {"{python}": sys.executable, "{connect}": ",".join(launch.connect),
+              "{namespace}": launch.namespace, "{site}": launch.site or ""}
+    try:
+        words = shlex.split(command)
+    except ValueError as exc:
+        raise ValueError(f"--child {entry!r}: {exc}") from None
+    for placeholder, value in values.items():
+        words = [word.replace(placeholder, value) for word in words]
+    return name, words

@@ -1,0 +1,433 @@
+"""The constraint library F (paper §III-B) as data: loading, validating, and resolving against a site.
+
+The library is a TOML file (the packaged ``library.toml``, or a site-specific one given with
+``--library``). Loading checks the whole file and refuses it with a :class:`LibraryError` whose
+message names the file, the entry and the field, e.g.
+``lab.toml: entry[1] (id "forbid_room"): params[1] (name "minutes"): min 5 is above max 3``.
+Templates are checked at load time too: their placeholders must be parameters (or ``t0``/``t1``),
+and a rendering with sample values must pass :func:`vocabulary.check_program`, so a library that
+loads can only ever produce ASP over the shared vocabulary.
+
+:func:`library_for_site` gives the library with the site's choices filled in, in the JSON shape
+the tablet and the AR client show (``arroch constraints library --json`` prints it).
+"""
+
+from __future__ import annotations
+
+import functools
+import re
+import string
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any, Protocol
+
+from .vocabulary import ASP_INT_MAX, ASP_INT_MIN, UnsafeProgram, check_program, is_asp_constant
+
+PACKAGED = "<packaged library>"
+
+# Parameter types. Symbol types take their choices from the site; "constraint" from the live set.
+INT = "int"
+DOOR = "door"
+ROOM = "room"
+OPENING = "opening"
+CONSTRAINT = "constraint"
+SYMBOL_TYPES = (DOOR, ROOM, OPENING)
+PARAM_TYPES = (INT, *SYMBOL_TYPES, CONSTRAINT)
+
+ADD = "add"
+CANCEL = "cancel"
+EFFECTS = (ADD, CANCEL)
+
+# The window placeholders every "add" template may use.
+WINDOW_NAMES = ("t0", "t1")
+# A window longer than a week is not "feedback" any more; this also keeps t1 well inside ASP ints.
+MAX_WINDOW_MINUTES = 7 * 24 * 60
+
+_ID = re.compile(r"^[a-z][a-z0-9_]{0,63}$")
+_MAX_ENTRIES = 100
+_MAX_PARAMS = 16
+_MAX_LABEL = 80
+_MAX_HELP = 300
+_MAX_TEMPLATE = 4096
+
+_ENTRY_KEYS = {"id", "label", "help", "effect", "params", "asp", "window_param", "window_minutes", "cancels"}
+_PARAM_KEYS = {"name", "type", "label", "help", "min", "max", "human_operated"}
+_CANCELS_KEYS = {"kind", "same"}
+_TOP_KEYS = {"version", "entry"}
+
+
+class LibraryError(ValueError):
+    """A library file that cannot be used; the message names the file, entry and field."""
+
+
+class SiteLike(Protocol):
+    """What the library needs of a :class:`protocol.site.Site`."""
+
+    name: str
+    rooms: dict[str, Any]
+    doors: dict[str, Any]
+    openings: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class Param:
+    name: str
+    type: str
+    label: str
+    help: str = ""
+    min: int | None = None  # int parameters only
+    max: int | None = None
+    human_operated: bool = True  # door parameters: offer only doors the human must open
+
+
+@dataclass(frozen=True)
+class Cancels:
+    """Adding the entry removes active constraints of ``kind`` whose ``same`` parameters are equal."""
+
+    kind: str
+    same: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Entry:
+    id: str
+    label: str
+    help: str
+    effect: str
+    params: tuple[Param, ...]
+    asp: str = ""
+    window_param: str | None = None
+    window_minutes: int | None = None
+    cancels: tuple[Cancels, ...] = ()
+
+    def param(self, name: str) -> Param | None:
+        return next((p for p in self.params if p.name == name), None)
+
+    @property
+    def param_names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.params)
+
+
+@dataclass(frozen=True)
+class Library:
+    entries: dict[str, Entry]
+    source: str
+
+    def get(self, kind: str) -> Entry | None:
+        return self.entries.get(kind)
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def load_library(path: str | Path | None = None) -> Library:
+    """Load and validate a library file; ``None`` loads the packaged one."""
+    if path is None:
+        return _packaged()
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise FileNotFoundError(f"constraint library {path} does not exist") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise LibraryError(f"{path.name}: cannot be read: {exc}") from None
+    return parse_library(text, path.name, source=str(path))
+
+
+@functools.lru_cache(maxsize=1)
+def _packaged() -> Library:
+    text = resources.files(__package__).joinpath("library.toml").read_text(encoding="utf-8")
+    return parse_library(text, "library.toml", source=PACKAGED)
+
+
+def parse_library(text: str, name: str = "library.toml", *, source: str | None = None) -> Library:
+    """Validate library TOML text; ``name`` prefixes every error message."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise LibraryError(f"{name}: not valid TOML: {exc}") from None
+    where = _Where(name)
+    _no_unknown_keys(data, _TOP_KEYS, where)
+    version = data.get("version", 1)
+    if version != 1 or isinstance(version, bool):
+        where.fail(f"version {version!r} is not supported (this restrictor reads version 1)")
+    raw_entries = data.get("entry")
+    if not isinstance(raw_entries, list) or not raw_entries:
+        where.fail("needs at least one [[entry]]")
+    if len(raw_entries) > _MAX_ENTRIES:
+        where.fail(f"has {len(raw_entries)} entries, more than {_MAX_ENTRIES}")
+    entries: dict[str, Entry] = {}
+    for index, raw in enumerate(raw_entries):
+        entry_where = where.entry(index, raw)
+        entry = _parse_entry(raw, entry_where)
+        if entry.id in entries:
+            entry_where.fail(f"duplicate id {entry.id!r}")
+        entries[entry.id] = entry
+    # Cross-entry references are checked once every entry is known.
+    for index, entry in enumerate(entries.values()):
+        for ci, cancels in enumerate(entry.cancels):
+            _check_cancels(entry, cancels, entries, where.entry(index, {"id": entry.id}).sub(f"cancels[{ci}]"))
+    return Library(entries=entries, source=source or name)
+
+
+class _Where:
+    """Builds the "file: entry[i] (id ...): field" prefix of error messages."""
+
+    def __init__(self, prefix: str) -> None:
+        self.prefix = prefix
+
+    def entry(self, index: int, raw: Any) -> "_Where":
+        ident = raw.get("id") if isinstance(raw, dict) else None
+        label = f" (id {ident!r})" if isinstance(ident, str) else ""
+        return _Where(f"{self.prefix}: entry[{index}]{label}")
+
+    def sub(self, field: str) -> "_Where":
+        return _Where(f"{self.prefix}: {field}")
+
+    def fail(self, problem: str) -> Any:
+        raise LibraryError(f"{self.prefix}: {problem}")
+
+
+def _no_unknown_keys(table: dict[str, Any], known: set[str], where: _Where) -> None:
+    unknown = sorted(set(table) - known)
+    if unknown:
+        where.fail(f"unknown field(s) {', '.join(unknown)} (known: {', '.join(sorted(known))})")
+
+
+def _text(raw: dict[str, Any], key: str, where: _Where, *, limit: int, required: bool = True) -> str:
+    value = raw.get(key, None if required else "")
+    if value is None:
+        where.fail(f"{key}: required")
+    if not isinstance(value, str):
+        where.fail(f"{key}: expected a string, got {type(value).__name__}")
+    if required and not value.strip():
+        where.fail(f"{key}: must not be empty")
+    if len(value) > limit:
+        where.fail(f"{key}: {len(value)} characters, more than {limit}")
+    return value
+
+
+def _identifier(raw: dict[str, Any], key: str, where: _Where) -> str:
+    value = raw.get(key)
+    if not isinstance(value, str) or not _ID.match(value):
+        where.fail(f"{key}: {value!r} is not an identifier (lower-case letter first, then a-z, 0-9, _; 64 at most)")
+    return value
+
+
+def _integer(raw: dict[str, Any], key: str, where: _Where) -> int | None:
+    value = raw.get(key)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int):
+        where.fail(f"{key}: expected an integer, got {type(value).__name__}")
+    return value
+
+
+def _parse_param(raw: Any, where: _Where) -> Param:
+    if not isinstance(raw, dict):
+        where.fail(f"expected a table, got {type(raw).__name__}")
+    _no_unknown_keys(raw, _PARAM_KEYS, where)
+    name = _identifier(raw, "name", where)
+    if name == "kind":
+        where.fail("name: 'kind' is reserved (it names the entry in feedback)")
+    if name in WINDOW_NAMES:
+        where.fail(f"name: {name!r} is reserved for the window")
+    kind = raw.get("type")
+    if kind not in PARAM_TYPES:
+        where.fail(f"type: {kind!r} is not one of {', '.join(PARAM_TYPES)}")
+    label = _text(raw, "label", where, limit=_MAX_LABEL)
+    help_text = _text(raw, "help", where, limit=_MAX_HELP, required=False)
+    lo, hi = _integer(raw, "min", where), _integer(raw, "max", where)
+    if kind == INT:
+        if lo is None or hi is None:
+            where.fail("an int parameter needs both min and max")
+        if lo > hi:
+            where.fail(f"min {lo} is above max {hi}")
+        if lo < ASP_INT_MIN or hi > ASP_INT_MAX:
+            where.fail(f"range [{lo}, {hi}] exceeds ASP integers [{ASP_INT_MIN}, {ASP_INT_MAX}]")
+    elif lo is not None or hi is not None:
+        where.fail(f"min/max apply to int parameters only, not {kind}")
+    human_operated = raw.get("human_operated", True)
+    if "human_operated" in raw:
+        if kind != DOOR:
+            where.fail(f"human_operated applies to door parameters only, not {kind}")
+        if not isinstance(human_operated, bool):
+            where.fail(f"human_operated: expected true or false, got {type(human_operated).__name__}")
+    return Param(name=name, type=kind, label=label, help=help_text, min=lo, max=hi, human_operated=human_operated)
+
+
+def _parse_entry(raw: Any, where: _Where) -> Entry:
+    if not isinstance(raw, dict):
+        where.fail(f"expected a table, got {type(raw).__name__}")
+    _no_unknown_keys(raw, _ENTRY_KEYS, where)
+    ident = _identifier(raw, "id", where)
+    label = _text(raw, "label", where, limit=_MAX_LABEL)
+    help_text = _text(raw, "help", where, limit=_MAX_HELP)
+    effect = raw.get("effect", ADD)
+    if effect not in EFFECTS:
+        where.fail(f"effect: {effect!r} is not one of {', '.join(EFFECTS)}")
+    raw_params = raw.get("params", [])
+    if not isinstance(raw_params, list):
+        where.fail(f"params: expected a list of tables, got {type(raw_params).__name__}")
+    if len(raw_params) > _MAX_PARAMS:
+        where.fail(f"params: {len(raw_params)} parameters, more than {_MAX_PARAMS}")
+    params: list[Param] = []
+    for index, raw_param in enumerate(raw_params):
+        pname = raw_param.get("name") if isinstance(raw_param, dict) else None
+        param_where = where.sub(f"params[{index}]" + (f" (name {pname!r})" if isinstance(pname, str) else ""))
+        param = _parse_param(raw_param, param_where)
+        if any(p.name == param.name for p in params):
+            param_where.fail(f"duplicate parameter name {param.name!r}")
+        params.append(param)
+    entry_params = tuple(params)
+    cancels = _parse_cancels(raw.get("cancels", []), where)
+    if effect == CANCEL:
+        return _cancel_entry(raw, where, ident, label, help_text, entry_params, cancels)
+    return _add_entry(raw, where, ident, label, help_text, entry_params, cancels)
+
+
+def _parse_cancels(raw: Any, where: _Where) -> tuple[Cancels, ...]:
+    if not isinstance(raw, list):
+        where.fail(f"cancels: expected a list of tables, got {type(raw).__name__}")
+    out = []
+    for index, item in enumerate(raw):
+        item_where = where.sub(f"cancels[{index}]")
+        if not isinstance(item, dict):
+            item_where.fail(f"expected a table, got {type(item).__name__}")
+        _no_unknown_keys(item, _CANCELS_KEYS, item_where)
+        kind = _identifier(item, "kind", item_where)
+        same = item.get("same", [])
+        if not isinstance(same, list) or not all(isinstance(s, str) for s in same):
+            item_where.fail("same: expected a list of parameter names")
+        out.append(Cancels(kind=kind, same=tuple(same)))
+    return tuple(out)
+
+
+def _cancel_entry(raw: dict[str, Any], where: _Where, ident: str, label: str, help_text: str,
+                  params: tuple[Param, ...], cancels: tuple[Cancels, ...]) -> Entry:
+    for key in ("asp", "window_param", "window_minutes", "cancels"):
+        if key in raw:
+            where.fail(f"{key}: a cancel entry has no {key}")
+    if len(params) != 1 or params[0].type != CONSTRAINT:
+        where.fail("params: a cancel entry takes exactly one parameter, of type constraint")
+    return Entry(id=ident, label=label, help=help_text, effect=CANCEL, params=params, cancels=cancels)
+
+
+def _add_entry(raw: dict[str, Any], where: _Where, ident: str, label: str, help_text: str,
+               params: tuple[Param, ...], cancels: tuple[Cancels, ...]) -> Entry:
+    for param in params:
+        if param.type == CONSTRAINT:
+            where.fail(f"params: {param.name} is of type constraint, which only a cancel entry takes")
+    window_param = raw.get("window_param")
+    window_minutes = _integer(raw, "window_minutes", where)
+    if (window_param is None) == (window_minutes is None):
+        where.fail("needs exactly one of window_param (a parameter in minutes) and window_minutes (fixed)")
+    if window_param is not None:
+        param = next((p for p in params if p.name == window_param), None)
+        if param is None or param.type != INT:
+            where.fail(f"window_param: {window_param!r} is not an int parameter of this entry")
+        if param.min < 1 or param.max > MAX_WINDOW_MINUTES:
+            where.fail(f"window_param: {window_param} must range within [1, {MAX_WINDOW_MINUTES}] minutes, not [{param.min}, {param.max}]")
+    elif not 1 <= window_minutes <= MAX_WINDOW_MINUTES:
+        where.fail(f"window_minutes: {window_minutes} is outside [1, {MAX_WINDOW_MINUTES}]")
+    asp = _text(raw, "asp", where, limit=_MAX_TEMPLATE)
+    _check_template(asp, params, window_param, where.sub("asp"))
+    return Entry(id=ident, label=label, help=help_text, effect=ADD, params=params, asp=asp,
+                 window_param=window_param, window_minutes=window_minutes, cancels=cancels)
+
+
+def _check_template(asp: str, params: tuple[Param, ...], window_param: str | None, where: _Where) -> None:
+    template = string.Template(asp)
+    if not template.is_valid():
+        where.fail("a '$' that is not a ${name} placeholder (write $$ for a literal $)")
+    names = set(template.get_identifiers())
+    known = {p.name for p in params} | set(WINDOW_NAMES)
+    unknown = sorted(names - known)
+    if unknown:
+        where.fail(f"placeholder(s) {', '.join(unknown)} are neither parameters nor t0/t1")
+    unused = sorted(p.name for p in params if p.name not in names and p.name != window_param)
+    if unused:
+        where.fail(f"parameter(s) {', '.join(unused)} are not used by the template")
+    try:
+        check_program(template.substitute(sample_values(params)))
+    except UnsafeProgram as exc:
+        where.fail(str(exc))
+
+
+def sample_values(params: tuple[Param, ...]) -> dict[str, str]:
+    """Placeholder values that stand for any valid ones, to check a template's shape."""
+    values = {name: str(i * 60) for i, name in enumerate(WINDOW_NAMES)}
+    for param in params:
+        values[param.name] = str(param.min) if param.type == INT else f"sample_{param.type}"
+    return values
+
+
+def _check_cancels(entry: Entry, cancels: Cancels, entries: dict[str, Entry], where: _Where) -> None:
+    target = entries.get(cancels.kind)
+    if target is None:
+        where.fail(f"kind: {cancels.kind!r} is not an entry of this library")
+    if target.effect != ADD:
+        where.fail(f"kind: {cancels.kind!r} is a {target.effect} entry; only added constraints can be cancelled")
+    for name in cancels.same:
+        mine, theirs = entry.param(name), target.param(name)
+        if mine is None or theirs is None:
+            where.fail(f"same: {name!r} must be a parameter of both {entry.id} and {target.id}")
+        if mine.type != theirs.type:
+            where.fail(f"same: {name!r} is a {mine.type} here but a {theirs.type} in {target.id}")
+
+
+# --------------------------------------------------------------------------- the site's choices
+
+
+def site_choices(param: Param, site: SiteLike) -> list[str] | None:
+    """The values a symbol parameter may take on ``site`` (sorted); ``None`` for other types.
+
+    Ids that are not ASP constants are left out: they could not be written into a constraint.
+    """
+    if param.type == DOOR:
+        ids = [d for d, opening in site.doors.items() if opening.human_operated or not param.human_operated]
+    elif param.type == ROOM:
+        ids = list(site.rooms)
+    elif param.type == OPENING:
+        ids = list(site.openings)
+    else:
+        return None
+    return sorted(i for i in ids if is_asp_constant(i))
+
+
+def library_for_site(site: SiteLike, library: Library | None = None) -> list[dict[str, Any]]:
+    """The library with the site's choices resolved, as plain JSON-able data.
+
+    One dict per entry: ``id``, ``label``, ``help``, ``effect`` ("add"/"cancel"), ``window``
+    (``{"param": name}``, ``{"minutes": n}`` or ``None``), ``usable`` (every symbol parameter has
+    at least one choice on this site) and ``params``, each with ``name``, ``type``, ``label``,
+    ``help`` and: ``min``/``max`` (int), ``choices`` (door/room/opening: the site's ids), or
+    ``choices: None`` with ``source: "constraints"`` (constraint: an id from the live ConstraintSet).
+    """
+    library = library or load_library()
+    out = []
+    for entry in library.entries.values():
+        params = []
+        usable = True
+        for param in entry.params:
+            item: dict[str, Any] = {"name": param.name, "type": param.type, "label": param.label, "help": param.help}
+            if param.type == INT:
+                item.update(min=param.min, max=param.max)
+            elif param.type == CONSTRAINT:
+                item.update(choices=None, source="constraints")
+            else:
+                choices = site_choices(param, site) or []
+                item.update(choices=choices, source="site")
+                usable = usable and bool(choices)
+            params.append(item)
+        if entry.window_param is not None:
+            window: dict[str, Any] | None = {"param": entry.window_param}
+        elif entry.window_minutes is not None:
+            window = {"minutes": entry.window_minutes}
+        else:
+            window = None
+        out.append({"id": entry.id, "label": entry.label, "help": entry.help, "effect": entry.effect,
+                    "window": window, "usable": usable, "params": params})
+    return out

@@ -1,0 +1,180 @@
+"""The restrictor process: feedback in, acknowledgements and the active ConstraintSet out, over Zenoh.
+
+I/O (keys under ``arroch/<namespace>/``):
+
+- subscribes to ``feedback`` (Feedback) and answers each with a FeedbackAck published on
+  ``feedback/ack/<src>``;
+- answers queries on ``feedback`` whose payload is a Feedback with the FeedbackAck as reply
+  (and publishes it on ``feedback/ack/<src>`` as well), so a client can wait for its answer
+  either way; a retry with the same ``seq`` gets the same answer;
+- publishes ``constraints`` (ConstraintSet) at start-up and on every change, and serves the
+  current one on a ``constraints`` queryable for late joiners;
+- drops expired constraints (window end reached on the site clock) and publishes the new version.
+
+All state changes run on the service's worker thread: query callbacks only hand the query over
+(Zenoh's thread must stay quick), and the worker replies once the feedback is applied.
+"""
+
+from __future__ import annotations
+
+import queue
+from pathlib import Path
+
+import zenoh
+
+from protocol.clock import SimClock, WallClock
+from protocol.codec import ENCODING, decode, encode
+from protocol.errors import ProtocolError
+from protocol.messages import ConstraintSet, Feedback, FeedbackAck
+from protocol.service import Service
+from protocol.transport import ZenohOptions
+
+from .active import DEFAULT_MAX_ACTIVE, ActiveSet, Outcome
+from .library import Library, SiteLike
+from .store import StateStore
+from .validate import quote
+
+EXPIRY_PERIOD = 0.2  # wall seconds between expiry checks
+QUERY_POLL = 0.02  # wall seconds between looks at pending feedback queries
+MAX_PENDING_QUERIES = 1000
+
+
+class RestrictorService(Service):
+    def __init__(
+        self,
+        *,
+        site: SiteLike,
+        library: Library,
+        namespace: str,
+        zenoh_options: ZenohOptions,
+        state_dir: str | Path | None,
+        clock: WallClock | SimClock | None = None,
+        max_active: int = DEFAULT_MAX_ACTIVE,
+        fresh: bool = False,
+        instance: str | None = None,
+    ) -> None:
+        super().__init__("restrictor", namespace, zenoh_options, clock=clock, instance=instance)
+        # Opening the store first means a bad state directory is reported before any Zenoh session.
+        self.store = StateStore(state_dir, site.name)
+        try:
+            if fresh:
+                self.store.clear()
+            self.active = ActiveSet(library, site, self.store, max_active=max_active)
+        except Exception:
+            self.store.close()
+            raise
+        self._current: ConstraintSet | None = None
+        self._queries: queue.Queue[zenoh.Query] = queue.Queue(maxsize=MAX_PENDING_QUERIES)
+        self.log.info("state %s: %d active constraint(s), version %d", self.store.where,
+                      len(self.active.constraints), self.active.version)
+
+    def setup(self) -> None:
+        self.subscribe(self.keys.feedback(), Feedback, self._on_feedback)
+        self.serve(self.keys.feedback(), self._take_feedback_query)
+        self.serve(self.keys.constraints(), lambda _query: self._current)
+        self.every(QUERY_POLL, self._answer_queries, first=0.0)
+        self.every(EXPIRY_PERIOD, self._expire, first=0.0)
+        self._publish_set()  # the restored set, for anyone already listening
+
+    def teardown(self) -> None:
+        while True:  # queries still waiting get no reply; dropping them ends them for the querier
+            try:
+                self._queries.get_nowait().drop()
+            except queue.Empty:
+                break
+        self.store.close()
+
+    # ------------------------------------------------------------------ feedback
+
+    def _now(self) -> float | None:
+        return self.clock.now() if self.clock.synced else None
+
+    def _on_feedback(self, feedback: Feedback, _key: str) -> None:
+        self._respond(feedback)
+
+    def _take_feedback_query(self, query: zenoh.Query) -> None:
+        """Zenoh's thread: keep the query for the worker (no reply yet)."""
+        if query.payload is None:
+            return None  # e.g. a wildcard query that happens to cover this key: not feedback
+        try:
+            self._queries.put_nowait(query)
+        except queue.Full:
+            self.count("dropped_queries")
+            query.drop()
+        return None
+
+    def _answer_queries(self) -> None:
+        while True:
+            try:
+                query = self._queries.get_nowait()
+            except queue.Empty:
+                return
+            try:
+                self._answer_query(query)
+            finally:
+                query.drop()
+
+    def _answer_query(self, query: zenoh.Query) -> None:
+        payload = query.payload.to_bytes()
+        try:
+            feedback = decode(payload, Feedback)
+        except ProtocolError as exc:
+            self.note_bad_message(self.keys.feedback(), payload, exc)
+            # The querier is waiting: tell it what is wrong rather than let it time out.
+            ack = FeedbackAck(to="", feedback_seq=0, accepted=False, reason=f"not a valid Feedback: {exc}"[:1000])
+            self._reply(query, self.stamp(ack))
+            return
+        self.count("received")
+        self._reply(query, self._respond(feedback))
+
+    def _reply(self, query: zenoh.Query, ack: FeedbackAck) -> None:
+        query.reply(self.keys.feedback(), encode(ack), encoding=zenoh.Encoding(ENCODING))
+
+    def _respond(self, feedback: Feedback) -> FeedbackAck:
+        """Apply feedback, publish its ack (and the set if it changed); returns the stamped ack."""
+        outcome = self.active.handle(feedback, self._now())
+        self._log_outcome(feedback, outcome)
+        ack = self.stamp(outcome.ack)
+        try:
+            ack_key = self.keys.feedback_ack(feedback.src)
+        except ValueError:  # a src that cannot be a key chunk: only a querier can get its answer
+            self.count("unaddressable_acks")
+        else:
+            self.publish(ack_key, ack, stamp=False)
+        if outcome.changed:
+            self._publish_set()
+        return ack
+
+    def _log_outcome(self, feedback: Feedback, outcome: Outcome) -> None:
+        sender = f"{quote(feedback.src)}/{feedback.seq}"
+        if outcome.expired:
+            self.count("expired", len(outcome.expired))
+            self.log.info("expired %s", ", ".join(outcome.expired))
+        if outcome.duplicate:
+            self.count("feedback_duplicate")
+            self.log.info("duplicate feedback %s: answered again", sender)
+        elif outcome.ack.accepted:
+            self.count("feedback_accepted")
+            self.log.info("feedback %s accepted: %s (version %d)", sender, outcome.ack.reason, outcome.ack.constraints_version)
+        else:
+            self.count("feedback_refused")
+            self.log.info("feedback %s refused: %s", sender, outcome.ack.reason)
+
+    # ------------------------------------------------------------------ the set
+
+    def _expire(self) -> None:
+        now = self._now()
+        if now is None:
+            return
+        gone = self.active.expire(now)
+        if gone:
+            self.count("expired", len(gone))
+            self.log.info("expired %s at t=%.1f", ", ".join(gone), now)
+            self._publish_set()
+
+    def _publish_set(self) -> None:
+        message = self.active.message()
+        self.publish(self.keys.constraints(), message)
+        # Swapping one reference is atomic, so the queryable (Zenoh's thread) reads a whole set.
+        self._current = message
+        self.log.debug("published constraints version %d (%d active)", message.version, len(message.constraints))

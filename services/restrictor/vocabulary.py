@@ -1,0 +1,138 @@
+"""The ASP vocabulary shared by the restrictor and the planner, and the check that enforces it.
+
+``docs/architecture.md`` ("ASP vocabulary shared by restrictor and planner") fixes the atoms the
+planner's encoding defines and the facts the restrictor may state. Every piece of ASP the
+restrictor hands to the solver, library templates at load time and each compiled constraint
+before it joins the active set, passes :func:`check_program`: it must parse, consist only of
+rules (integrity constraints and facts included) and weak constraints, and mention no predicate
+outside :data:`VOCABULARY`. No directives (``#include``, ``#script``, ``#program``, ``#const``,
+``#show``, ``#external`` ...), no strings, no comments, no external ``@`` calls, no theory atoms.
+
+The directive screen is lexical and runs *before* clingo sees the text, because clingo's parser
+acts on ``#include`` while parsing (it opens the file), so the AST check alone would be too late.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Any
+
+import clingo
+import clingo.ast as ast
+
+# (name, arity) -> meaning. The planner defines the first three for the plan being solved;
+# the restrictor states the last three as facts that the planner's encoding interprets.
+VOCABULARY: dict[tuple[str, int], str] = {
+    ("human_opens", 2): "human_opens(D, T): the plan asks the human to open door D at second T",
+    ("robot_in", 4): "robot_in(R, Room, S, E): robot R is in Room during [S, E)",
+    ("goes_through", 3): "goes_through(R, X, T): robot R goes through opening X starting at second T",
+    ("human_unavailable", 3): "human_unavailable(D, T0, T1): the human will not open D in [T0, T1)",
+    ("room_forbidden", 3): "room_forbidden(Room, T0, T1): no robot in Room during [T0, T1)",
+    ("human_available", 3): "human_available(D, T0, T1): the human offers to open D in [T0, T1)",
+}
+
+# ASP integers are 32-bit signed in clingo.
+ASP_INT_MIN = -(2**31)
+ASP_INT_MAX = 2**31 - 1
+
+# A symbol the restrictor may write: a lower-case ASP constant. ``not`` is a keyword, not a constant.
+ASP_CONSTANT = re.compile(r"^[a-z][A-Za-z0-9_]{0,63}$")
+_KEYWORDS = frozenset({"not"})
+
+# Hash words that are part of ordinary rule bodies; every other ``#word`` is a directive.
+_ALLOWED_HASH_WORDS = frozenset({"count", "sum", "min", "max", "false", "true", "inf", "sup"})
+_HASH_WORD = re.compile(r"#\s*([A-Za-z_]\w*\+?)")
+
+# Statement kinds a constraint may consist of.
+_STATEMENTS = frozenset({ast.ASTType.Rule, ast.ASTType.Minimize})
+# AST nodes that never belong in a constraint, wherever they appear.
+_FORBIDDEN_NODES = frozenset({ast.ASTType.TheoryAtom, ast.ASTType.TheoryAtomDefinition, ast.ASTType.TheoryDefinition})
+
+
+class UnsafeProgram(ValueError):
+    """ASP text that is not a plain program over the shared vocabulary."""
+
+
+def is_asp_constant(value: object) -> bool:
+    """True for a string that clingo reads as a constant (lower-case first, no keyword)."""
+    return isinstance(value, str) and bool(ASP_CONSTANT.match(value)) and value not in _KEYWORDS
+
+
+def check_program(text: str) -> set[tuple[str, int]]:
+    """Raise :class:`UnsafeProgram` unless ``text`` is a plain program over :data:`VOCABULARY`.
+
+    Returns the predicate signatures it uses.
+    """
+    _lexical_screen(text)
+    statements: list[ast.AST] = []
+    messages: list[str] = []
+    try:
+        ast.parse_string(text, statements.append, logger=lambda _code, message: messages.append(message.strip()))
+    except RuntimeError:
+        detail = "; ".join(m.replace("<string>:", "line ") for m in messages) or "syntax error"
+        raise UnsafeProgram(f"not valid ASP: {detail}") from None
+    used: set[tuple[str, int]] = set()
+    for statement in statements:
+        kind = statement.ast_type
+        if kind == ast.ASTType.Program:
+            # parse_string opens every text with an implicit "#program base."; an explicit one is
+            # caught by the lexical screen, so only that implicit one can reach here.
+            if statement.name != "base" or len(statement.parameters):
+                raise UnsafeProgram("#program sections are not allowed")
+            continue
+        if kind not in _STATEMENTS:
+            raise UnsafeProgram(f"only rules and weak constraints are allowed, found {kind.name}: {str(statement)[:80]}")
+        _collect_atoms(statement, used)
+    unknown = sorted(sig for sig in used if sig not in VOCABULARY)
+    if unknown:
+        names = ", ".join(f"{name}/{arity}" for name, arity in unknown)
+        allowed = ", ".join(f"{name}/{arity}" for name, arity in VOCABULARY)
+        raise UnsafeProgram(f"predicate(s) {names} are not in the shared vocabulary ({allowed})")
+    return used
+
+
+def _lexical_screen(text: str) -> None:
+    if not isinstance(text, str):
+        raise UnsafeProgram(f"expected ASP text, got {type(text).__name__}")
+    if not text.isascii():
+        raise UnsafeProgram("non-ASCII characters are not allowed")
+    # "@" is not screened here: weak constraints need it for priorities; the AST check refuses @calls.
+    for char, what in (('"', "strings"), ("%", "comments"), ("&", "theory atoms")):
+        if char in text:
+            raise UnsafeProgram(f"{what} ({char!r}) are not allowed")
+    for match in _HASH_WORD.finditer(text):
+        if match.group(1).rstrip("+") not in _ALLOWED_HASH_WORDS:
+            raise UnsafeProgram(f"directive #{match.group(1)} is not allowed")
+
+
+def _collect_atoms(node: Any, used: set[tuple[str, int]]) -> None:
+    """Walk an AST node, recording the signature of every symbolic atom."""
+    if isinstance(node, ast.AST):
+        kind = node.ast_type
+        if kind in _FORBIDDEN_NODES:
+            raise UnsafeProgram(f"{kind.name} is not allowed")
+        if kind == ast.ASTType.Function and getattr(node, "external", 0):
+            raise UnsafeProgram("external function calls are not allowed")
+        if kind == ast.ASTType.SymbolicAtom:
+            _record_atom(node.symbol, used)
+        for key in node.keys():
+            if key != "location":
+                _collect_atoms(getattr(node, key), used)
+    elif isinstance(node, ast.ASTSequence):
+        for child in node:
+            _collect_atoms(child, used)
+
+
+def _record_atom(term: ast.AST, used: set[tuple[str, int]]) -> None:
+    kind = term.ast_type
+    if kind == ast.ASTType.Function:
+        used.add((term.name, len(term.arguments)))
+    elif kind == ast.ASTType.SymbolicTerm and term.symbol.type == clingo.SymbolType.Function:
+        used.add((term.symbol.name, len(term.symbol.arguments)))
+    elif kind == ast.ASTType.Pool:
+        for option in term.arguments:
+            _record_atom(option, used)
+    elif kind == ast.ASTType.UnaryOperation:  # classical negation -p(x)
+        _record_atom(term.argument, used)
+    else:
+        raise UnsafeProgram(f"unsupported atom {str(term)[:60]}")

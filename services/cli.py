@@ -22,6 +22,7 @@ COMMANDS: tuple[str, ...] = (
     "services.restrictor.cli",  # arroch restrictor, feedback, constraints
     "services.sim.cli",  # arroch sim, sim snapshot
     "services.ar_client.cli",  # arroch ar, ar localize|render, tags
+    "services.ar_client.web.cli",  # arroch tablet, ar calibrate
     "services.supervisor.cli",  # arroch up
     "services.experiments.cli",  # arroch experiment
 )

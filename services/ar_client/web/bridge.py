@@ -1,0 +1,96 @@
+"""The tablet server's Zenoh side: what the pages see of the system, and what they say to it.
+
+A :class:`TabletBridge` is a :class:`protocol.service.Service` named ``tablet``. Its worker thread
+(:meth:`Service.run`, on a thread of the server's) feeds:
+
+- a :class:`WorldView` from ``robot/*/pose`` (latest), ``robot/*/status``, ``intent/*`` and
+  ``door/*/state`` — read by every page's pipeline and by the map view;
+- the live ``constraints`` (and a query for them at start), for the "cancel" choices of the pages;
+- with a sim camera (``--camera-source sim:CID``), the newest ``camera/<CID>/frame`` for viewer pages.
+
+The last two are handed to the web server's event loop through the ``on_constraints`` /
+``on_sim_frame`` callbacks (called on the worker; the server makes them thread-safe).
+
+Outwards: each page's Overlays on ``ar/<cid>/overlay`` (for recorders) and feedback to the
+restrictor with :func:`services.restrictor.client.send_feedback` (query with ack, retried until
+answered), which blocks and so runs on the server's feedback threads, never on the worker.
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Any, Callable
+
+from protocol.clock import SimClock, WallClock
+from protocol.messages import CameraFrame, ConstraintSet, DoorState, FeedbackAck, Intent, Overlay, RobotPose, RobotStatus
+from protocol.service import Service
+from protocol.transport import ZenohOptions
+
+from ..world import WorldView
+
+FEEDBACK_TIMEOUT = 8.0  # seconds a page waits for the restrictor's answer
+
+
+class TabletBridge(Service):
+    def __init__(
+        self,
+        *,
+        namespace: str,
+        zenoh_options: ZenohOptions,
+        sim_camera: str | None = None,
+        clock: WallClock | SimClock | None = None,
+        instance: str | None = None,
+    ) -> None:
+        super().__init__("tablet", namespace, zenoh_options, clock=clock, instance=instance)
+        if sim_camera is not None:
+            self.keys.camera_frame(sim_camera)  # an id unusable in a key fails here, before any session
+        self.sim_camera = sim_camera
+        self.world = WorldView()
+        self.constraints: ConstraintSet | None = None
+        self.on_constraints: Callable[[ConstraintSet], None] = lambda msg: None
+        self.on_sim_frame: Callable[[CameraFrame], None] = lambda msg: None
+        self._constraints_lock = threading.Lock()
+
+    def setup(self) -> None:
+        k = self.keys
+        self.subscribe(k.robot_pose("*"), RobotPose, self.world.on_pose, latest=True)
+        self.subscribe(k.robot_status("*"), RobotStatus, self.world.on_status)
+        self.subscribe(k.intent("*"), Intent, self.world.on_intent)
+        self.subscribe(k.door_state("*"), DoorState, self.world.on_door)
+        self.subscribe(k.constraints(), ConstraintSet, self._constraints)
+        if self.sim_camera is not None:
+            self.subscribe(k.camera_frame(self.sim_camera), CameraFrame, lambda msg, key: self.on_sim_frame(msg), latest=True)
+            self.log.info("viewer stream from %s", k.camera_frame(self.sim_camera))
+        # A late joiner asks for the live set; off the worker, since a query blocks.
+        threading.Thread(target=self._fetch_constraints, name="tablet-constraints", daemon=True).start()
+
+    def _constraints(self, msg: ConstraintSet, _key: str = "") -> None:
+        with self._constraints_lock:
+            if self.constraints is not None and msg.version <= self.constraints.version:
+                return  # an older set overtaken on the wire (or the query's answer after a newer publication)
+            self.constraints = msg
+        self.on_constraints(msg)
+
+    def _fetch_constraints(self) -> None:
+        try:
+            sets = self.query(self.keys.constraints(), ConstraintSet, timeout=2.0)
+        except Exception as exc:  # the session closed while asking: nothing to do
+            self.log.debug("constraints query failed: %s", exc)
+            return
+        if sets:
+            self._constraints(max(sets, key=lambda s: s.version))
+
+    def now(self) -> float:
+        """Site-clock time for drawing (before the sim's first clock message: wall time)."""
+        import time
+
+        return self.clock.now() if self.clock.synced else time.time()
+
+    def publish_overlay(self, overlay: Overlay, reason: str = "") -> None:
+        self.publish(self.keys.overlay(overlay.camera), overlay, extra={"reason": reason} if reason else None)
+
+    def send_feedback(self, kind: str, params: dict[str, Any]) -> FeedbackAck | None:
+        """Blocks until the restrictor answers or :data:`FEEDBACK_TIMEOUT` passes (None)."""
+        from services.restrictor.client import send_feedback
+
+        return send_feedback(self, kind, params, timeout=FEEDBACK_TIMEOUT, retry=1.0)

@@ -1,0 +1,26 @@
+"""Fixtures for the tablet tests: a headless Chromium (skipped when the machine has none)."""
+
+from __future__ import annotations
+
+from typing import Callable, Iterator
+
+import pytest
+
+from services.ar_client.web.headless import Browser, chromium_path
+
+
+@pytest.fixture
+def browser() -> Iterator[Callable[..., Browser]]:
+    """``browser(fake_camera=PATH, window=(w, h))`` starts Chromium; every one is closed at teardown."""
+    if chromium_path() is None:
+        pytest.skip("no Chromium on this machine (Debian: apt-get install chromium; .ci/run installs it)")
+    opened: list[Browser] = []
+
+    def _open(**kwargs) -> Browser:  # noqa: ANN003
+        b = Browser(**kwargs)
+        opened.append(b)
+        return b
+
+    yield _open
+    for b in opened:
+        b.close()

@@ -1,0 +1,246 @@
+"""AprilTag 36h11 detection: image → tag ids with corners named TL, TR, BR, BL (OpenCV pixel convention).
+
+Two back ends, both returning :class:`TagDetection` with corners already reordered by
+:mod:`protocol.apriltag` (the rest of the client never sees a detector's own corner order):
+
+* ``opencv`` (default) — OpenCV's ArUco detector with ``DICT_APRILTAG_36h11``, its corners then
+  refined by fitting the tag's four edges (:mod:`refine`).
+* ``apriltag`` — the AprilTag 3 C library through ``pupil-apriltags``. One detector lives per
+  process (:func:`apriltag_detector`), released at exit in the right order (the package's own
+  teardown frees in the wrong order and can crash the process).
+
+Why the default (``benchmarks/ar.py``, section ``detectors``, same frames for all): OpenCV's ArUco
+finds more tags than AprilTag 3 at decimation 2 (which loses small tags, most at 640x480), and its
+time is steady (3-7 ms a frame on one core) where AprilTag 3's grows with image noise (1-2 ms on
+the simulator's clean frames, 7-30 ms on noisy ones). Its own corners are poor (0.4-0.8 px RMS:
+unrefined they sit on the outermost black pixels; SUBPIX looks at a small window per corner), but
+the edge fit brings them to AprilTag 3's accuracy (~0.1 px on anti-aliased frames, ~0.4 px on the
+simulator's aliased ones) for under a millisecond a frame. AprilTag 3 at full resolution detects a
+little more but costs several times the time.
+
+Guided second pass (:meth:`TagDetector.detect_regions`): once a pose is known, landmarks predicted
+in view but not found are searched again in a crop around their predicted position (upscaled when
+small). That recovers small or blurred tags for about a millisecond per crop.
+
+Detections whose corners come within :data:`BORDER_MARGIN_PX` of the image edge are dropped: the
+AprilTag library clamps the corners of tags cut by the image edge, and a cut tag's edge fit would
+run off the image too.
+"""
+
+from __future__ import annotations
+
+import atexit
+import logging
+import threading
+from dataclasses import dataclass
+from typing import Iterable, Sequence
+
+import cv2
+import numpy as np
+
+from protocol.apriltag import apriltag_corners, opencv_corners
+
+from .refine import refine_corners
+
+log = logging.getLogger("arroch.ar.detect")
+
+#: A detection whose corners come closer than this to the image (or crop) edge is dropped (pixels).
+BORDER_MARGIN_PX = 2.0
+#: Frames up to this many pixels are searched at full resolution by the AprilTag back end.
+FULL_RES_MAX_PIXELS = 500_000
+#: Crops whose predicted tag is smaller than this (pixels across) are upscaled ×2 before the search.
+UPSCALE_BELOW_PX = 40.0
+
+_pupil_lock = threading.Lock()
+_pupil_detector = None
+
+
+@dataclass(frozen=True)
+class TagDetection:
+    """One detected tag: its id and its corners TL, TR, BR, BL in pixels (OpenCV convention)."""
+
+    tag_id: int
+    corners: np.ndarray  # (4, 2) float64
+    detector: str  # "apriltag" or "opencv"
+    decision_margin: float = 0.0  # AprilTag's decoding confidence (0 when the detector gives none)
+    hamming: int = 0  # bits corrected while decoding
+
+
+def apriltag_detector():  # -> pupil_apriltags.Detector
+    """The process-wide pupil-apriltags detector, created on first use and kept for the process's life."""
+    global _pupil_detector
+    with _pupil_lock:
+        if _pupil_detector is None:
+            import pupil_apriltags  # lazily: only processes that detect tags load the C library
+
+            _pupil_detector = pupil_apriltags.Detector(families="tag36h11", nthreads=1, quad_decimate=2.0)
+            atexit.register(_release_apriltag_detector)
+        return _pupil_detector
+
+
+def _release_apriltag_detector() -> None:
+    """Free the detector in the right order before the interpreter tears down.
+
+    pupil-apriltags' ``Detector.__del__`` destroys the tag family *before* the detector, whose
+    destruction then reads the family's freed decode table: a use-after-free that crashes the
+    process at exit (segmentation fault) depending on the heap's state. Here the detector goes
+    first, then the family, and ``__del__`` finds nothing left to do.
+    """
+    det = _pupil_detector
+    if det is None or det.tag_detector_ptr is None:
+        return
+    ptr, det.tag_detector_ptr = det.tag_detector_ptr, None
+    det.libc.apriltag_detector_destroy.restype = None
+    det.libc.apriltag_detector_destroy(ptr)
+    det.libc.tag36h11_destroy.restype = None
+    for family in det.tag_families.values():
+        det.libc.tag36h11_destroy(family)
+    det.tag_families = {}
+
+
+def apriltag_available() -> bool:
+    try:
+        import pupil_apriltags  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def touches_border(corners: np.ndarray, width: int, height: int, margin: float = BORDER_MARGIN_PX) -> bool:
+    """True when any corner lies within ``margin`` pixels of the image edge (or outside it)."""
+    u, v = corners[:, 0], corners[:, 1]
+    return bool((u < margin).any() or (v < margin).any() or (u > width - 1 - margin).any() or (v > height - 1 - margin).any())
+
+
+def to_gray(image: np.ndarray) -> np.ndarray:
+    """A contiguous uint8 single-channel view of a BGR/BGRA/gray image."""
+    if image.ndim == 3:
+        code = cv2.COLOR_BGRA2GRAY if image.shape[2] == 4 else cv2.COLOR_BGR2GRAY
+        image = cv2.cvtColor(image, code)
+    return np.ascontiguousarray(image, dtype=np.uint8)
+
+
+class TagDetector:
+    """Finds tag36h11 tags in grayscale frames with one of the back ends described above.
+
+    ``known_ids`` (the site's landmark ids) filters out decodings of tags the site does not have —
+    with 587 codes and 2-bit error correction, a stray decode of a foreign pattern is rare but would
+    otherwise enter the pose as an outlier.
+    """
+
+    def __init__(
+        self,
+        method: str = "opencv",
+        *,
+        known_ids: Iterable[int] | None = None,
+        decimate: float | None = None,
+        max_hamming: int = 1,
+        opencv_refine: str = "edges",
+    ) -> None:
+        if method not in ("apriltag", "opencv"):
+            raise ValueError(f"unknown detector {method!r} (expected 'apriltag' or 'opencv')")
+        if method == "apriltag" and not apriltag_available():
+            log.warning("pupil-apriltags is not installed: falling back to OpenCV's ArUco detector (less accurate corners)")
+            method = "opencv"
+        self.method = method
+        self.known_ids = None if known_ids is None else frozenset(int(i) for i in known_ids)
+        self.decimate = decimate
+        self.max_hamming = max_hamming
+        self._lock = threading.Lock()  # the pupil detector's decimation is per-call state
+        if method == "apriltag":
+            self._pupil = apriltag_detector()
+        else:
+            if opencv_refine not in ("edges", "none", "subpix", "apriltag"):
+                raise ValueError(f"unknown corner refinement {opencv_refine!r}")
+            self.refine = opencv_refine
+            params = cv2.aruco.DetectorParameters()
+            # Adaptive-threshold windows 3 and 23 px instead of 3, 13 and 23: a third less time for
+            # the same detection rate on our frames (benchmarks/ar.py).
+            params.adaptiveThreshWinSizeStep = 20
+            params.cornerRefinementMethod = {
+                "edges": cv2.aruco.CORNER_REFINE_NONE,  # ours runs afterwards (refine.py)
+                "none": cv2.aruco.CORNER_REFINE_NONE,
+                "subpix": cv2.aruco.CORNER_REFINE_SUBPIX,
+                "apriltag": cv2.aruco.CORNER_REFINE_APRILTAG,
+            }[opencv_refine]
+            dictionary = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11)
+            self._aruco = cv2.aruco.ArucoDetector(dictionary, params)
+
+    def _decimation_for(self, gray: np.ndarray) -> float:
+        if self.decimate is not None:
+            return self.decimate
+        return 1.0 if gray.shape[0] * gray.shape[1] <= FULL_RES_MAX_PIXELS else 2.0
+
+    def _keep(self, tag_id: int) -> bool:
+        return self.known_ids is None or tag_id in self.known_ids
+
+    def _run(self, gray: np.ndarray, decimate: float) -> list[TagDetection]:
+        """Raw detections of one image (no border filtering)."""
+        out: list[TagDetection] = []
+        if self.method == "apriltag":
+            with self._lock:
+                self._pupil.tag_detector_ptr.contents.quad_decimate = float(decimate)
+                dets = self._pupil.detect(gray)
+            for d in dets:
+                if d.hamming <= self.max_hamming and self._keep(d.tag_id):
+                    out.append(TagDetection(int(d.tag_id), apriltag_corners(d.corners), "apriltag", float(d.decision_margin), int(d.hamming)))
+        else:
+            corners, ids, _ = self._aruco.detectMarkers(gray)
+            if ids is not None:
+                kept = [(int(i), opencv_corners(c)) for c, i in zip(corners, ids.ravel()) if self._keep(int(i))]
+                quads = [q for _, q in kept]
+                if self.refine == "edges":
+                    quads = refine_corners(gray, quads)
+                out += [TagDetection(i, q, "opencv") for (i, _), q in zip(kept, quads)]
+        return out
+
+    def detect(self, image: np.ndarray) -> list[TagDetection]:
+        """All known tags in the frame, wholly inside it, one detection per id (the most confident)."""
+        gray = to_gray(image)
+        h, w = gray.shape
+        found = [d for d in self._run(gray, self._decimation_for(gray)) if not touches_border(d.corners, w, h)]
+        return _one_per_id(found)
+
+    def detect_regions(self, image: np.ndarray, regions: Sequence[tuple[int, np.ndarray]]) -> list[TagDetection]:
+        """Search crops for specific tags: ``regions`` holds ``(tag_id, predicted corners (4, 2))``.
+
+        Each crop is the predicted quad's bounding box grown by its own size, searched at full
+        resolution (×2 upscaled when the tag is small). Only the wanted id is kept from each crop,
+        and only when it lies wholly inside both the crop and the frame.
+        """
+        gray = to_gray(image)
+        h, w = gray.shape
+        out: list[TagDetection] = []
+        for tag_id, predicted in regions:
+            lo, hi = predicted.min(axis=0), predicted.max(axis=0)
+            extent = float(max(hi - lo))
+            if not np.isfinite(extent) or extent < 4.0:
+                continue
+            x0, y0 = np.floor(lo - extent).astype(int)
+            x1, y1 = np.ceil(hi + extent).astype(int)
+            x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, w), min(y1, h)
+            if x1 - x0 < 8 or y1 - y0 < 8:
+                continue
+            crop = np.ascontiguousarray(gray[y0:y1, x0:x1])
+            scale = 2.0 if extent < UPSCALE_BELOW_PX else 1.0
+            if scale != 1.0:
+                crop = cv2.resize(crop, None, fx=scale, fy=scale, interpolation=cv2.INTER_CUBIC)
+            ch, cw = crop.shape
+            for d in self._run(crop, 1.0):
+                if d.tag_id != tag_id or touches_border(d.corners, cw, ch):
+                    continue
+                # Back to frame pixels: crop pixel centre U ↔ frame (U + 0.5)/scale − 0.5 + offset.
+                corners = (d.corners + 0.5) / scale - 0.5 + np.array([x0, y0], dtype=np.float64)
+                if not touches_border(corners, w, h):
+                    out.append(TagDetection(d.tag_id, corners, d.detector, d.decision_margin, d.hamming))
+                break
+        return out
+
+
+def _one_per_id(dets: list[TagDetection]) -> list[TagDetection]:
+    """Keep one detection per tag id (a site has each id once; a duplicate is a mis-decode)."""
+    best: dict[int, TagDetection] = {}
+    for d in dets:
+        if d.tag_id not in best or d.decision_margin > best[d.tag_id].decision_margin:
+            best[d.tag_id] = d
+    return sorted(best.values(), key=lambda d: d.tag_id)

@@ -1,0 +1,112 @@
+"""Sub-pixel tag corners from the tag's four edges (edge-fit refinement).
+
+OpenCV's ArUco detector finds tags reliably but reports unrefined corners on the outermost black
+pixels (≈0.4 px mean error on our frames); its SUBPIX refinement looks at a small window around each
+corner only. A tag's black square is bounded by four straight edges (straight under a pinhole
+projection), each seen over tens of pixels, so the corners are best found by locating every edge
+precisely and intersecting the lines — the idea behind the AprilTag library's ``refine_edges``:
+
+1. along each edge, sample points between its corners (away from the corners themselves);
+2. at each sample read the intensity profile across the edge (bilinear, ``cv2.remap``), within the
+   black frame module inside and the white quiet-zone module outside;
+3. the edge crossing is the gradient-weighted mean position of the dark→light rise (robust to blur,
+   which is symmetric about the true edge);
+4. fit a line to each edge's crossings (weighted total least squares) and intersect neighbours.
+
+All tags of a frame are processed together (one ``remap`` call, batched numpy), so this costs a\nfraction of a millisecond.
+A corner that moves implausibly far (more than :data:`MAX_SHIFT_MODULES` of a module) keeps its
+original position: a refinement must never make a detection worse.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+#: Profile half-length across an edge, as a fraction of one module (stays inside the black frame
+#: and the white quiet zone, away from data modules and the background).
+REACH_MODULES = 0.7
+MAX_REACH_PX = 4.0
+#: Points per profile (spread over ±reach) and profiles per edge.
+STEPS = 25
+SAMPLES = 24
+#: Edge samples cover this central part of each edge (corners are rounded by blur).
+SPAN = (0.12, 0.88)
+MAX_SHIFT_MODULES = 0.5
+#: Profiles with less dark-to-light contrast than this (grey levels) are ignored.
+MIN_CONTRAST = 20.0
+_ROW = 1024
+
+
+def refine_corners(gray: np.ndarray, quads: list[np.ndarray]) -> list[np.ndarray]:
+    """Refined TL, TR, BR, BL corners (OpenCV pixel convention) for each quad in ``quads``.
+
+    ``quads`` hold approximate corners (4, 2) of dark squares on a light border, in that order
+    (any consistent winding works). Returns new arrays; unrefinable corners are returned unchanged.
+    Every array below has a leading tag axis T, then edge (4), sample (K) and step (S) axes.
+    """
+    if not quads:
+        return []
+    q = np.asarray(quads, dtype=np.float64).reshape(-1, 4, 2)
+    edges = np.roll(q, -1, axis=1) - q  # (T, 4, 2): edge i runs from corner i to corner i+1
+    lengths = np.linalg.norm(edges, axis=2)
+    module = lengths.mean(axis=1) / 8.0  # (T,)
+    reach = np.minimum(MAX_REACH_PX, REACH_MODULES * module)
+    usable = np.isfinite(q).all(axis=(1, 2)) & (lengths.min(axis=1) >= 6.0) & (reach >= 0.75)
+    if not usable.any():
+        return [quad.copy() for quad in q]
+    steps = np.linspace(-1.0, 1.0, STEPS)[None, :] * reach[:, None]  # (T, S)
+    t = np.linspace(SPAN[0], SPAN[1], SAMPLES)
+    bases = q[:, :, None, :] + t[None, None, :, None] * edges[:, :, None, :]  # (T, 4, K, 2)
+    d = edges / np.maximum(lengths, 1e-9)[..., None]
+    normals = np.stack([d[..., 1], -d[..., 0]], axis=-1)  # (T, 4, 2)
+    # Point each normal outward (away from the dark square's centre).
+    outward = np.einsum("tij,tij->ti", normals, q + edges / 2.0 - q.mean(axis=1, keepdims=True))
+    normals = np.where((outward < 0)[..., None], -normals, normals)
+    grid = bases[:, :, :, None, :] + steps[:, None, None, :, None] * normals[:, :, None, None, :]  # (T, 4, K, S, 2)
+    profile = _sample(gray, grid)
+    # Crossing of each profile: gradient-weighted mean of its rising (dark inside → light outside) part.
+    grad = np.clip(np.diff(profile, axis=-1), 0.0, None)
+    mids = (steps[:, :-1] + steps[:, 1:]) / 2.0  # (T, S-1)
+    weight = grad.sum(axis=-1)  # (T, 4, K)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        crossing = (grad * mids[:, None, None, :]).sum(axis=-1) / weight
+    contrast = profile.max(axis=-1) - profile.min(axis=-1)
+    good = np.isfinite(crossing) & (contrast > MIN_CONTRAST)
+    w = np.where(good, weight, 0.0)
+    pts = bases + np.where(good, crossing, 0.0)[..., None] * normals[:, :, None, :]
+    # Weighted total least squares line per edge: centroid + principal direction.
+    wsum = w.sum(axis=-1)  # (T, 4)
+    enough = good.sum(axis=-1) >= 4
+    mean = (pts * w[..., None]).sum(axis=2) / np.maximum(wsum, 1e-12)[..., None]
+    centred = (pts - mean[:, :, None, :]) * np.sqrt(w)[..., None]
+    cov = np.einsum("teki,tekj->teij", centred, centred)
+    _evals, evecs = np.linalg.eigh(cov)
+    direction = evecs[..., :, 1]  # (T, 4, 2) eigenvector of the largest eigenvalue
+    # Corner i is where edge i-1 (ending at it) meets edge i (starting at it).
+    p, u = np.roll(mean, 1, axis=1), np.roll(direction, 1, axis=1)
+    r, v = mean, direction
+    det = u[..., 0] * (-v[..., 1]) - u[..., 1] * (-v[..., 0])
+    rp = r - p
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = (rp[..., 0] * (-v[..., 1]) - rp[..., 1] * (-v[..., 0])) / det
+    corners = p + s[..., None] * u
+    ok_lines = enough & np.roll(enough, 1, axis=1) & (np.abs(det) > 1e-6)
+    shift = np.linalg.norm(corners - q, axis=2)
+    accept = usable[:, None] & ok_lines & np.isfinite(shift) & (shift <= MAX_SHIFT_MODULES * module[:, None] + 0.5)
+    refined = np.where(accept[..., None], corners, q)
+    return [c for c in refined]
+
+
+def _sample(gray: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    """Bilinear intensities at ``grid``'s (..., 2) pixel positions, in one ``cv2.remap`` call."""
+    shape = grid.shape[:-1]
+    coords = grid.reshape(-1, 2).astype(np.float32)
+    total = len(coords)
+    # remap wants 2-D maps under 32767 on a side: lay the samples out in rows of _ROW.
+    rows = -(-total // _ROW)
+    padded = np.zeros((rows * _ROW, 2), np.float32)
+    padded[:total] = coords
+    padded = padded.reshape(rows, _ROW, 2)
+    values = cv2.remap(gray, padded[..., 0], padded[..., 1], interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return values.reshape(-1)[:total].astype(np.float64).reshape(shape)

@@ -1,0 +1,98 @@
+"""``arroch ar localize``, ``arroch ar render`` and ``arroch tags sheet`` as real commands."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+
+import cv2
+import numpy as np
+import pytest
+
+from services.ar_client.detect import TagDetector
+from services.ar_client.geometry import look_at, matrix_from_quat, rotation_angle
+from services.ar_client.synth import render
+from tests.ar.helpers import HALL_FILE, HD, site
+from tests.procs import ROOT, arroch
+
+INTRINSICS = ",".join(f"{v:g}" for v in HD.as_list())
+TRUTH = look_at([2.5, 3.5, 1.4], [0.05, 5.0, 1.2])
+
+
+def _run(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
+    return subprocess.run(arroch(*args), cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def frame_png(tmp_path_factory) -> str:
+    path = tmp_path_factory.mktemp("cli") / "frame.png"
+    cv2.imwrite(str(path), render(site("hall"), TRUTH, HD).image)
+    return str(path)
+
+
+def test_localize_prints_the_pose_as_json(frame_png):
+    r = _run("ar", "localize", "--site", str(HALL_FILE), "--image", frame_png, "--intrinsics", INTRINSICS, "--json")
+    assert r.returncode == 0, r.stderr
+    data = json.loads(r.stdout)
+    assert data["ok"] is True and len(data["tags"]) >= 4
+    assert np.linalg.norm(np.array(data["position"]) - TRUTH.position) < 0.01
+    assert np.degrees(rotation_angle(matrix_from_quat(data["quaternion"]), TRUTH.R_wc)) < 0.3
+    assert 0.0 <= data["reprojection_rmse_px"] < 0.5
+
+
+def test_localize_says_why_when_it_cannot(tmp_path):
+    blank = tmp_path / "blank.png"
+    cv2.imwrite(str(blank), np.full((HD.height, HD.width), 200, np.uint8))
+    r = _run("ar", "localize", "--site", str(HALL_FILE), "--image", str(blank), "--intrinsics", INTRINSICS, "--json")
+    assert r.returncode == 1
+    data = json.loads(r.stdout)
+    assert data == {"ok": False, "reason": "no landmark tag in view", "tags": []}
+    wrong_size = _run("ar", "localize", "--site", str(HALL_FILE), "--image", str(blank), "--intrinsics", "500,500,320,240,640,480")
+    assert wrong_size.returncode == 2 and "1280x720" in wrong_size.stderr
+    missing = _run("ar", "localize", "--site", str(HALL_FILE), "--image", str(tmp_path / "nope.png"), "--intrinsics", INTRINSICS)
+    assert missing.returncode == 2 and "cannot read image" in missing.stderr
+
+
+def test_render_draws_a_state_file_over_an_image(frame_png, tmp_path):
+    state = {"time": 0.0, "poses": {"r0": [2.0, 5.0, 0.0]}, "intents": {"r0": [[0, 2.0, 5.0, 0], [10, 1.0, 4.0, 0]]}, "doors": {}}
+    state_file = tmp_path / "state.json"
+    state_file.write_text(json.dumps(state))
+    out = tmp_path / "out.png"
+    r = _run("ar", "render", "--site", str(HALL_FILE), "--image", frame_png, "--intrinsics", INTRINSICS, "--state", str(state_file), "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    drawn = cv2.imread(str(out))
+    plain = cv2.imread(frame_png)
+    assert drawn.shape == plain.shape
+    changed = np.abs(drawn.astype(int) - plain.astype(int)).max(axis=2) > 30
+    assert changed.sum() > 500  # the avatar, path and status were drawn
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"poses": {"r0": [1, 2]}}))
+    r = _run("ar", "render", "--site", str(HALL_FILE), "--image", frame_png, "--intrinsics", INTRINSICS, "--state", str(bad), "--out", str(out))
+    assert r.returncode == 2 and "poses.r0" in r.stderr
+
+
+def test_tags_sheet_pdf_has_one_true_size_page_per_landmark(tmp_path):
+    pdf = tmp_path / "tags.pdf"
+    r = _run("tags", "sheet", "--site", str(HALL_FILE), "--out", str(pdf))
+    assert r.returncode == 0, r.stderr
+    data = pdf.read_bytes()
+    assert data.startswith(b"%PDF")
+    assert len(re.findall(rb"/Type\s*/Page\b", data)) == len(site("hall").landmarks)
+
+
+def test_tags_sheet_png_pages_decode_upright_at_true_size(tmp_path):
+    """Each PNG page holds the landmark's tag: both detectors read the right id, its TL corner is the
+    image's top-left (upright), and its black square measures the landmark's size at the page's dpi."""
+    dpi = 150
+    r = _run("tags", "sheet", "--site", str(HALL_FILE), "--out", str(tmp_path / "sheet.png"), "--dpi", str(dpi))
+    assert r.returncode == 0, r.stderr
+    opencv = TagDetector("opencv")
+    for lm in site("hall").landmarks[:3]:
+        page = cv2.imread(str(tmp_path / f"sheet_{lm.tag}.png"), cv2.IMREAD_GRAYSCALE)
+        for dets in (opencv.detect(page), TagDetector("apriltag", decimate=2.0).detect(page)):
+            assert [d.tag_id for d in dets] == [lm.tag]
+            c = dets[0].corners
+            assert c[0][0] < c[1][0] and c[0][1] < c[3][1]  # TL left of TR and above BL: upright
+            edge_px = np.mean(np.linalg.norm(np.roll(c, -1, axis=0) - c, axis=1))
+            assert edge_px / dpi * 0.0254 == pytest.approx(lm.size, rel=0.01)

@@ -1,0 +1,113 @@
+"""Command line of the simulator: ``arroch sim [options]`` and ``arroch sim snapshot ...``.
+
+``arroch sim`` runs the simulation service until SIGINT/SIGTERM (or, with ``--until-done``, until
+the mission is done; exit code 0). Bad configuration (site file, human config, options) exits 2
+before any Zenoh session is opened.
+
+``--mode`` here is the clock mode (realtime, rate, lockstep), as the issue's command line has it;
+the Zenoh session mode every other service calls ``--mode`` is ``--zenoh-mode`` here (or env
+``ARROCH_ZENOH_MODE``).
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from protocol.runner import add_common_arguments, run_service
+from protocol.transport import MODES as ZENOH_MODES
+from protocol.transport import options_from
+
+from .human import METHODS, HumanConfig
+from .pacing import MODES
+
+
+def register(subparsers: Any) -> None:
+    parser = subparsers.add_parser(
+        "sim",
+        help="simulator: robots, doors, the simulated human, virtual tablet camera",
+        description=(
+            "Simulate the site: robots follow the planner's RobotCommands, doors open and close, the simulated "
+            "human works, opens her door and gives feedback (ARROCH). Publishes clock, poses, statuses, door "
+            "states, events and, at the end, the mission's metrics (Event mission_done)."
+        ),
+        conflict_handler="resolve",  # our --mode (clock mode) replaces the Zenoh --mode
+    )
+    add_common_arguments(parser)
+    parser.add_argument("--zenoh-mode", choices=ZENOH_MODES, help="Zenoh session mode (default client; env ARROCH_ZENOH_MODE)")
+    run = parser.add_argument_group("simulation")
+    run.add_argument("--method", choices=METHODS, default="arroch", help="arroch (default), no-feedback or no-comm (paper §V-A)")
+    run.add_argument("--mode", choices=MODES, default=None, help="clock mode: realtime (default), rate (with --rate) or lockstep")
+    run.add_argument("--rate", type=float, metavar="K", help="run K times faster than real time (implies --mode rate)")
+    run.add_argument("--seed", type=int, default=0, help="seed of the run's random numbers (default 0)")
+    run.add_argument("--until-done", action="store_true", help="exit (code 0) once mission_done is published")
+    run.add_argument("--time-limit", type=float, metavar="S", help="end the mission unfinished after S sim seconds (default 7200; 0: never)")
+    run.add_argument("--tick", type=float, metavar="S", help="sim seconds per engine step (default 0.05, i.e. 20 Hz)")
+    run.add_argument("--pose-rate", type=float, default=20.0, metavar="HZ", help="pose publication rate in sim time (default 20)")
+    run.add_argument("--metrics-out", metavar="FILE.json", help="write the mission's metrics there when it ends")
+    run.add_argument("--events-out", metavar="FILE.jsonl", help="write every event there, one JSON line each")
+    human = parser.add_argument_group("simulated human")
+    human.add_argument("--human-config", metavar="FILE", help="TOML file with the human model's parameters ([human] table; see docs)")
+    human.add_argument("--door-probability", type=float, metavar="P", help="chance per waiting robot per decision interval that she goes to open (default 0.5)")
+    from .camfeed import add_camera_arguments
+
+    add_camera_arguments(parser.add_argument_group("virtual tablet camera"))
+    parser.set_defaults(func=_run)
+
+    from .snapshot import add_snapshot_arguments, run_snapshot
+
+    sub = parser.add_subparsers(dest="sim_command", metavar="SUBCOMMAND")
+    snap = sub.add_parser("snapshot", help="render one camera frame of the site and write its ground truth")
+    add_snapshot_arguments(snap)
+    snap.set_defaults(func=run_snapshot)
+
+
+def _clock_mode(args: argparse.Namespace) -> tuple[str, float]:
+    mode = args.mode or ("rate" if args.rate is not None else "realtime")
+    if mode == "rate":
+        if args.rate is None or not args.rate > 0:
+            raise ValueError("--mode rate needs --rate K with K > 0")
+        return mode, args.rate
+    if args.rate is not None:
+        raise ValueError(f"--rate goes with --mode rate, not --mode {mode}")
+    return mode, 1.0
+
+
+def build_options(args: argparse.Namespace) -> Any:
+    """SimOptions from the parsed command line (raises ValueError/FileNotFoundError when bad)."""
+    from .camfeed import camera_options_from
+    from .engine import engine_config_with
+    from .service import SimOptions
+
+    mode, rate = _clock_mode(args)
+    if not args.pose_rate > 0:
+        raise ValueError("--pose-rate must be > 0")
+    overrides = {"door_probability": args.door_probability}
+    human = HumanConfig.from_toml(args.human_config, **overrides) if args.human_config else HumanConfig(**{k: v for k, v in overrides.items() if v is not None})
+    return SimOptions(
+        method=args.method,
+        mode=mode,
+        rate=rate,
+        seed=args.seed,
+        pose_rate=args.pose_rate,
+        until_done=args.until_done,
+        metrics_out=args.metrics_out,
+        events_out=args.events_out,
+        engine=engine_config_with(tick=args.tick, time_limit=args.time_limit),
+        human=human,
+        camera=camera_options_from(args),
+    )
+
+
+def _run(args: argparse.Namespace) -> int:
+    def build() -> Any:
+        from protocol.site import load_site
+
+        from .service import SimService
+
+        site = load_site(args.site)
+        options = build_options(args)
+        zenoh_args = argparse.Namespace(**{**vars(args), "mode": args.zenoh_mode})
+        return SimService(site, options, options_from(zenoh_args), namespace=args.namespace)
+
+    return run_service(build)

@@ -1,0 +1,168 @@
+"""Trajectory following: pure pursuit on a unicycle.
+
+A robot is a unicycle (x, y, theta) driven by a linear speed ``v`` and a turn rate ``omega``.
+Pure pursuit steers toward a point ``lookahead`` metres further along the path; the curvature that
+reaches it is ``2 sin(alpha) / d`` (``alpha`` the bearing of that point, ``d`` its distance). The
+robot drives at ``speed`` unless the curvature would need more than ``max_turn_rate``: then it slows
+down so as to keep the curvature (it never widens a corner by turning less). A bearing beyond
+``turn_in_place`` (e.g. the first row points behind the robot) is met by turning on the spot.
+
+The path is followed in space, not in time: a trajectory's timestamps are the planner's forecast,
+and a robot held at a door is late on them by the time it waited. ``s_limit`` caps how far along
+the path the robot may go (a closed door ahead); the step never carries it past that point.
+
+Integration is exact for constant (v, omega) over a step, so results do not drift with the tick.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass
+
+from .geometry import wrap
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    speed: float = 0.5  # m/s, the site's robot_speed
+    max_turn_rate: float = 1.5  # rad/s
+    lookahead: float = 0.3  # m; shorter cuts corners less but reacts more sharply
+    goal_tolerance: float = 0.02  # m from the last row counts as arrived
+    heading_tolerance: float = 0.03  # rad from the last row's theta counts as aligned
+    turn_in_place: float = 1.0  # rad of bearing beyond which the robot turns on the spot
+    align_final_heading: bool = True  # turn to the last row's theta after arriving
+
+
+class Path:
+    """A polyline with cumulative arc length, built from trajectory rows ``[t, x, y, theta]``."""
+
+    def __init__(self, rows: list[list[float]]) -> None:
+        points: list[tuple[float, float]] = []
+        for row in rows:
+            p = (float(row[1]), float(row[2]))
+            if not points or math.hypot(p[0] - points[-1][0], p[1] - points[-1][1]) > 1e-6:
+                points.append(p)
+        self.points = points
+        self.final_theta = float(rows[-1][3]) if rows else 0.0
+        self.s = [0.0]
+        for a, b in zip(points, points[1:]):
+            self.s.append(self.s[-1] + math.hypot(b[0] - a[0], b[1] - a[1]))
+
+    @property
+    def length(self) -> float:
+        return self.s[-1]
+
+    @property
+    def end(self) -> tuple[float, float]:
+        return self.points[-1]
+
+    def point_at(self, s: float) -> tuple[float, float]:
+        """The point at arc length ``s`` (clamped to the path)."""
+        if s <= 0.0 or len(self.points) == 1:
+            return self.points[0]
+        if s >= self.length:
+            return self.points[-1]
+        i = bisect.bisect_right(self.s, s) - 1
+        a, b = self.points[i], self.points[i + 1]
+        f = (s - self.s[i]) / (self.s[i + 1] - self.s[i])
+        return (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]))
+
+    def project(self, x: float, y: float, s_from: float, window: float) -> tuple[float, float]:
+        """Closest path point to (x, y) within arc lengths [s_from, s_from + window]: (s, distance).
+
+        Searching only forward of the last progress keeps progress monotone on paths that come back
+        near themselves (e.g. into a room and out through the same door).
+        """
+        if len(self.points) == 1:
+            return 0.0, math.hypot(x - self.points[0][0], y - self.points[0][1])
+        first = min(max(bisect.bisect_right(self.s, s_from) - 1, 0), len(self.points) - 2)
+        last = min(bisect.bisect_right(self.s, s_from + window), len(self.points) - 1)
+        best_s, best_d = s_from, math.inf
+        for i in range(first, max(last, first + 1)):
+            (ax, ay), (bx, by) = self.points[i], self.points[i + 1]
+            dx, dy = bx - ax, by - ay
+            seg = self.s[i + 1] - self.s[i]
+            t = ((x - ax) * dx + (y - ay) * dy) / (seg * seg)
+            t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
+            s = self.s[i] + t * seg
+            if s < s_from:
+                s, t = s_from, (s_from - self.s[i]) / seg
+            d = math.hypot(x - (ax + t * dx), y - (ay + t * dy))
+            if d < best_d:
+                best_s, best_d = s, d
+        return best_s, best_d
+
+
+@dataclass
+class Step:
+    """One control step's outcome."""
+
+    x: float
+    y: float
+    theta: float
+    v: float
+    omega: float
+    arrived: bool = False  # at the end of the path (and aligned, if asked)
+    held: bool = False  # stopped by ``s_limit`` short of the end
+
+
+class PurePursuit:
+    """Follows one path; keeps the progress along it between steps."""
+
+    def __init__(self, path: Path, config: ControllerConfig) -> None:
+        self.path = path
+        self.config = config
+        self.s = 0.0  # progress: arc length of the closest path point
+        self.cross_track = 0.0  # distance from that point at the last step
+        self.aligning = False
+
+    def step(self, x: float, y: float, theta: float, dt: float, s_limit: float = math.inf) -> Step:
+        cfg, path = self.config, self.path
+        if not self.aligning:
+            # How far the robot may get in one step, with a margin for the corner cases.
+            window = max(2.0 * cfg.lookahead, 4.0 * cfg.speed * dt) + 0.5
+            self.s, self.cross_track = path.project(x, y, self.s, window)
+            ex, ey = path.end
+            d_end = math.hypot(ex - x, ey - y)
+            if d_end <= cfg.goal_tolerance and self.s >= path.length - cfg.goal_tolerance - 1e-9:
+                if not cfg.align_final_heading:
+                    return Step(x, y, theta, 0.0, 0.0, arrived=True)
+                self.aligning = True
+            else:
+                return self._pursue(x, y, theta, dt, d_end, s_limit)
+        delta = wrap(path.final_theta - theta)
+        if abs(delta) <= cfg.heading_tolerance:
+            return Step(x, y, theta, 0.0, 0.0, arrived=True)
+        omega = max(-cfg.max_turn_rate, min(cfg.max_turn_rate, delta / dt))
+        return Step(x, y, wrap(theta + omega * dt), 0.0, omega)
+
+    def _pursue(self, x: float, y: float, theta: float, dt: float, d_end: float, s_limit: float) -> Step:
+        cfg, path = self.config, self.path
+        allowed = s_limit - self.s
+        if allowed <= 0.005:
+            return Step(x, y, theta, 0.0, 0.0, held=True)
+        tx, ty = path.point_at(self.s + cfg.lookahead) if path.length - self.s > cfg.lookahead else path.end
+        ld = math.hypot(tx - x, ty - y)
+        alpha = wrap(math.atan2(ty - y, tx - x) - theta) if ld > 1e-9 else 0.0
+        if abs(alpha) > cfg.turn_in_place:
+            omega = max(-cfg.max_turn_rate, min(cfg.max_turn_rate, alpha / dt))
+            return Step(x, y, wrap(theta + omega * dt), 0.0, omega)
+        curvature = 2.0 * math.sin(alpha) / ld if ld > 1e-9 else 0.0
+        v = cfg.speed
+        if abs(curvature) * v > cfg.max_turn_rate:
+            v = cfg.max_turn_rate / abs(curvature)
+        # Never overshoot the end of the path or the limit (a closed door ahead).
+        v = min(v, d_end / dt, allowed / dt)
+        omega = curvature * v
+        nx, ny, nth = integrate(x, y, theta, v, omega, dt)
+        return Step(nx, ny, nth, v, omega)
+
+
+def integrate(x: float, y: float, theta: float, v: float, omega: float, dt: float) -> tuple[float, float, float]:
+    """Unicycle pose after ``dt`` at constant (v, omega), exactly (an arc, or a line)."""
+    if abs(omega) < 1e-9:
+        return x + v * math.cos(theta) * dt, y + v * math.sin(theta) * dt, theta
+    th1 = theta + omega * dt
+    r = v / omega
+    return x + r * (math.sin(th1) - math.sin(theta)), y - r * (math.cos(th1) - math.cos(theta)), wrap(th1)

@@ -1,0 +1,328 @@
+"""The simulation's tick loop: time, robots, doors and the human, and what comes of them.
+
+One :meth:`Engine.step` advances sim time by ``tick`` seconds (20 Hz by default): robots first (in
+id order), then doors (they see this tick's requests and the robots' new positions), then the
+human (she sees who waits now). Stepping is kinematic and needs no physics engine; the pybullet
+scene only mirrors the result when something looks at it (see :mod:`services.sim.mirror`).
+
+Everything the outside world must hear comes out of :meth:`take_events` (in order) and the
+``status_changed``/door change flags; feedback the human gives comes out of
+:meth:`take_feedback`. The engine never reads a clock or the network: given the site, the seed and
+the same commands at the same ticks, it produces the same events.
+
+``world_version`` counts the states the planner must answer (docs/architecture.md): the mission
+start, every action done or failed (except a ``stop``), every opening or closing of a
+human-operated door. Automatic doors open and close for robots without a new version: they never
+block a plan, and a version per automatic door swing would only make the planner replan for nothing.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from protocol.messages import RobotCommand
+from protocol.site.model import Site
+
+from .controller import ControllerConfig
+from .doors import DoorChange, DoorConfig, Doors
+from .human import Declare, HumanConfig, HumanModel, OpenDoor, TaskDone
+from .metrics import MetricsRecorder
+from .objects import Objects
+from .robots import Outcome, Robot, RobotConfig, RobotExecutor
+
+HUMAN_DOOR_STANDOFF = 0.5  # m in front of a door where the human stands to open it
+
+
+@dataclass(frozen=True)
+class EngineConfig:
+    tick: float = 0.05  # s of sim time per step
+    time_limit: float = 7200.0  # s of sim time after which the mission ends unfinished (0: never)
+    max_turn_rate: float = 1.5  # rad/s
+    lookahead: float = 0.3  # m, pure pursuit
+    door_swing_time: float = 1.5  # s
+    auto_close_delay: float = 1.0  # s
+    stop_margin: float = 0.15  # m
+    auto_open_distance: float = 1.5  # m
+    start_tolerance: float = 1.5  # m
+    reach: float = 1.0  # m
+
+    def __post_init__(self) -> None:
+        if not self.tick > 0 or self.time_limit < 0:
+            raise ValueError("engine config: tick must be > 0 and time_limit >= 0")
+
+    def as_dict(self) -> dict[str, Any]:
+        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+
+@dataclass(frozen=True)
+class SimEvent:
+    time: float
+    kind: str
+    robot: str = ""
+    door: str = ""
+    object: str = ""
+    data: dict[str, Any] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"time": self.time, "kind": self.kind, "robot": self.robot, "door": self.door, "object": self.object, "data": self.data}
+
+
+@dataclass(frozen=True)
+class FeedbackRequest:
+    """Feedback the human gives; the service sends it and reports the answer back."""
+
+    id: int
+    time: float
+    kind: str
+    params: dict[str, Any]
+
+
+class Engine:
+    def __init__(
+        self,
+        site: Site,
+        *,
+        method: str,
+        seed: int,
+        human: HumanConfig | None = None,
+        config: EngineConfig | None = None,
+    ) -> None:
+        self.site = site
+        self.method = method
+        self.seed = seed
+        self.config = config or EngineConfig()
+        self.human_config = human or HumanConfig()
+        p = site.params
+        self.rng = np.random.default_rng(seed)  # the run's only source of randomness
+        self.doors = Doors(
+            site.doors.values(),
+            DoorConfig(swing_time=self.config.door_swing_time, hold_time=p.door_hold_time, auto_close_delay=self.config.auto_close_delay),
+            p.robot_radius,
+            site.door_leaves,
+        )
+        self.objects = Objects(site.objects)
+        controller = ControllerConfig(speed=p.robot_speed, max_turn_rate=self.config.max_turn_rate, lookahead=self.config.lookahead)
+        self.executor = RobotExecutor(
+            site,
+            self.doors,
+            self.objects,
+            RobotConfig(
+                controller=controller,
+                radius=p.robot_radius,
+                load_time=p.load_time,
+                capacity=p.robot_capacity,
+                stop_margin=self.config.stop_margin,
+                auto_open_distance=self.config.auto_open_distance,
+                start_tolerance=self.config.start_tolerance,
+                reach=self.config.reach,
+            ),
+        )
+        self.robots: dict[str, Robot] = {rid: Robot(rid, *spec.start) for rid, spec in sorted(site.robots.items())}
+        her_room = site.human.room
+        self.human_doors = sorted(d.id for d in site.doors.values() if d.human_operated and her_room in d.rooms)
+        self.human = HumanModel(
+            self.human_config,
+            method,
+            self.rng,
+            site.human.position,
+            {d: site.doors[d].beside(her_room, HUMAN_DOOR_STANDOFF) for d in self.human_doors},
+        )
+        self.ticks = 0
+        self.world_version = 0
+        self.done = False
+        self.completed = False
+        self.door_changed: set[str] = set(self.doors.doors)  # doors whose state must be published
+        self.door_by: dict[str, str] = {}  # who opened each door last
+        self._events: list[SimEvent] = []
+        self._feedback: list[FeedbackRequest] = []
+        self._feedback_ids = 0
+        self._waiting_since: dict[str, tuple[str, float]] = {}  # robot -> (door, since)
+        self.metrics = MetricsRecorder(
+            params={
+                "site": site.name,
+                "method": method,
+                "seed": seed,
+                "human": self.human_config.as_dict(),
+                "engine": self.config.as_dict(),
+                "site_params": {k: getattr(p, k) for k in p.__dataclass_fields__},
+                "robots": len(self.robots),
+                "objects": len(self.objects.items),
+                "human_doors": self.human_doors,
+            }
+        )
+
+    # ------------------------------------------------------------------ time
+
+    @property
+    def time(self) -> float:
+        # From the tick count, not a running sum: no float drift, identical across runs.
+        # Rounded so that logs read 19.4, not 19.400000000000002.
+        return round(self.ticks * self.config.tick, 9)
+
+    def start(self) -> None:
+        """The mission starts: the first state the planner must answer."""
+        self._new_world()
+        self._emit("mission_started", data={"method": self.method, "seed": self.seed, "world_version": self.world_version})
+
+    def step(self) -> None:
+        """Advance one tick."""
+        if self.done:
+            return
+        now, dt = self.time, self.config.tick
+        for robot in self.robots.values():
+            self._report(self.executor.step(robot, now, dt), now + dt)
+        positions = [(r.x, r.y) for r in self.robots.values()]
+        self.ticks += 1
+        t1 = self.time
+        for change in self.doors.step(now, dt, positions):
+            self._door_change(change, t1)
+        self._track_waiting(t1)
+        waiting: dict[str, dict[str, float]] = {d: {} for d in self.human_doors}
+        for rid, (door, since) in self._waiting_since.items():
+            if door in waiting:
+                waiting[door][rid] = since
+        door_open = {d: self.doors[d].open_or_opening for d in self.human_doors}
+        for action in self.human.step(now, dt, waiting, door_open):
+            self._human_action(action, t1)
+        self._check_end(t1)
+
+    # ------------------------------------------------------------------ inputs
+
+    def apply_command(self, cmd: RobotCommand) -> str:
+        """Apply a command now. Returns ``"applied"``, ``"stale"`` (not newer than the last one for
+        that robot) or ``"unknown_robot"``."""
+        robot = self.robots.get(cmd.robot)
+        if robot is None:
+            self._emit("action_failed", robot=cmd.robot, data={"plan_id": cmd.plan_id, "action_id": cmd.action_id, "action": cmd.action, "args": list(cmd.args), "reason": f"no robot {cmd.robot!r} on this site"})
+            return "unknown_robot"
+        if cmd.action_id <= robot.last_action_id:
+            return "stale"
+        self._waiting_since.pop(robot.id, None)
+        self._report(self.executor.assign(robot, cmd), self.time)
+        return "applied"
+
+    def feedback_answered(self, request: FeedbackRequest, *, accepted: bool | None, reason: str = "", constraints_version: int = 0) -> None:
+        """The restrictor's answer to the human's feedback (``accepted=None``: none came)."""
+        self.metrics.feedback_answer(accepted)
+        self._emit(
+            "feedback_answered",
+            door=str(request.params.get("door", "")),
+            data={"request": request.id, "sent": request.time, "accepted": accepted, "reason": reason, "constraints_version": constraints_version},
+        )
+
+    # ------------------------------------------------------------------ outputs
+
+    def take_events(self) -> list[SimEvent]:
+        events, self._events = self._events, []
+        return events
+
+    def take_feedback(self) -> list[FeedbackRequest]:
+        out, self._feedback = self._feedback, []
+        return out
+
+    def human_pose(self) -> tuple[float, float, float]:
+        return self.human.pose()
+
+    # ------------------------------------------------------------------ internals
+
+    def _emit(self, kind: str, *, robot: str = "", door: str = "", object: str = "", data: dict[str, Any] | None = None, at: float | None = None) -> None:
+        self._events.append(SimEvent(self.time if at is None else at, kind, robot, door, object, data or {}))
+
+    def _new_world(self) -> int:
+        self.world_version += 1
+        return self.world_version
+
+    def _report(self, outcomes: list[Outcome], t: float) -> None:
+        for out in outcomes:
+            data = dict(out.data)
+            if out.new_world:
+                data["world_version"] = self._new_world()
+            if out.kind == "action_done":
+                self.metrics.actions_done += 1
+            elif out.kind == "action_failed":
+                self.metrics.actions_failed += 1
+            elif out.kind == "delivered":
+                self._robot_progress(out.robot, t)
+            self._emit(out.kind, robot=out.robot, door=out.door, object=out.object, data=data, at=t)
+
+    def _robot_progress(self, rid: str, t: float) -> None:
+        mine = self.objects.of_robot(rid)
+        if mine and all(o.delivered for o in mine):
+            self.metrics.robot_done[rid] = max(o.delivered_at or t for o in mine)
+
+    def _door_change(self, change: DoorChange, t: float) -> None:
+        self.door_changed.add(change.door)
+        data: dict[str, Any] = {"by": change.by}
+        if self.doors[change.door].human_operated:
+            data["world_version"] = self._new_world()
+        if change.opened:
+            self.door_by[change.door] = change.by
+            self.metrics.opened(change.door, change.by)
+            if change.until:
+                data["until"] = change.until
+        self._emit("door_opened" if change.opened else "door_closed", door=change.door, data=data, at=t)
+
+    def _track_waiting(self, t: float) -> None:
+        for rid, robot in self.robots.items():
+            if robot.state == "waiting_at_door":
+                entry = self._waiting_since.get(rid)
+                if entry is None or entry[0] != robot.waiting_door:
+                    self._waiting_since[rid] = (robot.waiting_door, t)
+            else:
+                self._waiting_since.pop(rid, None)
+
+    def _human_action(self, action: OpenDoor | Declare | TaskDone, t: float) -> None:
+        if isinstance(action, OpenDoor):
+            self.doors.human_open(action.door, t)
+            self.door_changed.add(action.door)
+            self._emit("human_opens_door", door=action.door, data={"opening": self.human.counters.door_openings})
+        elif isinstance(action, Declare):
+            self._feedback_ids += 1
+            request = FeedbackRequest(self._feedback_ids, t, "door_unavailable", {"door": action.door, "minutes": action.minutes})
+            self._feedback.append(request)
+            self.metrics.feedback_sent += 1
+            self._emit("feedback_sent", door=action.door, data={"request": request.id, "kind": request.kind, "params": dict(request.params)})
+        else:
+            self.metrics.human_done = action.time
+            self._emit("human_done", data={"task_duration": self.human.task_duration}, at=action.time)
+
+    def _check_end(self, t: float) -> None:
+        finished = self.objects.all_delivered and self.human.done
+        timed_out = self.config.time_limit > 0 and t >= self.config.time_limit - 1e-9
+        if not (finished or timed_out):
+            return
+        self.done = True
+        self.completed = finished
+        self._emit("mission_done", data=self.summary())
+
+    def summary(self) -> dict[str, Any]:
+        robots = {
+            rid: {
+                "completion_time": self.metrics.robot_done.get(rid),
+                "delivered": list(r.delivered),
+                "wait_time": round(r.wait_time, 6),
+            }
+            for rid, r in self.robots.items()
+        }
+        h = self.human
+        human = {
+            "completion_time": h.done_time,
+            "task_duration": h.task_duration,
+            "door_openings": h.counters.door_openings,
+            "door_trips": h.counters.door_trips,
+            "turned_back": h.counters.turned_back,
+            "declarations": h.counters.declarations,
+            "time_away": round(h.counters.time_away, 6),
+            "focus": h.focus_report(),
+            "focus_started": h.counters.focus_started,
+        }
+        return self.metrics.summary(time=self.time, completed=self.completed, robots=robots, human=human, world_versions=self.world_version)
+
+
+def engine_config_with(**overrides: Any) -> EngineConfig:
+    """An :class:`EngineConfig` with the given fields changed (``None`` values are ignored)."""
+    return replace(EngineConfig(), **{k: v for k, v in overrides.items() if v is not None})
+

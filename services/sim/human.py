@@ -1,0 +1,393 @@
+"""The simulated human (paper §V-A, DESIGN §6).
+
+She has her own task (a0) of a total working time drawn once from a Gaussian. Robots that need her
+door are helped by a1: she walks from her desk to the door, opens it, and walks back; the time she
+is away is time not spent on her task, so every door she opens delays her. In ARROCH she can also
+take a2(N), "I am unavailable for the next N minutes", which the simulator turns into a real
+``door_unavailable`` Feedback to the restrictor.
+
+When she decides to open the door depends on what she can see:
+
+- with AR (``arroch`` and ``no-feedback``) she sees the robots waiting at her door. Each waiting
+  robot is one independent chance per *decision interval*: when it starts waiting and then every
+  ``decision_interval`` seconds while it still waits, she decides with ``door_probability``
+  whether to go. More robots waiting, more chances: she is more likely to come.
+- in ``no-comm`` she sees nothing: every ``no_comm_interval`` (a minute) she goes to open the door
+  with ``no_comm_probability`` (0.6), whether a robot is there or not.
+
+Focus intervals are drawn before she starts (their number and lengths from the config, placed
+uniformly at random, not overlapping, within her nominal task time). During one she opens no door,
+whatever the method: she draws no decision, and a walk to the door that a focus interval
+interrupts turns back. At the start of each one, in ARROCH only, she declares a2(N) with
+``declare_probability`` (0.9), N being the interval's length in whole minutes, for each door she
+operates.
+
+The model is pure: it reads the time, the robots waiting at her doors and whether each door is
+open, and returns what she does. All randomness comes from the one ``numpy.random.Generator`` the
+engine hands it, drawn in a fixed order, so a seed fixes her behaviour given the same inputs.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import asdict, dataclass, fields, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+METHODS = ("arroch", "no-feedback", "no-comm")
+
+
+@dataclass(frozen=True)
+class HumanConfig:
+    """The human model's parameters. Defaults: the paper's values where it gives them (0.6 per
+    minute in no-comm, 0.9 for a2 at a focus interval's start); otherwise chosen to fit the
+    office site (a delivery mission of a few robots takes 5–15 minutes)."""
+
+    task_mean: float = 600.0  # s of work her own task needs (Gaussian mean)
+    task_std: float = 60.0  # s (Gaussian standard deviation)
+    task_min: float = 60.0  # s; the Gaussian is clipped here so a draw is never absurd
+    walk_speed: float = 1.0  # m/s between her desk and a door
+    open_time: float = 3.0  # s at the door to open it
+    declare_time: float = 5.0  # s on the tablet to declare a2(N)
+    door_probability: float = 0.5  # chance per waiting robot per decision interval (AR methods)
+    decision_interval: float = 10.0  # s between two decisions about one waiting robot
+    no_comm_probability: float = 0.6  # chance per no_comm_interval (paper: 0.6 each minute)
+    no_comm_interval: float = 60.0  # s
+    focus_count: int = 2  # focus intervals drawn before she finishes
+    focus_min_minutes: int = 2  # a focus interval lasts a whole number of minutes in [min, max]
+    focus_max_minutes: int = 4
+    declare_probability: float = 0.9  # chance of a2(N) at a focus interval's start (paper: 0.9)
+    feedback_timeout: float = 2.0  # s to wait for the restrictor's ack of one attempt (wall time)
+    feedback_retries: int = 3  # further attempts after the first goes unanswered
+
+    def __post_init__(self) -> None:
+        problems = []
+        for name in ("door_probability", "no_comm_probability", "declare_probability"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                problems.append(f"{name} must be within [0, 1]")
+        for name in ("task_mean", "walk_speed", "decision_interval", "no_comm_interval", "feedback_timeout"):
+            if not getattr(self, name) > 0.0:
+                problems.append(f"{name} must be > 0")
+        for name in ("task_std", "task_min", "open_time", "declare_time"):
+            if not getattr(self, name) >= 0.0:
+                problems.append(f"{name} must be >= 0")
+        if self.focus_count < 0 or self.feedback_retries < 0:
+            problems.append("focus_count and feedback_retries must be >= 0")
+        if not 1 <= self.focus_min_minutes <= self.focus_max_minutes:
+            problems.append("focus minutes need 1 <= focus_min_minutes <= focus_max_minutes")
+        if problems:
+            raise ValueError("human config: " + "; ".join(problems))
+
+    @classmethod
+    def from_toml(cls, path: str | Path, **overrides: Any) -> "HumanConfig":
+        """Read ``[human]`` (or top-level keys) from a TOML file; ``overrides`` win over the file.
+
+        Unknown keys are refused by name, so a typo never silently falls back to a default."""
+        path = Path(path)
+        try:
+            data = tomllib.loads(path.read_text())
+        except FileNotFoundError:
+            raise FileNotFoundError(f"human config {path} does not exist") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise ValueError(f"human config {path}: {exc}") from None
+        table = data.get("human", data)
+        known = {f.name: f.type for f in fields(cls)}
+        unknown = sorted(set(table) - set(known))
+        if unknown:
+            raise ValueError(f"human config {path}: unknown key(s) {', '.join(unknown)}; known: {', '.join(known)}")
+        values: dict[str, Any] = {}
+        for name, value in table.items():
+            want = int if known[name] in ("int", int) else float
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or (want is int and not isinstance(value, int)):
+                raise ValueError(f"human config {path}: {name} must be a{'n integer' if want is int else ' number'}")
+            values[name] = want(value)
+        return replace(cls(**values), **{k: v for k, v in overrides.items() if v is not None})
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+# ---------------------------------------------------------------------------- what she does
+
+
+@dataclass(frozen=True)
+class OpenDoor:
+    """She reached the door and opens it now."""
+
+    door: str
+
+
+@dataclass(frozen=True)
+class Declare:
+    """a2(N): she declares she will not open ``door`` for the next ``minutes`` minutes."""
+
+    door: str
+    minutes: int
+
+
+@dataclass(frozen=True)
+class TaskDone:
+    """Her own task finished at ``time`` (within the step just taken)."""
+
+    time: float
+
+
+HumanAction = OpenDoor | Declare | TaskDone
+
+
+@dataclass(frozen=True)
+class FocusInterval:
+    start: float
+    end: float
+
+    @property
+    def minutes(self) -> int:
+        return int(round((self.end - self.start) / 60.0))
+
+
+@dataclass
+class HumanCounters:
+    """What she did, for the metrics and the statistics tests."""
+
+    ar_decisions: int = 0  # draws made for a waiting robot
+    ar_triggers: int = 0  # draws that sent her to the door
+    no_comm_decisions: int = 0
+    no_comm_triggers: int = 0
+    door_trips: int = 0  # walks toward a door begun
+    door_openings: int = 0  # times she opened a door (a1 completed)
+    turned_back: int = 0  # walks abandoned because a focus interval began
+    focus_started: int = 0
+    declarations: int = 0  # a2(N) taken (one per focus interval, whatever the number of doors)
+    time_away: float = 0.0  # s spent walking and at the door
+    time_declaring: float = 0.0
+
+
+@dataclass
+class _Trip:
+    door: str
+    leg: str  # "to", "at", "back"
+    left: float  # s left on this leg
+    walked: float = 0.0  # s walked toward the door so far (a turn-back returns the same way)
+
+
+class HumanModel:
+    """Her behaviour over time; call :meth:`step` once per engine tick."""
+
+    def __init__(
+        self,
+        config: HumanConfig,
+        method: str,
+        rng: np.random.Generator,
+        desk: tuple[float, float],
+        doors: dict[str, tuple[float, float]],
+    ) -> None:
+        if method not in METHODS:
+            raise ValueError(f"method {method!r} is not one of {', '.join(METHODS)}")
+        self.config = config
+        self.method = method
+        self.rng = rng
+        self.desk = desk
+        self.door_points = dict(doors)  # where she stands to open each door she operates
+        self.walk_time = {d: math.dist(desk, p) / config.walk_speed for d, p in doors.items()}
+        self.task_duration = max(config.task_min, float(rng.normal(config.task_mean, config.task_std)))
+        self.focus = self._sample_focus(self.task_duration)
+        self.counters = HumanCounters()
+        self.work_done = 0.0
+        self.done_time: float | None = None
+        self.pause = 0.0  # s of declaring still to spend before work resumes
+        self.trip: _Trip | None = None
+        self._focus_next = 0  # index of the next focus interval to start
+        self._next_check: dict[tuple[str, str], float] = {}  # (door, robot) -> next decision time
+        self._next_minute = config.no_comm_interval
+        self.opened_at: list[float] = []  # times she opened a door (for tests and metrics)
+
+    # ------------------------------------------------------------------ set-up
+
+    def _sample_focus(self, duration: float) -> list[FocusInterval]:
+        """``focus_count`` non-overlapping intervals placed uniformly in [0, duration).
+
+        Lengths first (whole minutes), then the free time is split by sorted uniform points: every
+        placement of the intervals in order is equally likely. If they cannot fit, fewer are kept.
+        """
+        cfg = self.config
+        lengths = [60.0 * int(self.rng.integers(cfg.focus_min_minutes, cfg.focus_max_minutes + 1)) for _ in range(cfg.focus_count)]
+        while lengths and sum(lengths) > 0.9 * duration:
+            lengths.pop()
+        free = duration - sum(lengths)
+        cuts = np.sort(self.rng.uniform(0.0, free, size=len(lengths)))
+        out, offset = [], 0.0
+        for cut, length in zip(cuts, lengths):
+            start = float(cut) + offset
+            out.append(FocusInterval(start, start + length))
+            offset += length
+        return out
+
+    # ------------------------------------------------------------------ queries
+
+    def in_focus(self, t: float) -> bool:
+        return any(f.start <= t < f.end for f in self.focus)
+
+    @property
+    def done(self) -> bool:
+        return self.done_time is not None
+
+    @property
+    def available(self) -> bool:
+        """At her desk (working, declaring, or finished): free to decide to go to a door."""
+        return self.trip is None
+
+    def pose(self) -> tuple[float, float, float]:
+        """Where she is (x, y) and which way she faces, for rendering and the tablet camera."""
+        if self.trip is None:
+            door = next(iter(self.door_points.values()), None)
+            yaw = math.atan2(door[1] - self.desk[1], door[0] - self.desk[0]) if door else 0.0
+            return (*self.desk, yaw)
+        target = self.door_points[self.trip.door]
+        walk = self.walk_time[self.trip.door] or 1.0
+        if self.trip.leg == "to":
+            f = self.trip.walked / walk
+            a, b = self.desk, target
+        elif self.trip.leg == "at":
+            f, a, b = 1.0, self.desk, target
+        else:
+            f = 1.0 - self.trip.left / walk
+            a, b = target, self.desk
+        f = min(max(f, 0.0), 1.0)
+        return (a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]), math.atan2(b[1] - a[1], b[0] - a[0]))
+
+    # ------------------------------------------------------------------ behaviour
+
+    def step(
+        self,
+        now: float,
+        dt: float,
+        waiting: dict[str, dict[str, float]],
+        door_open: dict[str, bool],
+    ) -> list[HumanAction]:
+        """Advance from ``now`` to ``now + dt``.
+
+        ``waiting[door]`` maps each robot waiting at that door to the time it started waiting;
+        ``door_open[door]`` says whether the door is open (or opening). Decisions fall at the end
+        of the step; walking and working are accounted exactly within it.
+        """
+        actions: list[HumanAction] = []
+        t1 = now + dt
+        self._advance(now, dt, actions)
+        self._start_focus(t1, actions)
+        if not self.in_focus(t1):
+            if self.method == "no-comm":
+                self._decide_blind(t1)
+            else:
+                self._decide_seen(t1, waiting, door_open)
+        else:
+            # No decisions are drawn during a focus interval; decisions due meanwhile are skipped.
+            for key, due in self._next_check.items():
+                while due <= t1:
+                    due += self.config.decision_interval
+                self._next_check[key] = due
+            while self._next_minute <= t1:
+                self._next_minute += self.config.no_comm_interval
+        # Forget robots no longer waiting, so a robot that comes back is seen afresh.
+        live = {(d, r) for d, robots in waiting.items() for r in robots}
+        for key in [k for k in self._next_check if k not in live]:
+            del self._next_check[key]
+        return actions
+
+    def _advance(self, now: float, dt: float, actions: list[HumanAction]) -> None:
+        """Spend ``dt`` seconds on the current activity, moving on to the next when one ends."""
+        t, left = now, dt
+        while left > 1e-12:
+            trip = self.trip
+            if trip is None:
+                spend = min(left, self.pause)
+                self.pause -= spend
+                self.counters.time_declaring += spend
+                t, left = t + spend, left - spend
+                if left <= 1e-12:
+                    break
+                if not self.done:
+                    need = self.task_duration - self.work_done
+                    if need <= left:
+                        self.work_done = self.task_duration
+                        self.done_time = t + need
+                        actions.append(TaskDone(self.done_time))
+                    else:
+                        self.work_done += left
+                return
+            spend = min(left, trip.left)
+            trip.left -= spend
+            self.counters.time_away += spend
+            if trip.leg == "to":
+                trip.walked += spend
+            t, left = t + spend, left - spend
+            if trip.left > 1e-12:
+                return
+            if trip.leg == "to":
+                if self.in_focus(t):  # arrived as a focus interval runs: leave the door shut
+                    self.counters.turned_back += 1
+                    self.trip = _Trip(trip.door, "back", trip.walked)
+                else:
+                    actions.append(OpenDoor(trip.door))
+                    self.counters.door_openings += 1
+                    self.opened_at.append(t)
+                    self.trip = _Trip(trip.door, "at", self.config.open_time)
+            elif trip.leg == "at":
+                self.trip = _Trip(trip.door, "back", self.walk_time[trip.door])
+            else:
+                self.trip = None
+
+    def _start_focus(self, t1: float, actions: list[HumanAction]) -> None:
+        while self._focus_next < len(self.focus) and self.focus[self._focus_next].start <= t1:
+            interval = self.focus[self._focus_next]
+            self._focus_next += 1
+            if self.done:
+                continue  # intervals are part of her task: none once it is finished
+            self.counters.focus_started += 1
+            if self.trip is not None and self.trip.leg == "to":
+                self.counters.turned_back += 1
+                self.trip = _Trip(self.trip.door, "back", self.trip.walked)
+            if self.method == "arroch" and self.door_points:
+                # Drawn in ARROCH only, so the other methods' random streams stay comparable.
+                if self.rng.random() < self.config.declare_probability:
+                    self.counters.declarations += 1
+                    self.pause += self.config.declare_time
+                    for door in self.door_points:
+                        actions.append(Declare(door, interval.minutes))
+
+    def _decide_seen(self, t1: float, waiting: dict[str, dict[str, float]], door_open: dict[str, bool]) -> None:
+        for door in sorted(waiting):
+            if door not in self.door_points:
+                continue
+            for robot in sorted(waiting[door]):
+                key = (door, robot)
+                due = self._next_check.get(key, waiting[door][robot])
+                while due <= t1:
+                    due += self.config.decision_interval
+                    # A decision needs her at her desk and the door still shut.
+                    if self.available and not door_open.get(door, False):
+                        self.counters.ar_decisions += 1
+                        if self.rng.random() < self.config.door_probability:
+                            self.counters.ar_triggers += 1
+                            self._go(door)
+                self._next_check[key] = due
+
+    def _decide_blind(self, t1: float) -> None:
+        while self._next_minute <= t1:
+            self._next_minute += self.config.no_comm_interval
+            if self.available and self.door_points:
+                self.counters.no_comm_decisions += 1
+                if self.rng.random() < self.config.no_comm_probability:
+                    self.counters.no_comm_triggers += 1
+                    doors = sorted(self.door_points)
+                    door = doors[int(self.rng.integers(len(doors)))] if len(doors) > 1 else doors[0]
+                    self._go(door)
+
+    def _go(self, door: str) -> None:
+        self.counters.door_trips += 1
+        self.trip = _Trip(door, "to", self.walk_time[door])
+
+    def focus_report(self) -> list[dict[str, float]]:
+        return [{"start": f.start, "end": f.end, "minutes": f.minutes} for f in self.focus]

@@ -1,0 +1,336 @@
+"""Executing RobotCommands: one state machine per robot (docs/architecture.md, execution contract).
+
+An action runs through phases: *drive* (follow the trajectory with :class:`PurePursuit`), then,
+depending on the action, *wait for the door* (``opendoor``) or *dwell* (``load``/``unload``
+for ``duration``, else the site's ``load_time``), then done. A new command preempts the current
+one; an ``action_id`` not above the last one seen is a duplicate or stale and is ignored.
+
+Doors on the way: every door whose gap the path crosses is a *crossing* at some arc length. While
+the next crossing's door is not passable, the robot may go no further than ``radius +
+stop_margin`` short of the closed leaf's line; held there it is ``waiting_at_door``. A hard guard
+backs this up: a step that would bring the robot's disc within ``guard_margin`` of a shut door's
+gap, closer than it was, is refused. Automatic doors are asked to open while the robot's path
+reaches them within ``auto_open_distance``.
+
+A command that cannot be executed fails at once with ``action_failed`` and a reason: an unknown
+door, passage or object, an object that is not this robot's or not where it can be reached, a full
+robot, a trajectory that starts too far from the robot, crosses a wall, or (``gothrough``) does
+not cross the opening it names.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from protocol.messages import RobotCommand
+from protocol.site.model import Site
+
+from .controller import ControllerConfig, Path, PurePursuit, Step
+from .doors import Doors
+from .geometry import segment_distance, segment_intersection
+from .objects import Objects
+
+
+@dataclass(frozen=True)
+class RobotConfig:
+    controller: ControllerConfig = ControllerConfig()
+    radius: float = 0.25
+    load_time: float = 10.0
+    capacity: int = 1
+    stop_margin: float = 0.15  # m between a waiting robot's disc and a closed leaf's line
+    guard_margin: float = 0.05  # m; the hard limit no step may cross toward a shut door
+    auto_open_distance: float = 1.5  # m of path ahead within which an automatic door is asked to open
+    start_tolerance: float = 1.5  # m; a trajectory may start at most this far from the robot
+    reach: float = 1.0  # m from the robot's centre within which it can pick up an object
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """Something a robot did that the engine reports (and maybe answers with a new world version)."""
+
+    kind: str  # action_done, action_failed, waiting_at_door, loaded, delivered
+    robot: str
+    door: str = ""
+    object: str = ""
+    data: dict[str, Any] = field(default_factory=dict)
+    new_world: bool = False  # the planner must answer it (world_version increments)
+
+
+class CommandError(Exception):
+    """Why a command cannot be executed (the text goes into action_failed's reason)."""
+
+
+@dataclass
+class Robot:
+    id: str
+    x: float
+    y: float
+    theta: float
+    v: float = 0.0
+    omega: float = 0.0
+    state: str = "idle"  # RobotStatus.state
+    command: RobotCommand | None = None
+    last_action_id: int = 0
+    carrying: list[str] = field(default_factory=list)
+    delivered: list[str] = field(default_factory=list)
+    waiting_door: str = ""
+    detail: str = ""
+    progress: float = 0.0
+    wait_time: float = 0.0  # s spent waiting at doors, over the whole mission
+    # execution of the current command
+    phase: str = "idle"  # idle, drive, wait_open, dwell, done, failed
+    follower: PurePursuit | None = None
+    crossings: list[tuple[float, str]] = field(default_factory=list)  # (arc length, door id), in order
+    dwell_left: float = 0.0
+    dwell_total: float = 0.0
+    status_changed: bool = True
+
+
+class RobotExecutor:
+    """Applies commands to robots and steps them; shared rules, one instance per engine."""
+
+    def __init__(self, site: Site, doors: Doors, objects: Objects, config: RobotConfig) -> None:
+        self.site = site
+        self.doors = doors
+        self.objects = objects
+        self.config = config
+
+    # ------------------------------------------------------------------ commands
+
+    def assign(self, robot: Robot, cmd: RobotCommand) -> list[Outcome]:
+        """Start executing ``cmd`` (preempting what ran before). Returns what that caused at once."""
+        robot.command = cmd
+        robot.last_action_id = cmd.action_id
+        robot.follower = None
+        robot.crossings = []
+        robot.v = robot.omega = 0.0
+        robot.detail = ""
+        robot.progress = 0.0
+        robot.status_changed = True  # a new action_id, even if the state stays "moving"
+        self._set(robot, state="moving", waiting_door="")
+        if cmd.action == "stop":
+            robot.phase = "idle"
+            self._set(robot, state="idle", detail="stopped")
+            # Nothing the planner did not ask for: no new world version (a stop per plan would loop).
+            return [self._outcome(robot, "action_done")]
+        try:
+            self._check(robot, cmd)
+        except CommandError as exc:
+            return self._fail(robot, str(exc))
+        if cmd.trajectory:
+            robot.follower = PurePursuit(Path(cmd.trajectory), self.config.controller)
+            robot.crossings = self._crossings(robot.follower.path)
+        robot.phase = "drive"
+        return []
+
+    def _check(self, robot: Robot, cmd: RobotCommand) -> None:
+        site = self.site
+        target = cmd.args[0] if cmd.args else ""
+        if cmd.action in ("approach", "gothrough", "opendoor"):
+            try:
+                opening = site.opening(target)
+            except KeyError:
+                raise CommandError(f"{cmd.action}: no door or passage {target!r}") from None
+            if cmd.action == "opendoor" and opening.kind != "door":
+                raise CommandError(f"opendoor: {target!r} is a passage, not a door")
+        elif cmd.action in ("load", "unload"):
+            if target not in self.objects:
+                raise CommandError(f"{cmd.action}: no object {target!r}")
+            obj = self.objects[target]
+            if cmd.action == "load":
+                if obj.spec.robot != robot.id:
+                    raise CommandError(f"load: object {target!r} belongs to robot {obj.spec.robot!r}")
+                if obj.delivered or obj.carrier is not None:
+                    raise CommandError(f"load: object {target!r} is {'delivered' if obj.delivered else 'carried by ' + str(obj.carrier)}")
+                if len(robot.carrying) >= self.config.capacity:
+                    raise CommandError(f"load: robot is full ({self.config.capacity} object(s))")
+            elif target not in robot.carrying:
+                raise CommandError(f"unload: robot does not carry {target!r}")
+        if not cmd.trajectory:
+            if cmd.action == "gothrough":
+                raise CommandError(f"gothrough: empty trajectory cannot go through {target!r}")
+            return
+        x0, y0 = cmd.trajectory[0][1], cmd.trajectory[0][2]
+        gap = math.hypot(x0 - robot.x, y0 - robot.y)
+        if gap > self.config.start_tolerance:
+            raise CommandError(f"trajectory starts {gap:.2f} m from the robot (more than {self.config.start_tolerance} m)")
+        points = [(robot.x, robot.y)] + [(row[1], row[2]) for row in cmd.trajectory]
+        for a, b in zip(points, points[1:]):
+            for wall in site.walls:
+                if segment_intersection(a, b, wall.a, wall.b) is not None:
+                    raise CommandError(f"trajectory segment {_fmt(a)}->{_fmt(b)} crosses a wall")
+        if cmd.action == "gothrough":
+            ea, eb = site.opening(target).endpoints
+            if not any(segment_intersection(a, b, ea, eb) is not None for a, b in zip(points, points[1:])):
+                raise CommandError(f"gothrough: trajectory does not cross {target!r}")
+
+    def _crossings(self, path: Path) -> list[tuple[float, str]]:
+        found: list[tuple[float, str]] = []
+        for door in self.doors.doors.values():
+            a, b = door.opening.endpoints
+            for i in range(len(path.points) - 1):
+                t = segment_intersection(path.points[i], path.points[i + 1], a, b)
+                if t is not None:
+                    found.append((path.s[i] + t * (path.s[i + 1] - path.s[i]), door.id))
+                    break
+        return sorted(found)
+
+    # ------------------------------------------------------------------ stepping
+
+    def step(self, robot: Robot, now: float, dt: float) -> list[Outcome]:
+        """Advance one robot by ``dt``; ``now`` is the time at the start of the step."""
+        if robot.phase == "drive":
+            return self._drive(robot, now, dt)
+        if robot.phase == "wait_open":
+            return self._wait_open(robot, dt)
+        if robot.phase == "dwell":
+            return self._dwell(robot, now, dt)
+        robot.v = robot.omega = 0.0
+        return []
+
+    def _drive(self, robot: Robot, now: float, dt: float) -> list[Outcome]:
+        follower = robot.follower
+        if follower is None:
+            return self._arrived(robot, now + dt)
+        cfg = self.config
+        s_limit, blocking = math.inf, ""
+        for s_cross, door_id in robot.crossings:
+            if s_cross < follower.s:
+                continue  # behind the robot's centre already
+            if s_cross - follower.s <= cfg.auto_open_distance + cfg.radius:
+                self.doors.request_open(door_id, robot.id)
+            if not self.doors.passable(door_id):
+                s_limit, blocking = s_cross - (cfg.radius + cfg.stop_margin), door_id
+                break
+        cmd = robot.command
+        if cmd is not None and cmd.action == "approach":
+            # Approaching a door to go through it next: an automatic one opens as the robot comes
+            # near, so it does not have to stop at it when gothrough follows.
+            opening = self.site.opening(cmd.args[0])
+            if opening.kind == "door" and math.dist((robot.x, robot.y), opening.center) <= cfg.auto_open_distance + cfg.radius:
+                self.doors.request_open(opening.id, robot.id)
+        step = follower.step(robot.x, robot.y, robot.theta, dt, s_limit)
+        if blocking and not step.held and self._breaks_guard(robot, step, blocking):
+            step = Step(robot.x, robot.y, robot.theta, 0.0, 0.0, held=True)
+        robot.x, robot.y, robot.theta, robot.v, robot.omega = step.x, step.y, step.theta, step.v, step.omega
+        robot.progress = min(follower.s / follower.path.length, 1.0) if follower.path.length > 0 else 1.0
+        if step.held:
+            robot.wait_time += dt
+            if robot.state != "waiting_at_door" or robot.waiting_door != blocking:
+                self._set(robot, state="waiting_at_door", waiting_door=blocking)
+                return [self._outcome(robot, "waiting_at_door", door=blocking)]
+            return []
+        if robot.state == "waiting_at_door":
+            self._set(robot, state="moving", waiting_door="")
+        if step.arrived:
+            return self._arrived(robot, now + dt)
+        return []
+
+    def _breaks_guard(self, robot: Robot, step: Step, door_id: str) -> bool:
+        a, b = self.doors[door_id].opening.endpoints
+        limit = self.config.radius + self.config.guard_margin
+        before = segment_distance((robot.x, robot.y), a, b)
+        after = segment_distance((step.x, step.y), a, b)
+        return after < limit and after < before
+
+    def _arrived(self, robot: Robot, t: float) -> list[Outcome]:
+        """The drive is over; go on with what the action does at its end."""
+        cmd = robot.command
+        assert cmd is not None
+        robot.v = robot.omega = 0.0
+        if cmd.action in ("approach", "gothrough"):
+            return self._done(robot)
+        if cmd.action == "opendoor":
+            robot.phase = "wait_open"
+            return self._wait_open(robot, 0.0)
+        # load / unload: check now that the dwell can succeed, so a doomed one fails at once.
+        obj = self.objects[cmd.args[0]]
+        if cmd.action == "load":
+            gap = math.hypot(obj.x - robot.x, obj.y - robot.y)
+            if gap > self.config.reach:
+                return self._fail(robot, f"load: object {obj.id!r} is {gap:.2f} m away (reach {self.config.reach} m)")
+        else:
+            room = self.site.room_at(robot.x, robot.y)
+            if room is None or room.id != obj.spec.deliver_to:
+                where = room.id if room else "no room"
+                return self._fail(robot, f"unload: robot is in {where!r}, object {obj.id!r} goes to {obj.spec.deliver_to!r}")
+        robot.phase = "dwell"
+        robot.dwell_total = robot.dwell_left = cmd.duration if cmd.duration > 0 else self.config.load_time
+        robot.progress = 0.0
+        self._set(robot, state="loading" if cmd.action == "load" else "unloading")
+        if robot.dwell_left <= 0:
+            return self._dwell(robot, t, 0.0)
+        return []
+
+    def _wait_open(self, robot: Robot, dt: float) -> list[Outcome]:
+        cmd = robot.command
+        assert cmd is not None
+        door_id = cmd.args[0]
+        self.doors.request_open(door_id, robot.id)
+        if self.doors.passable(door_id):
+            return self._done(robot)
+        robot.wait_time += dt
+        if robot.state != "waiting_at_door":
+            self._set(robot, state="waiting_at_door", waiting_door=door_id)
+            return [self._outcome(robot, "waiting_at_door", door=door_id)]
+        return []
+
+    def _dwell(self, robot: Robot, now: float, dt: float) -> list[Outcome]:
+        cmd = robot.command
+        assert cmd is not None
+        robot.dwell_left -= dt
+        robot.progress = min(1.0, 1.0 - robot.dwell_left / robot.dwell_total) if robot.dwell_total > 0 else 1.0
+        if robot.dwell_left > 1e-9:
+            return []
+        oid = cmd.args[0]
+        # The dwell ended within this step: date what follows at that instant, not at the tick.
+        t = now + dt + min(robot.dwell_left, 0.0)
+        if cmd.action == "load":
+            self.objects.pick(oid, robot.id)
+            robot.carrying.append(oid)
+            first = self._outcome(robot, "loaded", object=oid)
+        else:
+            robot.carrying.remove(oid)
+            robot.delivered.append(oid)
+            self.objects.place(oid, robot.x, robot.y, delivered_at=t)
+            first = self._outcome(robot, "delivered", object=oid)
+        return [first, *self._done(robot)]
+
+    # ------------------------------------------------------------------ reporting
+
+    def _done(self, robot: Robot) -> list[Outcome]:
+        robot.phase = "done"
+        robot.progress = 1.0
+        self._set(robot, state="done", waiting_door="")
+        return [self._outcome(robot, "action_done", new_world=True)]
+
+    def _fail(self, robot: Robot, reason: str) -> list[Outcome]:
+        robot.phase = "failed"
+        robot.v = robot.omega = 0.0
+        self._set(robot, state="failed", waiting_door="", detail=reason)
+        return [self._outcome(robot, "action_failed", new_world=True, reason=reason)]
+
+    def _outcome(self, robot: Robot, kind: str, *, door: str = "", object: str = "", new_world: bool = False, reason: str = "") -> Outcome:
+        cmd = robot.command
+        data: dict[str, Any] = {}
+        if cmd is not None:
+            data = {"plan_id": cmd.plan_id, "action_id": cmd.action_id, "action": cmd.action, "args": list(cmd.args)}
+        # Where the robot is as it happens: a consumer can plan from this without relying on the
+        # pose stream having arrived first (subscriptions on different keys are not ordered).
+        data["pose"] = [round(robot.x, 6), round(robot.y, 6), round(robot.theta, 6)]
+        if reason:
+            data["reason"] = reason
+        return Outcome(kind, robot.id, door=door, object=object, data=data, new_world=new_world)
+
+    @staticmethod
+    def _set(robot: Robot, **changes: Any) -> None:
+        for name, value in changes.items():
+            if getattr(robot, name) != value:
+                setattr(robot, name, value)
+                robot.status_changed = True
+
+
+def _fmt(p: tuple[float, float]) -> str:
+    return f"({p[0]:.2f}, {p[1]:.2f})"

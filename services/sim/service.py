@@ -1,0 +1,344 @@
+"""The ``arroch sim`` process: the engine on Zenoh, in one of the three clock modes.
+
+Inputs: ``robot/*/command`` (RobotCommand), ``plan`` (TeamPlan, for lockstep), the restrictor's
+acks of the human's feedback (queries on ``feedback``). Outputs: ``clock``, ``robot/<rid>/pose``,
+``robot/<rid>/status``, ``door/<did>/state``, ``event``, and with ``--camera`` the virtual tablet
+camera's ``camera/<cid>/frame`` and ``truth``.
+
+Order of publication after a tick that changed the world: poses, then statuses and door states,
+then the events, then the clock. A planner woken by an event (or by the new ``world_version`` on
+a status) has therefore already received the poses of that instant.
+
+Publishing rates:
+- poses every ``1/pose_rate`` of sim time (20 Hz by default); in lockstep also at most
+  ``pose_rate`` times per wall second (more is of no use to anyone watching, and at 1000x real
+  time would flood the network), and always at a new world version, when the planner needs them;
+- the clock with every pose batch, at every new world version, and twice a wall second while
+  time stands still (paused in lockstep, or the mission over);
+- statuses and door states when they change, and all of them once a wall second for late joiners;
+- events as they happen.
+
+Everything runs on the service's worker thread (the Service base's loop); the only other thread
+sends feedback queries (:mod:`services.sim.feedback`).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, Any
+
+from protocol.messages import Clock, DoorState, Event, RobotCommand, RobotPose, RobotStatus, TeamPlan
+from protocol.keys import chunk_at
+from protocol.service import Service
+from protocol.site.model import Site
+from protocol.transport import ZenohOptions
+
+from .engine import Engine, EngineConfig, FeedbackRequest, SimEvent
+from .feedback import FeedbackSender
+from .human import HumanConfig
+from .pacing import LockstepGate, WallPacer
+
+log = logging.getLogger("arroch.sim")
+
+HEARTBEAT = 1.0  # wall s between republications of every status and door state
+PAUSED_CLOCK = 0.5  # wall s between clock messages while time stands still
+LOCKSTEP_BUDGET = 0.02  # wall s of stepping per turn of the loop in lockstep, so messages get in
+STALL_WARNING = 10.0  # wall s paused on one reason before lockstep says so at WARNING level
+
+
+@dataclass
+class SimOptions:
+    method: str = "arroch"
+    mode: str = "lockstep"  # realtime, rate, lockstep
+    rate: float = 1.0  # sim seconds per wall second in rate mode
+    seed: int = 0
+    pose_rate: float = 20.0  # Hz
+    until_done: bool = False
+    metrics_out: str | None = None
+    events_out: str | None = None
+    engine: EngineConfig = field(default_factory=EngineConfig)
+    human: HumanConfig = field(default_factory=HumanConfig)
+    camera: Any = None  # a services.sim.camfeed.CameraOptions, or None
+
+    def as_params(self) -> dict[str, Any]:
+        return {"mode": self.mode, "rate": self.rate if self.mode == "rate" else (1.0 if self.mode == "realtime" else 0.0), "pose_rate": self.pose_rate}
+
+
+class EngineClock:
+    """The site clock of the sim itself: the engine's time (stamps every message it sends)."""
+
+    synced = True
+
+    def __init__(self) -> None:
+        self.engine: Engine | None = None
+
+    def now(self) -> float:
+        return self.engine.time if self.engine is not None else 0.0
+
+
+class SimService(Service):
+    def __init__(self, site: Site, options: SimOptions, zenoh_options: ZenohOptions, *, namespace: str | None = None) -> None:
+        clock = EngineClock()
+        super().__init__("sim", namespace or site.name, zenoh_options, clock=clock)  # type: ignore[arg-type]
+        self.site = site
+        self.options = options
+        self.engine = Engine(site, method=options.method, seed=options.seed, human=options.human, config=options.engine)
+        self.engine.metrics.params.update(options.as_params())
+        clock.engine = self.engine
+        self.gate = LockstepGate()
+        self.pacer = WallPacer(options.rate if options.mode == "rate" else 1.0, options.engine.tick) if options.mode != "lockstep" else None
+        self._pose_period = 1.0 / options.pose_rate
+        self._next_pose_sim = 0.0
+        self._last_pose_wall = 0.0
+        self._last_heartbeat = 0.0
+        self._last_clock_wall = 0.0
+        self._blocker = ""
+        self._blocked_since = 0.0
+        self._stall_reported = False
+        self._sender: FeedbackSender | None = None
+        self._events_file: IO[str] | None = None
+        self._started_wall = 0.0
+        self._exit_at: float | None = None
+        self._camera = None
+
+    # ------------------------------------------------------------------ set-up
+
+    def setup(self) -> None:
+        if self.options.events_out:
+            self._events_file = open(self.options.events_out, "w", encoding="utf-8")
+        self.subscribe(self.keys.robot_command(), RobotCommand, self._on_command)
+        self.subscribe(self.keys.plan(), TeamPlan, self._on_plan)
+        hc = self.options.human
+        self._sender = FeedbackSender(self, timeout=hc.feedback_timeout, retries=hc.feedback_retries)
+        if self.options.camera is not None:
+            from .camfeed import CameraFeed  # pybullet only when a camera is asked for
+
+            self._camera = CameraFeed(self.site, self.engine, self.options.camera)
+        self._started_wall = time.monotonic()
+        self.engine.start()
+        self._publish_tick(force_poses=True)
+        if self.options.mode == "lockstep":
+            period = 0.001
+        else:
+            period = min(0.01, self.options.engine.tick / (self.pacer.rate if self.pacer else 1.0) / 2.0)
+        self.every(period, self._pump, first=0.0)
+        log.info(
+            "sim %s: method %s, mode %s%s, seed %d, %d robots, %d objects",
+            self.site.name, self.options.method, self.options.mode,
+            f" x{self.options.rate:g}" if self.options.mode == "rate" else "", self.options.seed, len(self.engine.robots), len(self.engine.objects.items),
+        )
+
+    def teardown(self) -> None:
+        if self._sender is not None:
+            self._sender.close()
+        if self._camera is not None:
+            self._camera.close()
+        if self._events_file is not None:
+            self._events_file.close()
+            self._events_file = None
+
+    # ------------------------------------------------------------------ inputs
+
+    def _on_command(self, cmd: RobotCommand, key: str) -> None:
+        keyed = chunk_at(key, 3)
+        if keyed != cmd.robot:
+            self.count("commands_refused")
+            self.log.warning("command for robot %r arrived on %r's key: refused", cmd.robot, keyed)
+            return
+        result = self.engine.apply_command(cmd)
+        self.count(f"commands_{result}")
+        self._publish_tick(force_poses=False)
+
+    def _on_plan(self, plan: TeamPlan, key: str) -> None:
+        if self.gate.on_plan(plan):
+            self.count("plans")
+        else:
+            self.count("plans_stale")
+
+    # ------------------------------------------------------------------ the loop
+
+    def _pump(self) -> None:
+        wall = time.monotonic()
+        self._collect_feedback_answers()
+        if self._exit_at is not None:
+            if wall >= self._exit_at:
+                self.stop()
+            return
+        if self.engine.done:
+            self._paused_heartbeat(wall)
+            return
+        if self.options.mode == "lockstep":
+            self._run_lockstep(wall)
+        else:
+            assert self.pacer is not None
+            for _ in range(self.pacer.due(self.engine.time, wall)):
+                if not self._tick(wall):
+                    break
+        if self._camera is not None:
+            self._camera.maybe_render(self, wall)
+        if wall - self._last_heartbeat >= HEARTBEAT:
+            self._last_heartbeat = wall
+            self._publish_states(everything=True)
+
+    def _run_lockstep(self, wall: float) -> None:
+        deadline = wall + LOCKSTEP_BUDGET
+        while True:
+            blocker = self._blocked()
+            if blocker:
+                if blocker != self._blocker:
+                    self.log.debug("t=%.2f paused: %s", self.engine.time, blocker)
+                    self._blocker = blocker
+                    self._blocked_since = wall
+                    self._publish_clock()
+                elif wall - self._blocked_since >= STALL_WARNING and not self._stall_reported:
+                    # Usually a planner that is not running, or a command it never sent.
+                    self.log.warning("lockstep stalled %.0f s at t=%.2f: %s", wall - self._blocked_since, self.engine.time, blocker)
+                    self._stall_reported = True
+                self._paused_heartbeat(wall)
+                return
+            self._blocker = ""
+            self._stall_reported = False
+            if not self._tick(time.monotonic()) or time.monotonic() >= deadline:
+                return
+
+    def _tick(self, wall: float) -> bool:
+        """One engine step and what it must publish. False when the world changed or ended (in
+        lockstep: stop and let the planner answer)."""
+        version = self.engine.world_version
+        self.engine.step()
+        for request in self.engine.take_feedback():
+            self._send_feedback(request)
+        changed = self.engine.world_version != version
+        self._publish_tick(force_poses=changed, wall=wall)
+        if self.engine.done:
+            self._finish()
+            return False
+        return not changed
+
+    # ------------------------------------------------------------------ publishing
+
+    def _publish_tick(self, *, force_poses: bool, wall: float | None = None) -> None:
+        wall = time.monotonic() if wall is None else wall
+        t = self.engine.time
+        events = self.engine.take_events()
+        due = t >= self._next_pose_sim - 1e-9
+        if due and self.options.mode == "lockstep" and wall - self._last_pose_wall < self._pose_period:
+            due = False  # in lockstep, no faster than pose_rate per wall second either
+        if force_poses or due or events:
+            self._publish_poses()
+            self._last_pose_wall = wall
+            self._next_pose_sim = t + self._pose_period
+        self._publish_states(everything=False)
+        for event in events:
+            self._publish_event(event)
+        if force_poses or due or events:
+            self._publish_clock()
+
+    def _publish_poses(self) -> None:
+        for rid, r in self.engine.robots.items():
+            self.publish(self.keys.robot_pose(rid), RobotPose(robot=rid, x=r.x, y=r.y, theta=r.theta, vel=r.v, omega=r.omega))
+
+    def _publish_states(self, *, everything: bool) -> None:
+        version = self.engine.world_version
+        for rid, r in self.engine.robots.items():
+            if not (everything or r.status_changed):
+                continue
+            r.status_changed = False
+            cmd = r.command
+            status = RobotStatus(
+                robot=rid,
+                state=r.state,
+                plan_id=cmd.plan_id if cmd else 0,
+                action_id=cmd.action_id if cmd else 0,
+                action=cmd.action if cmd else "",
+                args=list(cmd.args) if cmd else [],
+                progress=max(0.0, min(1.0, r.progress)),
+                carrying=list(r.carrying),
+                delivered=list(r.delivered),
+                waiting_door=r.waiting_door,
+                detail=r.detail[:512],
+                world_version=version,
+            )
+            self.publish(self.keys.robot_status(rid), status)
+        doors = self.engine.doors
+        changed = set(doors.doors) if everything else self.engine.door_changed
+        for did in sorted(changed):
+            door = doors[did]
+            until = door.hold_until if door.human_operated and door.passable else 0.0
+            state = DoorState(door=did, open=door.passable, by=self.engine.door_by.get(did, ""), until=until, world_version=version)
+            self.publish(self.keys.door_state(did), state)
+        self.engine.door_changed = set()
+
+    def _publish_event(self, event: SimEvent) -> None:
+        msg = Event(kind=event.kind, robot=event.robot, door=event.door, object=event.object, data=event.data)
+        # Stamped with the instant it happened (may fall within the tick), not the tick's end.
+        msg.src, msg.seq, msg.stamp = self.src, self.next_seq(), event.time
+        self.publish(self.keys.event(), msg, stamp=False)
+        if self._events_file is not None:
+            self._events_file.write(json.dumps(event.as_dict(), sort_keys=True) + "\n")
+
+    def _blocked(self) -> str:
+        if self.options.mode != "lockstep":
+            return ""
+        return self.gate.blocker(self.engine.world_version, {rid: r.last_action_id for rid, r in self.engine.robots.items()})
+
+    def _publish_clock(self) -> None:
+        """The clock; ``paused`` when time stands still (lockstep waiting, or the mission over)."""
+        self._last_clock_wall = time.monotonic()
+        mode = self.options.mode
+        rate = self.options.rate if mode == "rate" else 1.0
+        paused = self.engine.done or bool(self._blocked())
+        self.publish(self.keys.clock(), Clock(time=self.engine.time, mode=mode, rate=rate, world_version=self.engine.world_version, paused=paused))
+
+    def _paused_heartbeat(self, wall: float) -> None:
+        if wall - self._last_clock_wall >= PAUSED_CLOCK:
+            self._publish_clock()
+            if self._blocker:
+                self.log.debug("t=%.2f still paused: %s", self.engine.time, self._blocker)
+
+    # ------------------------------------------------------------------ feedback
+
+    def _send_feedback(self, request: FeedbackRequest) -> None:
+        assert self._sender is not None
+        self.gate.feedback_sent()
+        self.count("feedback_sent")
+        self._sender.send(request, request.kind, dict(request.params))
+
+    def _collect_feedback_answers(self) -> None:
+        if self._sender is None:
+            return
+        for answer in self._sender.answers():
+            request = answer.request
+            assert isinstance(request, FeedbackRequest)
+            ack = answer.ack
+            accepted = None if ack is None else ack.accepted
+            cv = ack.constraints_version if ack is not None else 0
+            self.gate.feedback_answered(accepted, cv)
+            self.engine.feedback_answered(request, accepted=accepted, reason=ack.reason if ack else "no ack", constraints_version=cv)
+            self.count("feedback_accepted" if accepted else ("feedback_refused" if accepted is False else "feedback_unanswered"))
+            self._publish_tick(force_poses=False)
+
+    # ------------------------------------------------------------------ the end
+
+    def _finish(self) -> None:
+        wall = time.monotonic() - self._started_wall
+        self._publish_states(everything=True)
+        self._publish_clock()
+        summary = self.engine.summary()
+        self.log.info(
+            "mission %s at t=%.1f s (team %.1f s), %.1f s wall (%.0fx real time)",
+            "done" if self.engine.completed else "ended unfinished", self.engine.time,
+            summary["team_completion_time"] or float("nan"), wall, self.engine.time / wall if wall > 0 else float("inf"),
+        )
+        if self.options.metrics_out:
+            out = dict(summary)
+            out["run"] = {"wall_time": wall, "realtime_factor": self.engine.time / wall if wall > 0 else None, "counters": self.counters_snapshot()}
+            Path(self.options.metrics_out).write_text(json.dumps(out, indent=2, sort_keys=True) + "\n", encoding="utf-8")
+        if self._events_file is not None:
+            self._events_file.flush()
+        if self.options.until_done:
+            self._exit_at = time.monotonic() + 0.3  # let the last messages leave before closing

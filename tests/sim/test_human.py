@@ -1,0 +1,185 @@
+"""The human model alone, over thousands of seeded trials: its statistics match its parameters.
+
+Bounds are four standard errors of the quantity tested (a binomial proportion or a mean), so a
+correct model fails one of them with probability well under 1e-3, and a model that is off by
+a few percentage points fails reliably.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from services.sim.human import Declare, HumanConfig, HumanModel, OpenDoor, TaskDone
+
+DESK = (7.0, 1.0)
+DOOR = {"d": (7.0, 4.0)}  # 3 m from her desk: 3 s each way at 1 m/s
+
+
+def model(method: str, seed: int, **config) -> HumanModel:
+    return HumanModel(HumanConfig(**config), method, np.random.default_rng(seed), DESK, dict(DOOR))
+
+
+def run(h: HumanModel, *, until: float, dt: float, waiting=None, door_open=False):
+    """Step ``h`` to ``until``; ``waiting`` maps robot -> since (robots waiting at door d)."""
+    actions, t = [], 0.0
+    while t < until - 1e-9:
+        for a in h.step(t, dt, {"d": dict(waiting or {})}, {"d": door_open}):
+            actions.append((t + dt, a))
+        t += dt
+    return actions
+
+
+def within(observed: float, expected: float, n: int) -> bool:
+    """A proportion within 4 standard errors of ``expected``."""
+    return abs(observed - expected) <= 4.0 * math.sqrt(expected * (1 - expected) / n)
+
+
+def test_task_time_has_the_configured_mean_and_spread():
+    durations = []
+    for seed in range(3000):
+        h = model("no-feedback", seed, focus_count=0)
+        (t, done), = [(t, a) for t, a in run(h, until=2000.0, dt=50.0) if isinstance(a, TaskDone)]
+        durations.append(done.time)
+        assert done.time == pytest.approx(h.task_duration)  # no interruption: exactly her task
+    d = np.array(durations)
+    assert abs(d.mean() - 600.0) <= 4 * 60.0 / math.sqrt(len(d))
+    assert d.std(ddof=1) == pytest.approx(60.0, rel=0.06)
+
+
+def test_every_door_trip_costs_her_task_time():
+    walk = 3.0  # her desk is 3 m from the door
+    for seed in range(10):
+        h = model("no-feedback", seed, door_probability=0.5, focus_count=0)
+        actions = run(h, until=4000.0, dt=0.5, waiting={"r0": 0.0, "r1": 100.0})
+        done = [a for _, a in actions if isinstance(a, TaskDone)][0]
+        trip = 2 * walk + h.config.open_time
+        assert len(h.opened_at) > 10  # the test is not vacuous
+        assert h.counters.time_away == pytest.approx(len(h.opened_at) * trip, abs=1e-6)
+        # A trip under way when she would have finished delays her by all of it.
+        before = sum(1 for t in h.opened_at if t - walk < done.time)
+        assert done.time == pytest.approx(h.task_duration + before * trip, abs=1e-6)
+
+
+def test_every_declaration_costs_her_task_time():
+    for seed in range(50):
+        h = model("arroch", seed, door_probability=0.0)
+        actions = run(h, until=3000.0, dt=0.5)
+        done = [a for _, a in actions if isinstance(a, TaskDone)][0]
+        assert done.time == pytest.approx(h.task_duration + h.counters.declarations * h.config.declare_time, abs=1e-6)
+
+
+@pytest.mark.parametrize("p", [0.2, 0.5])
+def test_each_decision_about_a_waiting_robot_opens_with_the_door_probability(p):
+    decisions = triggers = 0
+    for seed in range(150):
+        h = model("no-feedback", seed, door_probability=p, focus_count=0, task_mean=3600.0)
+        run(h, until=1800.0, dt=5.0, waiting={"r0": 0.0})
+        decisions += h.counters.ar_decisions
+        triggers += h.counters.ar_triggers
+        # One decision per interval at most, and none while she is away.
+        assert h.counters.ar_decisions <= 1800.0 / h.config.decision_interval + 1
+    assert decisions > 3000
+    assert within(triggers / decisions, p, decisions)
+
+
+@pytest.mark.parametrize("robots", [1, 2, 4])
+def test_more_waiting_robots_make_her_more_likely_to_come(robots):
+    p, trials, went = 0.3, 3000, 0
+    for seed in range(trials):
+        h = model("arroch", seed, door_probability=p, focus_count=0)
+        run(h, until=0.5, dt=0.5, waiting={f"r{i}": 0.0 for i in range(robots)})
+        went += h.counters.door_trips
+    assert within(went / trials, 1 - (1 - p) ** robots, trials)
+
+
+def test_no_comm_goes_to_the_door_with_probability_0_6_every_minute_blind():
+    decisions = triggers = 0
+    for seed in range(100):
+        h = model("no-comm", seed, focus_count=0, task_mean=7200.0)
+        actions = run(h, until=3600.0, dt=5.0, waiting={"r0": 0.0})  # a waiting robot changes nothing
+        decisions += h.counters.no_comm_decisions
+        triggers += h.counters.no_comm_triggers
+        assert h.counters.ar_decisions == 0
+        opened = [t for t, a in actions if isinstance(a, OpenDoor)]
+        # Each opening is one walk (3 s) after a whole minute.
+        assert all(abs((t - 3.0) / 60.0 - round((t - 3.0) / 60.0)) < 0.1 for t in opened)
+    assert decisions > 4000
+    assert within(triggers / decisions, 0.6, decisions)
+
+
+def test_no_comm_opens_even_when_no_robot_waits():
+    h = model("no-comm", 1, focus_count=0, no_comm_probability=1.0)
+    actions = run(h, until=300.0, dt=1.0, waiting={})
+    assert sum(isinstance(a, OpenDoor) for _, a in actions) >= 4
+
+
+def test_a2_is_declared_at_about_0_9_of_focus_intervals_in_arroch_only():
+    started = declared = 0
+    for seed in range(2500):
+        h = model("arroch", seed)
+        actions = run(h, until=2000.0, dt=30.0)
+        started += h.counters.focus_started
+        declarations = [(t, a) for t, a in actions if isinstance(a, Declare)]
+        declared += len(declarations)
+        for t, a in declarations:
+            interval = next(f for f in h.focus if f.start <= t and f.start > t - 30.0 - 1e-9)
+            assert a.door == "d" and a.minutes == interval.minutes and 2 <= a.minutes <= 4
+    assert started > 4000
+    assert within(declared / started, 0.9, started)
+    for method in ("no-feedback", "no-comm"):
+        for seed in range(50):
+            h = model(method, seed)
+            assert not [a for _, a in run(h, until=2000.0, dt=30.0) if isinstance(a, Declare)]
+            assert h.counters.focus_started > 0
+
+
+@pytest.mark.parametrize("method, config", [("arroch", {"door_probability": 1.0}), ("no-feedback", {"door_probability": 1.0}), ("no-comm", {"no_comm_probability": 1.0})])
+def test_no_door_is_opened_during_a_focus_interval(method, config):
+    opened_total = focused_robots = 0
+    for seed in range(150):
+        h = model(method, seed, **config)
+        actions = run(h, until=1200.0, dt=2.0, waiting={"r0": 0.0, "r1": 0.0, "r2": 0.0})
+        assert len(h.opened_at) == sum(isinstance(a, OpenDoor) for _, a in actions)
+        for t in h.opened_at:  # the exact instants (actions are reported at the step's end)
+            opened_total += 1
+            assert not h.in_focus(t), f"opened at {t} during {h.focus}"
+        focused_robots += h.counters.focus_started
+    assert opened_total > 500 and focused_robots > 250  # plenty of chances to get it wrong
+
+
+def test_focus_intervals_fit_her_task_and_do_not_overlap():
+    starts, lengths = [], []
+    for seed in range(2000):
+        h = model("arroch", seed)
+        # Two, unless both together would fill more than 90 % of her task (then one).
+        assert len(h.focus) == 2 or (len(h.focus) == 1 and h.task_duration < 480.0 / 0.9)
+        for f in h.focus:
+            assert 0.0 <= f.start and f.end <= h.task_duration
+            assert round(f.end - f.start, 6) in (120.0, 180.0, 240.0)
+            starts.append(f.start / h.task_duration)
+            lengths.append(f.minutes)
+        assert all(a.end <= b.start for a, b in zip(h.focus, h.focus[1:]))
+    assert min(starts) < 0.02 and max(starts) > 0.5
+    counts = np.bincount(lengths)[2:5] / len(lengths)  # 2, 3 and 4 minutes equally likely
+    assert all(within(c, 1 / 3, len(lengths)) for c in counts)
+
+
+def test_config_file_is_read_and_checked(tmp_path):
+    good = tmp_path / "human.toml"
+    good.write_text("[human]\ntask_mean = 300.0\nfocus_count = 1\ndoor_probability = 0.25\n")
+    cfg = HumanConfig.from_toml(good, door_probability=0.7)
+    assert (cfg.task_mean, cfg.focus_count, cfg.door_probability) == (300.0, 1, 0.7)
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[human]\ntask_meen = 300.0\n")
+    with pytest.raises(ValueError, match="task_meen"):
+        HumanConfig.from_toml(bad)
+    bad.write_text("[human]\nfocus_count = 1.5\n")
+    with pytest.raises(ValueError, match="focus_count must be an integer"):
+        HumanConfig.from_toml(bad)
+    with pytest.raises(ValueError, match="door_probability"):
+        HumanConfig(door_probability=1.5)
+    with pytest.raises(FileNotFoundError):
+        HumanConfig.from_toml(tmp_path / "missing.toml")

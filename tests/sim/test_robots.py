@@ -1,0 +1,258 @@
+"""Robots executing commands in the engine: doors, loading, failures (no network, no pybullet)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from services.sim.engine import Engine
+from services.sim.geometry import segment_distance
+from services.sim.human import HumanConfig
+from tests.sim.helpers import command, small_site
+
+# A human who never opens a door and never focuses: the tests open doors themselves.
+PASSIVE = HumanConfig(door_probability=0.0, focus_count=0)
+RADIUS = 0.25
+
+
+@pytest.fixture
+def engine() -> Engine:
+    e = Engine(small_site(), method="no-feedback", seed=1, human=PASSIVE)
+    e.start()
+    e.take_events()
+    return e
+
+
+def run_until(engine: Engine, predicate, limit: float = 120.0, on_step=None):
+    events = []
+    while not predicate(events):
+        assert engine.time < limit, f"condition not met by t={engine.time}"
+        engine.step()
+        new = engine.take_events()
+        events.extend(new)
+        if on_step:
+            on_step()
+    return events
+
+
+def kinds(events, kind):
+    return [e for e in events if e.kind == kind]
+
+
+def gap_distance(engine: Engine, door: str, rid: str) -> float:
+    a, b = engine.site.doors[door].endpoints
+    r = engine.robots[rid]
+    return segment_distance((r.x, r.y), a, b)
+
+
+def test_robot_stops_before_a_closed_door_and_goes_on_once_it_opens(engine):
+    engine.apply_command(command("r0", 1, "gothrough", ["d_storage"], [(1.0, 5.0), (6.0, 5.0), (6.0, 3.0)]))
+    closest = []
+    events = run_until(engine, lambda ev: kinds(ev, "waiting_at_door"), on_step=lambda: closest.append(gap_distance(engine, "d_storage", "r0")))
+    wait = kinds(events, "waiting_at_door")[0]
+    assert wait.robot == "r0" and wait.door == "d_storage"
+    r0 = engine.robots["r0"]
+    assert r0.state == "waiting_at_door" and r0.waiting_door == "d_storage"
+    # Stopped radius + stop margin (0.15 m) short of the leaf's line, never closer.
+    assert r0.y == pytest.approx(4.0 + RADIUS + 0.15, abs=0.02)
+    # It stays there while the door stays shut.
+    held_at = (r0.x, r0.y)
+    run_until(engine, lambda ev: engine.time >= wait.time + 30.0, on_step=lambda: closest.append(gap_distance(engine, "d_storage", "r0")))
+    assert (r0.x, r0.y) == held_at and r0.state == "waiting_at_door"
+    assert min(closest) >= RADIUS + 0.05  # never touched the closed leaf
+    version = engine.world_version
+    engine.doors.human_open("d_storage", engine.time)
+    events = run_until(engine, lambda ev: kinds(ev, "action_done"))
+    opened = kinds(events, "door_opened")[0]
+    assert opened.door == "d_storage" and opened.data["by"] == "human"
+    assert opened.data["world_version"] == version + 1  # a human door's change is a new world
+    done = kinds(events, "action_done")[0]
+    assert done.time > opened.time
+    assert done.data["action"] == "gothrough" and done.data["action_id"] == 1
+    assert math.dist((r0.x, r0.y), (6.0, 3.0)) <= 0.02
+    assert engine.site.room_at(r0.x, r0.y).id == "storage"
+
+
+def test_a_door_closing_in_front_of_a_robot_stops_it_before_the_leaf(engine):
+    engine.doors.human_open("d_storage", 0.0)
+    run_until(engine, lambda ev: engine.time >= 14.0)
+    # r1 needs more than 10 s to get there: the hold time (20 s) runs out on the way.
+    engine.apply_command(command("r1", 1, "gothrough", ["d_storage"], [(10.0, 5.0), (6.0, 5.0), (6.0, 3.0)], now=engine.time))
+    closest = []
+    events = run_until(engine, lambda ev: kinds(ev, "action_done"), limit=200, on_step=lambda: (
+        closest.append(gap_distance(engine, "d_storage", "r1")) if not engine.doors.passable("d_storage") else None,
+        engine.doors.human_open("d_storage", engine.time) if engine.robots["r1"].state == "waiting_at_door" else None,
+    ))
+    assert kinds(events, "door_closed") and kinds(events, "waiting_at_door")
+    assert min(closest) >= RADIUS + 0.05
+
+
+def test_automatic_door_opens_for_the_approaching_robot_and_closes_after_it(engine):
+    engine.apply_command(command("r0", 1, "approach", ["d_office"], [(1.0, 5.0), (3.0, 5.4)]))
+    events = run_until(engine, lambda ev: kinds(ev, "action_done"))
+    opened = kinds(events, "door_opened")
+    assert opened and opened[0].door == "d_office" and opened[0].data["by"] == "r0"
+    assert "world_version" not in opened[0].data  # automatic doors do not make the planner replan
+    # Through, and on beyond the leaf's reach (a leaf never closes onto a robot in its sweep).
+    engine.apply_command(command("r0", 2, "gothrough", ["d_office"], [(3.0, 5.4), (3.0, 7.5)], now=engine.time))
+    crossed, clear_at_close = [], []
+
+    def watch() -> None:
+        if engine.robots["r0"].y > 6.0 and not crossed:
+            crossed.append(engine.time)
+        if not engine.doors["d_office"].target_open and not clear_at_close:
+            clear_at_close.append(gap_distance(engine, "d_office", "r0"))
+
+    events = run_until(engine, lambda ev: kinds(ev, "door_closed") and kinds(ev, "action_done"), on_step=watch)
+    assert not kinds(events, "waiting_at_door")  # it was open in time
+    closed = kinds(events, "door_closed")[0]
+    assert closed.time >= crossed[0] + 1.0  # after the robot passed, and the closing delay
+    assert clear_at_close[0] > RADIUS + 0.1  # doorway clear when it closed
+
+
+def test_automatic_door_opens_ahead_of_a_robot_on_its_way(engine):
+    # Asked 1.75 m ahead, the door has swung open before the robot gets there: no stop.
+    engine.apply_command(command("r0", 1, "gothrough", ["d_office"], [(1.0, 5.0), (3.0, 5.0), (3.0, 7.0)]))
+    crossed = []
+    events = run_until(engine, lambda ev: kinds(ev, "action_done"), on_step=lambda: (
+        crossed.append(engine.time) if engine.robots["r0"].y > 6.0 - RADIUS and not crossed else None))
+    opened = kinds(events, "door_opened")[0]
+    assert crossed[0] > opened.time  # its disc reached the door line only once the door was open
+    assert not kinds(events, "waiting_at_door")
+    assert engine.robots["r0"].y == pytest.approx(7.0, abs=0.02)
+
+
+def test_robot_starting_right_at_an_automatic_door_waits_for_its_swing(engine):
+    engine.apply_command(command("r0", 1, "approach", ["d_office"], [(1.0, 5.0), (1.0, 5.1)]))
+    run_until(engine, lambda ev: kinds(ev, "action_done"))
+    r0 = engine.robots["r0"]
+    r0.x, r0.y, r0.theta = 3.0, 5.4, math.pi / 2  # placed beside the closed door
+    engine.apply_command(command("r0", 2, "gothrough", ["d_office"], [(3.0, 5.4), (3.0, 6.6)], now=engine.time))
+    events = run_until(engine, lambda ev: kinds(ev, "action_done"))
+    waited, opened = kinds(events, "waiting_at_door")[0], kinds(events, "door_opened")[0]
+    assert waited.door == "d_office" and waited.time < opened.time
+    assert opened.time - waited.time <= engine.config.door_swing_time
+    assert r0.y == pytest.approx(6.6, abs=0.02)
+
+
+def test_human_door_stays_open_while_the_doorway_is_occupied(engine):
+    engine.doors.human_open("d_storage", 0.0)
+    events = run_until(engine, lambda ev: kinds(ev, "door_opened"))
+    opened_at = kinds(events, "door_opened")[0].time
+    # r1 parks in the doorway for a while.
+    engine.apply_command(command("r1", 1, "approach", ["d_storage"], [(10.0, 5.0), (6.0, 5.0), (6.0, 4.0)], now=engine.time))
+    run_until(engine, lambda ev: kinds(ev, "action_done"))
+    events = run_until(engine, lambda ev: engine.time >= opened_at + 40.0)
+    assert not kinds(events, "door_closed")  # hold time long over, but the doorway is not clear
+    engine.apply_command(command("r1", 2, "approach", ["d_storage"], [(6.0, 4.0), (6.0, 5.5)], now=engine.time))
+    events = run_until(engine, lambda ev: kinds(ev, "door_closed"))
+    closed = kinds(events, "door_closed")[0]
+    assert closed.data["world_version"] > 0
+    assert gap_distance(engine, "d_storage", "r1") > RADIUS + 0.1
+
+
+def test_human_door_closes_after_the_hold_time(engine):
+    engine.doors.human_open("d_storage", 0.0)
+    events = run_until(engine, lambda ev: kinds(ev, "door_closed"))
+    opened, closed = kinds(events, "door_opened")[0], kinds(events, "door_closed")[0]
+    assert closed.time - opened.time == pytest.approx(engine.site.params.door_hold_time, abs=0.06)
+    assert opened.data["until"] == pytest.approx(closed.time, abs=0.06)
+
+
+def test_load_and_unload_take_load_time_and_the_object_rides_along(engine):
+    load_time = engine.site.params.load_time
+    engine.apply_command(command("r1", 1, "load", ["o1"], [(10.0, 5.0), (10.8, 5.0)], duration=load_time))
+    started = []
+    events = run_until(engine, lambda ev: kinds(ev, "action_done"), on_step=lambda: (
+        started.append(engine.time) if engine.robots["r1"].state == "loading" and not started else None))
+    loaded = kinds(events, "loaded")[0]
+    assert loaded.object == "o1" and loaded.robot == "r1"
+    assert loaded.time - (started[0] - engine.config.tick) == pytest.approx(load_time, abs=engine.config.tick + 1e-9)
+    assert engine.objects["o1"].carrier == "r1" and engine.robots["r1"].carrying == ["o1"]
+    # Into the storage room (the door opened by the human beforehand), then unload.
+    engine.doors.human_open("d_storage", engine.time)
+    path = [(10.8, 5.0), (6.0, 5.0), (6.0, 2.5)]
+    engine.apply_command(command("r1", 2, "gothrough", ["d_storage"], path, now=engine.time))
+    run_until(engine, lambda ev: kinds(ev, "action_done"))
+    r1 = engine.robots["r1"]
+    engine.apply_command(command("r1", 3, "unload", ["o1"], [(r1.x, r1.y), (5.5, 2.0)], now=engine.time, duration=load_time))
+    events = run_until(engine, lambda ev: kinds(ev, "action_done"))
+    delivered = kinds(events, "delivered")[0]
+    assert delivered.object == "o1"
+    obj = engine.objects["o1"]
+    assert obj.delivered and obj.carrier is None and obj.delivered_at == pytest.approx(delivered.time)
+    assert (obj.x, obj.y) == pytest.approx((r1.x, r1.y))
+    assert r1.carrying == [] and r1.delivered == ["o1"]
+    assert engine.metrics.robot_done["r1"] == pytest.approx(delivered.time)
+
+
+@pytest.mark.parametrize(
+    "cmd, reason",
+    [
+        (command("r0", 1, "load", ["o1"], [(1.0, 5.0), (2.0, 5.0)]), "belongs to robot 'r1'"),
+        (command("r0", 1, "load", ["nope"], [(1.0, 5.0), (2.0, 5.0)]), "no object"),
+        (command("r0", 1, "unload", ["o0"], [(1.0, 5.0), (2.0, 5.0)]), "does not carry"),
+        (command("r0", 1, "approach", ["d_nowhere"], [(1.0, 5.0), (2.0, 5.0)]), "no door or passage"),
+        (command("r0", 1, "approach", ["d_office"], [(1.0, 5.0), (1.0, 7.0)]), "crosses a wall"),
+        (command("r0", 1, "approach", ["d_office"], [(5.0, 5.0), (3.0, 5.4)]), "starts 4.00 m from the robot"),
+        (command("r0", 1, "gothrough", ["d_storage"], [(1.0, 5.0), (3.0, 5.0)]), "does not cross"),
+        (command("r0", 1, "gothrough", ["d_storage"], []), "empty trajectory"),
+    ],
+)
+def test_commands_that_cannot_be_executed_fail_with_a_reason(engine, cmd, reason):
+    version = engine.world_version
+    assert engine.apply_command(cmd) == "applied"
+    failed = kinds(engine.take_events(), "action_failed")
+    assert len(failed) == 1 and reason in failed[0].data["reason"]
+    assert failed[0].data["action_id"] == 1 and failed[0].data["world_version"] == version + 1
+    assert engine.robots["r0"].state == "failed"
+    engine.step()  # and the engine goes on
+
+
+def test_load_out_of_reach_and_unload_in_the_wrong_room_fail_on_arrival(engine):
+    engine.apply_command(command("r0", 1, "load", ["o0"], [(1.0, 5.0), (2.0, 5.0)]))
+    events = run_until(engine, lambda ev: kinds(ev, "action_failed"))
+    assert "reach" in kinds(events, "action_failed")[0].data["reason"]
+    engine.apply_command(command("r1", 1, "load", ["o1"], [(10.0, 5.0), (10.8, 5.0)]))
+    run_until(engine, lambda ev: kinds(ev, "action_done"))
+    engine.apply_command(command("r1", 2, "unload", ["o1"], [(10.8, 5.0), (9.0, 5.0)], now=engine.time))
+    events = run_until(engine, lambda ev: kinds(ev, "action_failed"))
+    assert "goes to 'storage'" in kinds(events, "action_failed")[0].data["reason"]
+    assert engine.robots["r1"].carrying == ["o1"]  # still has it
+
+
+def test_stale_commands_are_ignored_and_new_ones_preempt(engine):
+    engine.apply_command(command("r0", 5, "approach", ["d_office"], [(1.0, 5.0), (3.0, 5.4)]))
+    for _ in range(20):
+        engine.step()
+    assert engine.apply_command(command("r0", 5, "approach", ["d_office"], [(1.0, 5.0), (8.0, 5.0)])) == "stale"
+    assert engine.apply_command(command("r0", 4, "approach", ["d_office"], [(1.0, 5.0), (8.0, 5.0)])) == "stale"
+    r0 = engine.robots["r0"]
+    assert engine.apply_command(command("r0", 6, "stop", [], [])) == "applied"
+    done = kinds(engine.take_events(), "action_done")
+    assert done and done[0].data["action"] == "stop" and "world_version" not in done[0].data
+    x, y = r0.x, r0.y
+    for _ in range(20):
+        engine.step()
+    assert (r0.x, r0.y) == (x, y) and r0.state == "idle"
+
+
+def test_unknown_robot_is_reported_not_fatal(engine):
+    assert engine.apply_command(command("r9", 1, "stop", [], [])) == "unknown_robot"
+    failed = kinds(engine.take_events(), "action_failed")
+    assert failed and failed[0].robot == "r9"
+
+
+def test_a_leaf_never_closes_onto_a_robot_in_its_sweep(engine):
+    # d_storage swings into the storage room; r1 parks there 0.6 m from the door, within the leaf's reach.
+    engine.doors.human_open("d_storage", 0.0)
+    run_until(engine, lambda ev: engine.doors.passable("d_storage"))
+    engine.apply_command(command("r1", 1, "gothrough", ["d_storage"], [(10.0, 5.0), (6.0, 5.0), (6.0, 3.4)], now=engine.time))
+    events = run_until(engine, lambda ev: engine.time >= 60.0)
+    assert kinds(events, "action_done") and not kinds(events, "door_closed")  # hold long over, robot in the sweep
+    engine.apply_command(command("r1", 2, "approach", ["d_storage"], [(6.0, 3.4), (7.0, 1.5)], now=engine.time))
+    events = run_until(engine, lambda ev: kinds(ev, "door_closed"))
+    leaf = engine.site.door_leaves["d_storage"]
+    r1 = engine.robots["r1"]
+    assert math.dist((r1.x, r1.y), leaf.hinge) > leaf.length + RADIUS

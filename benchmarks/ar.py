@@ -50,7 +50,7 @@ from protocol.messages import DoorState, Intent, RobotPose  # noqa: E402
 from protocol.site import load_site  # noqa: E402
 from services.ar_client.detect import TagDetector, apriltag_detector  # noqa: E402
 from services.ar_client.feedback import FeedbackPanel  # noqa: E402
-from services.ar_client.geometry import CameraPose, rotation_angle  # noqa: E402
+from protocol.frames import CameraPose, rotation_angle  # noqa: E402
 from services.ar_client.localize import Localizer  # noqa: E402
 from services.ar_client.pipeline import Pipeline  # noqa: E402
 from services.ar_client.project import Intrinsics  # noqa: E402

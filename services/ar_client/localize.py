@@ -31,7 +31,7 @@ import cv2
 import numpy as np
 
 from .detect import TagDetection
-from .geometry import CameraPose, rotation_angle
+from protocol.frames import CameraPose, rotation_angle
 from .project import Intrinsics
 
 #: Candidates within this factor (plus ``AMBIGUOUS_SLACK_PX``) of the best RMSE count as equally good fits.

@@ -24,7 +24,7 @@ from protocol.messages import Overlay
 from .detect import TagDetection, TagDetector, to_gray
 from .draw import draw
 from .feedback import FeedbackPanel
-from .geometry import CameraPose
+from protocol.frames import CameraPose
 from .localize import Localization, Localizer
 from .overlay import OverlayBuilder, status_primitives
 from .project import Intrinsics, Projector

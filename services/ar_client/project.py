@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .geometry import CameraPose
+from protocol.frames import CameraPose
 
 #: Default near plane (metres in front of the camera centre).
 NEAR = 0.05

@@ -21,7 +21,7 @@ import numpy as np
 
 from protocol.apriltag import tag_image
 
-from .geometry import CameraPose
+from protocol.frames import CameraPose
 from .project import Intrinsics, Projector
 from .visibility import Occluders
 
@@ -140,7 +140,7 @@ def sample_views(
     the tag (so tags are not always centred), rolled a little. Poses outside every room (with
     ``wall_clearance``) or with a wall between camera and tag are drawn again. Deterministic per seed.
     """
-    from .geometry import look_at
+    from protocol.frames import look_at
 
     rng = np.random.default_rng(seed)
     occ = Occluders.from_site(site)

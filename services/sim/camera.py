@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from protocol.messages import CameraFrame, CameraTruth
-from services.ar_client.geometry import quat_from_matrix
+from protocol.frames import camera_from_yaw_pitch, quat_from_matrix
 
 #: Near and far clipping planes of the rendering (m). Near is small so a tablet held close to a
 #: wall still sees it; far covers any site this project generates. Depth precision is no issue:
@@ -94,12 +94,7 @@ class CameraSpec:
     @cached_property
     def R_world_camera(self) -> np.ndarray:
         """Rotation camera → world (3×3): its columns are the OpenCV camera axes in the world."""
-        cy, sy = math.cos(self.yaw), math.sin(self.yaw)
-        cp, sp = math.cos(self.pitch), math.sin(self.pitch)
-        forward = np.array([cp * cy, cp * sy, sp])  # camera z
-        right = np.array([sy, -cy, 0.0])  # camera x: horizontal, since there is no roll
-        down = np.cross(forward, right)  # camera y = z × x completes a right-handed frame
-        R = np.stack([right, down, forward], axis=1)
+        R = camera_from_yaw_pitch(self.position, self.yaw, self.pitch).R_wc.copy()
         R.setflags(write=False)
         return R
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from protocol.site import load_site
-from services.ar_client.geometry import CameraPose, look_at, rotation_angle
+from protocol.frames import CameraPose, look_at, rotation_angle
 from services.ar_client.project import Intrinsics
 
 SITES = Path(__file__).parent / "sites"

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from services.ar_client.detect import TagDetector
-from services.ar_client.geometry import look_at, matrix_from_quat, rotation_angle
+from protocol.frames import look_at, matrix_from_quat, rotation_angle
 from services.ar_client.synth import render
 from tests.ar.helpers import HALL_FILE, HD, site
 from tests.procs import ROOT, arroch

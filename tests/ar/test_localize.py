@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from services.ar_client.detect import TagDetector
-from services.ar_client.geometry import CameraPose, camera_from_yaw_pitch
+from protocol.frames import CameraPose, camera_from_yaw_pitch
 from services.ar_client.localize import Localizer
 from services.ar_client.synth import render
 from tests.ar.helpers import CLUSTER_CENTRE, HD, SINGLE_CENTRE, SINGLE_TAG, VGA, errors, only_tags, site, view_of

@@ -9,7 +9,7 @@ import pytest
 from protocol.codec import decode, encode
 from protocol.messages import DoorState, Intent, Overlay, RobotPose, RobotStatus
 from services.ar_client.draw import draw
-from services.ar_client.geometry import camera_from_yaw_pitch, look_at
+from protocol.frames import camera_from_yaw_pitch, look_at
 from services.ar_client.overlay import DOOR_CLOSED, DOOR_OPEN, OverlayBuilder
 from services.ar_client.pipeline import BadFrame, Pipeline
 from services.ar_client.project import Projector

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from services.ar_client.detect import TagDetector
-from services.ar_client.geometry import camera_from_yaw_pitch, look_at
+from protocol.frames import camera_from_yaw_pitch, look_at
 from services.ar_client.localize import Localizer
 from services.ar_client.project import NEAR, Intrinsics, Projector
 from services.ar_client.synth import render

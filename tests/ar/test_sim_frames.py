@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from protocol.site import load_site
-from services.ar_client.geometry import CameraPose
+from protocol.frames import CameraPose
 from services.ar_client.pipeline import Pipeline
 from services.ar_client.project import Intrinsics, Projector
 from tests.ar.helpers import errors
@@ -100,7 +100,7 @@ def test_a_snapshot_file_localised_by_the_cli(tmp_path):
     import json
     import subprocess
 
-    from services.ar_client.geometry import matrix_from_quat, rotation_angle
+    from protocol.frames import matrix_from_quat, rotation_angle
     from tests.procs import ROOT, arroch
 
     png, truth_file = tmp_path / "s.png", tmp_path / "s.json"

@@ -31,7 +31,7 @@ from protocol.messages import CameraFrame, CameraTruth
 from protocol.site import load_site
 from protocol.site.model import Site
 from services.ar_client.detect import apriltag_detector
-from services.ar_client.geometry import matrix_from_quat, rotation_angle
+from protocol.frames import matrix_from_quat, rotation_angle
 from services.cli import main
 from services.sim.camera import FAR, NEAR, CameraSpec, frame_message, truth_json, truth_message
 from services.sim.world import World

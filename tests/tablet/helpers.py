@@ -12,7 +12,7 @@ import aiohttp
 import numpy as np
 
 from protocol.site import load_site
-from services.ar_client.geometry import CameraPose, look_at
+from protocol.frames import CameraPose, look_at
 from services.ar_client.project import Intrinsics, Projector
 from services.ar_client.synth import render
 from services.ar_client.web.fakecam import write_y4m

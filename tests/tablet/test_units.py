@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from protocol.messages import Overlay, Primitive
-from services.ar_client.geometry import look_at
+from protocol.frames import look_at
 from services.ar_client.project import Intrinsics, Projector
 from services.ar_client.web import wire
 from services.ar_client.web.intrinsics import CameraModel, default_intrinsics, load_intrinsics, scaled, write_intrinsics

@@ -1,4 +1,4 @@
-"""Rigid-pose arithmetic shared by the AR client: rotations, quaternions, camera poses.
+"""Rigid-pose arithmetic shared by every service that deals with cameras: rotations, quaternions, camera poses.
 
 Conventions (DESIGN §3): world x east, y north, z up; camera frame OpenCV (x right, y down,
 z forward). A camera pose is ``T_world_camera``: ``R_wc`` (columns are the camera axes in world

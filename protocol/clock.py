@@ -13,6 +13,9 @@ from typing import Protocol
 
 from .messages import Clock as ClockMessage
 
+EXTRAPOLATED_MODES = ("realtime", "rate", "wall")  # modes in which time runs between messages
+MAX_EXTRAPOLATION = 1.0  # seconds: a stalled sim stops time rather than letting it run away
+
 
 class Clock(Protocol):
     def now(self) -> float:
@@ -37,9 +40,14 @@ class WallClock:
 class SimClock:
     """Time from the simulator's ``clock`` messages.
 
-    Between messages, time is extrapolated at the announced rate in ``realtime``/``rate`` modes
-    (poses arrive at 20 Hz, clock messages maybe less often); in ``lockstep`` it is not, because
-    sim time there only moves when the sim says so.
+    Between messages, time is extrapolated at the announced rate in ``realtime``/``rate``/``wall``
+    modes (poses arrive at 20 Hz, clock messages maybe less often), never more than a second past
+    the last message; in ``lockstep`` (or while paused) it is not, because sim time there only
+    moves when the sim says so.
+
+    A message from the same sender with a lower ``seq`` than the last one is an old message
+    overtaken by a newer one, and is ignored. A message from another sender (a restarted sim has a
+    new ``src``) is taken as it is, even if its time is earlier: the clock follows the new source.
     """
 
     def __init__(self) -> None:
@@ -49,20 +57,28 @@ class SimClock:
         self._rate = 1.0
         self._extrapolate = False
         self._synced = False
+        self._src = ""
+        self._seq = 0
         self.world_version = 0
         self.mode = "realtime"
 
     def update(self, msg: ClockMessage) -> None:
         with self._lock:
-            if self._synced and msg.time < self._time and self.mode == msg.mode:
-                return  # an old message overtaken by a newer one
+            same_source = self._synced and msg.src == self._src
+            if same_source:
+                if msg.src and msg.seq and msg.seq <= self._seq:
+                    return  # an old (or repeated) message overtaken by a newer one
+                if not msg.src and msg.time < self._time and self.mode == msg.mode:
+                    return  # unstamped messages: only time tells their order
             self._time = msg.time
             self._received = time.monotonic()
             self._rate = msg.rate
-            self._extrapolate = msg.mode in ("realtime", "rate") and not msg.paused
+            self._extrapolate = msg.mode in EXTRAPOLATED_MODES and not msg.paused
             self._synced = True
+            self._src, self._seq = msg.src, msg.seq
             self.mode = msg.mode
-            self.world_version = max(self.world_version, msg.world_version)
+            # A new source starts its own count; the same source's count never goes back.
+            self.world_version = max(self.world_version, msg.world_version) if same_source else msg.world_version
 
     @property
     def synced(self) -> bool:
@@ -72,8 +88,7 @@ class SimClock:
         with self._lock:
             if not self._extrapolate:
                 return self._time
-            # Never extrapolate more than a second past the last message: a stalled sim stops time.
-            elapsed = min(time.monotonic() - self._received, 1.0)
+            elapsed = min(time.monotonic() - self._received, MAX_EXTRAPOLATION)
             return self._time + elapsed * self._rate
 
 

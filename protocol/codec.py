@@ -4,31 +4,137 @@ Decoding never trusts the payload: size first, then msgpack with bounded contain
 envelope (``v``, ``type``, ``src``, ``seq``, ``stamp``), then every field of the type. Whatever is
 wrong raises :class:`ProtocolError` naming the field. Unknown fields are ignored so that a newer
 minor revision of a sender still talks to an older receiver; a newer *major* ``v`` is refused.
+
+Both directions have a lean path for the common case, because they sit on every message of
+every service: :func:`encoder_for` and :func:`decoder_for` generate one function per message
+class (one Python frame per message, a reused per-thread msgpack packer); the decoder tries the
+checks a valid payload passes in one go and hands anything unusual to the full path, which
+produces the precise error. :func:`encode` and :func:`decode` use them.
 """
 
 from __future__ import annotations
 
-from typing import Any, TypeVar
+import threading
+from typing import Any, Callable, Mapping, TypeVar
 
 import msgpack
 
 from .errors import ProtocolError
 from .messages import BY_TYPE, Message
-from .schema import plan_for, record_to_wire
+from .schema import from_wire_function, record_source, to_wire_function, wire_map_source
 
 M = TypeVar("M", bound=Message)
 
 ENCODING = "application/msgpack"
 _ABSOLUTE_MAX = max(cls.MAX_SIZE for cls in BY_TYPE.values())
 _ENVELOPE = ("v", "type", "src", "seq", "stamp")
+MAX_ARRAY_LEN = 1_000_000
+MAX_MAP_LEN = 100_000
+
+_unpackb = msgpack.unpackb
+_ENCODERS: dict[type, Callable[[Message], bytes]] = {}
+_DECODERS: dict[type, Callable[[Any], Message]] = {}
+_WIRE_MAPS: dict[type, Callable[[Message], dict]] = {}
+_local = threading.local()  # one msgpack.Packer per thread: a Packer has a buffer, so is not shared
 
 
-def encode(msg: Message) -> bytes:
-    """Serialise a message (envelope included) to msgpack bytes."""
-    data = record_to_wire(msg)
-    data["v"] = msg.VERSION
-    data["type"] = msg.TYPE
-    return msgpack.packb(data, use_bin_type=True)
+def _new_pack() -> Callable[[Any], bytes]:
+    # autoreset: each pack() returns its bytes and starts afresh (also after an error).
+    _local.pack = msgpack.Packer(use_bin_type=True, autoreset=True).pack
+    return _local.pack
+
+
+def encoder_for(cls: type[M]) -> Callable[[M], bytes]:
+    """The generated encoder of one message class: ``f(msg) -> bytes`` (what :func:`encode` does
+    without ``extra``, in one Python frame). Built once per class."""
+    fn = _ENCODERS.get(cls)
+    if fn is not None:
+        return fn
+    expr, consts = wire_map_source(cls, _envelope_trailer(cls), var="msg")
+    consts.update(local=_local, new_pack=_new_pack)
+    source = (
+        "def encode_msg(msg):\n"
+        "    try:\n"
+        "        pack = local.pack\n"
+        "    except AttributeError:\n"
+        "        pack = new_pack()\n"
+        f"    return pack({expr})\n"
+    )
+    exec(source, consts)  # noqa: S102 - generated from the class's own fields
+    fn = _ENCODERS[cls] = consts["encode_msg"]
+    return fn
+
+
+def _envelope_trailer(cls: type[Message]) -> dict[str, Any]:
+    return {"v": cls.VERSION, "type": cls.TYPE}
+
+
+def _wire_map(cls: type[Message]) -> Callable[[Message], dict]:
+    """The message as a plain map, envelope included (for encoding with extra fields)."""
+    fn = _WIRE_MAPS.get(cls)
+    if fn is None:
+        fn = _WIRE_MAPS[cls] = to_wire_function(cls, _envelope_trailer(cls))
+    return fn
+
+
+def decoder_for(cls: type[M]) -> Callable[[Any], M]:
+    """The generated decoder of one message class: ``f(payload) -> msg``, what ``decode(payload, cls)``
+    does, in one Python frame for a valid payload.
+
+    It tries the checks a valid payload passes in one go (size, one msgpack call, ``type``, ``v``,
+    envelope present, each field's inline test); anything unusual goes to the full path, which
+    produces the precise error. Built once per class."""
+    fn = _DECODERS.get(cls)
+    if fn is not None:
+        return fn
+    body, consts = record_source(cls, indent="        ")
+    limit = cls.MAX_SIZE
+    consts.update(unpackb=_unpackb, checked=_decode_checked, ProtocolError=ProtocolError,
+                  TYPE=cls.TYPE, VERSION=cls.VERSION, LIMIT=limit)
+    source = [
+        "def decode_msg(payload):",
+        "    if type(payload) is not bytes or not 0 < len(payload) <= LIMIT:",
+        "        return checked(payload, cls)",
+        "    try:",
+        f"        data = unpackb(payload, raw=False, strict_map_key=True, max_str_len={limit}, max_bin_len={limit},"
+        f" max_array_len={MAX_ARRAY_LEN}, max_map_len={MAX_MAP_LEN}, max_ext_len=0)",
+        "    except Exception:",
+        "        return checked(payload, cls)",
+        "    if type(data) is not dict or data.get('type') != TYPE:",
+        "        return checked(payload, cls)",
+        "    version = data.get('v')",
+        "    if type(version) is not int or not 0 < version <= VERSION or 'src' not in data or 'seq' not in data or 'stamp' not in data:",
+        "        return checked(payload, cls)",
+        "    prefix = ''",
+        "    try:",
+        *body,
+        "    except ProtocolError as exc:",
+        "        raise ProtocolError(exc.field, exc.problem, TYPE) from None",
+    ]
+    exec("\n".join(source), consts)  # noqa: S102 - generated from the class's own fields
+    fn = _DECODERS[cls] = consts["decode_msg"]
+    return fn
+
+
+def encode(msg: Message, extra: Mapping[str, Any] | None = None) -> bytes:
+    """Serialise a message (envelope included) to msgpack bytes.
+
+    ``extra`` adds fields the message type does not know, as a newer minor revision of a sender
+    would (receivers ignore them); diagnostics use it to pad a payload to a chosen size. An extra
+    field may not shadow a field of the type or of the envelope.
+    """
+    if not extra:
+        return (_ENCODERS.get(type(msg)) or encoder_for(type(msg)))(msg)
+    data = _wire_map(type(msg))(msg)
+    clash = sorted(set(extra) & set(data))
+    if clash:
+        raise ValueError(f"extra fields {', '.join(clash)} would shadow fields of {msg.TYPE}")
+    data.update(extra)
+    try:
+        pack = _local.pack
+    except AttributeError:
+        pack = _new_pack()
+    return pack(data)
 
 
 def _unpack(payload: bytes | bytearray | memoryview, limit: int) -> Any:
@@ -39,14 +145,14 @@ def _unpack(payload: bytes | bytearray | memoryview, limit: int) -> Any:
     if len(payload) > limit:
         raise ProtocolError("", f"payload of {len(payload)} bytes exceeds the limit {limit}")
     try:
-        return msgpack.unpackb(
+        return _unpackb(
             payload,
             raw=False,
             strict_map_key=True,
             max_str_len=limit,
             max_bin_len=limit,
-            max_array_len=1_000_000,
-            max_map_len=100_000,
+            max_array_len=MAX_ARRAY_LEN,
+            max_map_len=MAX_MAP_LEN,
             max_ext_len=0,
         )
     except ProtocolError:
@@ -61,6 +167,13 @@ def decode(payload: bytes | bytearray | memoryview, expected: type[M] | None = N
     With ``expected``, the payload's ``type`` must name that class; without, any known type is
     accepted and the matching class is returned.
     """
+    if expected is not None:
+        return (_DECODERS.get(expected) or decoder_for(expected))(payload)  # type: ignore[return-value]
+    return _decode_checked(payload, None)
+
+
+def _decode_checked(payload: bytes | bytearray | memoryview, expected: type[M] | None) -> M:
+    """The full path: every check in order, raising the first problem found."""
     limit = expected.MAX_SIZE if expected is not None else _ABSOLUTE_MAX
     data = _unpack(payload, limit)
     if not isinstance(data, dict):
@@ -85,13 +198,7 @@ def decode(payload: bytes | bytearray | memoryview, expected: type[M] | None = N
     for name in _ENVELOPE[2:]:
         if name not in data:
             raise ProtocolError(name, "required field is missing", cls.TYPE)
-    values = {}
     try:
-        for fp in plan_for(cls):
-            if fp.name in data:
-                values[fp.name] = fp.check(data[fp.name], fp.name)
-            elif fp.required:
-                raise ProtocolError(fp.name, "required field is missing")
+        return from_wire_function(cls)(data, "")  # type: ignore[return-value]
     except ProtocolError as exc:
         raise ProtocolError(exc.field, exc.problem, cls.TYPE) from None
-    return cls(**values)  # type: ignore[return-value]

@@ -86,6 +86,11 @@ class Keys:
         parts.append(instance if instance == "*" else _chunk(instance, "instance id"))
         return self._k("stats", *parts)
 
+    # diagnostics
+    def ping_reply(self) -> str:
+        """Where ``arroch ping serve`` echoes every pose it hears on ``robot/*/pose``."""
+        return self._k("ping", "reply")
+
     def all(self) -> str:
         return self._k("**")
 

@@ -219,8 +219,8 @@ class CameraFrame(Message):
     jpeg: bytes = spec(max_len=16 * 1024 * 1024)
     width: int = spec(lo=1, hi=16384)
     height: int = spec(lo=1, hi=16384)
-    intrinsics: list[float] = spec(max_len=4, lo=-1e6, hi=1e6)  # fx, fy, cx, cy
-    distortion: list[float] = spec(factory=lambda: [0.0] * 5, max_len=5, lo=-1e6, hi=1e6)  # k1 k2 p1 p2 k3
+    intrinsics: list[float] = spec(max_len=4, lengths=(4,), lo=-1e6, hi=1e6)  # fx, fy, cx, cy
+    distortion: list[float] = spec(factory=lambda: [0.0] * 5, max_len=5, lengths=(5,), lo=-1e6, hi=1e6)  # k1 k2 p1 p2 k3
 
 
 @dataclass(kw_only=True, slots=True)
@@ -228,8 +228,8 @@ class CameraTruth(Message):
     TYPE: ClassVar[str] = "CameraTruth"
     camera: str = spec(ident=True)
     frame_seq: int = spec(lo=0, hi=2**63 - 1)  # seq of the CameraFrame it belongs to
-    position: list[float] = spec(max_len=3, lo=-COORD, hi=COORD)
-    quaternion: list[float] = spec(max_len=4, lo=-1.0, hi=1.0)  # x, y, z, w of R_world_camera
+    position: list[float] = spec(max_len=3, lengths=(3,), lo=-COORD, hi=COORD)
+    quaternion: list[float] = spec(max_len=4, lengths=(4,), lo=-1.0, hi=1.0)  # x, y, z, w of R_world_camera
 
 
 @dataclass(kw_only=True, slots=True)
@@ -240,8 +240,8 @@ class Overlay(Message):
     width: int = spec(0, lo=0, hi=16384)
     height: int = spec(0, lo=0, hi=16384)
     ok: bool = False
-    position: list[float] = spec(factory=list, max_len=3, lo=-COORD, hi=COORD)
-    quaternion: list[float] = spec(factory=list, max_len=4, lo=-1.0, hi=1.0)
+    position: list[float] = spec(factory=list, max_len=3, lengths=(0, 3), lo=-COORD, hi=COORD)  # empty when not ok
+    quaternion: list[float] = spec(factory=list, max_len=4, lengths=(0, 4), lo=-1.0, hi=1.0)
     tags: list[int] = spec(factory=list, max_len=1000, lo=0, hi=1_000_000)
     reprojection_rmse: float = spec(0.0, lo=0.0, hi=1e6)
     lost_age: float = spec(0.0, lo=0.0, hi=TIME)  # seconds since the last good pose when not ok

@@ -51,8 +51,25 @@ def run_service(build: Callable[[], "object"]) -> int:
         service.close()  # type: ignore[attr-defined]
         return 1
     service.run()  # type: ignore[attr-defined]
+    if getattr(service, "close_timed_out", False):
+        # Zenoh's close() overran its budget and still runs on a daemon thread; a normal interpreter
+        # exit would wait for the session forever (zenoh-python issue 434). Leave now, output flushed.
+        logging.shutdown()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(0)
     return 0
 
 
 def zenoh_options(args: argparse.Namespace):
     return options_from(args)
+
+
+def namespace_from(args: argparse.Namespace) -> str:
+    """The key namespace: ``--namespace`` if given, else the name of the site (``--site`` or the
+    packaged default). Raises ``ValueError`` for a bad site file (see :func:`run_service`)."""
+    if getattr(args, "namespace", None):
+        return args.namespace
+    from .site import load_site  # only when needed: loading a site is not free
+
+    return load_site(getattr(args, "site", None)).name

@@ -3,8 +3,15 @@
 A wire record is a ``kw_only`` dataclass whose field types are drawn from a small set
 (``bool``, ``int``, ``float``, ``str``, ``bytes``, ``list[T]``, ``dict[str, T]``,
 ``X | None``, unions of scalars, ``Json`` and nested records). From those type hints and
-the limits given with :func:`spec`, :func:`compile_record` builds one checker per field,
-once per class, so decoding a message is a flat loop of small function calls.
+the limits given with :func:`spec`, :func:`plan_for` builds one checker per field, once per class.
+
+On top of the plan, :func:`from_wire_function` and :func:`to_wire_function` generate one flat
+Python function per class. For every field of a common kind (numbers, bools, strings, optionals)
+the generated decoder first tries a single inline test that accepts a value needing no change;
+only a value that fails it goes through the field's full checker, which either converts it
+(an int where a float is expected) or raises with the precise reason. So valid messages take the
+fast path and invalid ones get exactly the same errors. A pose decodes about 2-3x faster this way,
+and, more to the point in a round trip, runs far fewer Python frames on a cold cache.
 
 Every check raises :class:`ProtocolError` naming the field path.
 """
@@ -12,8 +19,10 @@ Every check raises :class:`ProtocolError` naming the field path.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 import re
+import sys
 import types
 import typing
 from typing import Any, Callable
@@ -50,14 +59,18 @@ def spec(
     ident: bool = False,
     row_len: int | None = None,
     factory: Callable[[], Any] | None = None,
+    lengths: tuple[int, ...] | None = None,
 ) -> Any:
     """A dataclass field with wire limits.
 
     ``lo``/``hi`` bound numbers (inclusive); ``max_len`` bounds strings, bytes, lists and maps;
     ``choices`` restricts a string; ``ident`` requires an identifier (letters, digits, ``_``, ``-``);
-    ``row_len`` requires every row of a ``list[list[float]]`` to have that length.
+    ``row_len`` requires every row of a ``list[list[float]]`` to have that length;
+    ``lengths`` lists the lengths a list may have (``(3,)`` for a position, ``(0, 4)`` for an
+    optional quaternion).
     """
-    meta = {"lo": lo, "hi": hi, "max_len": max_len, "choices": choices, "ident": ident, "row_len": row_len}
+    meta = {"lo": lo, "hi": hi, "max_len": max_len, "choices": choices, "ident": ident, "row_len": row_len,
+            "lengths": lengths}
     if factory is not None:
         return dataclasses.field(default_factory=factory, metadata=meta)
     return dataclasses.field(default=default, metadata=meta)
@@ -123,12 +136,14 @@ def _bytes_checker(max_len: int) -> Checker:
     return check
 
 
-def _list_checker(item: Checker, max_len: int, row_len: int | None) -> Checker:
+def _list_checker(item: Checker, max_len: int, row_len: int | None, lengths: tuple[int, ...] | None = None) -> Checker:
     def check(value: Any, path: str) -> list:
         if not isinstance(value, (list, tuple)):
             _fail(path, f"expected list, got {_type_name(value)}")
         if len(value) > max_len:
             _fail(path, f"list of {len(value)} items exceeds the limit {max_len}")
+        if lengths is not None and len(value) not in lengths:
+            _fail(path, f"expected {' or '.join(map(str, lengths))} items, got {len(value)}")
         out = [item(v, f"{path}[{i}]") for i, v in enumerate(value)]
         if row_len is not None:
             for i, row in enumerate(out):
@@ -139,14 +154,40 @@ def _list_checker(item: Checker, max_len: int, row_len: int | None) -> Checker:
     return check
 
 
+_ROW_TYPES = frozenset({list})
+_NUMBER_TYPES = frozenset({float, int})
+
+
 def _float_rows_checker(max_len: int, row_len: int, lo: float | None, hi: float | None) -> Checker:
     """Fast path for ``list[list[float]]`` with fixed rows (trajectories, 2-D points).
 
-    Checking element by element costs ~2 µs per row in Python; one pass of type checks and one
-    numpy pass for finiteness and bounds is ~10x cheaper."""
+    Checking element by element costs ~2 µs per row in Python. A valid value (lists of numbers,
+    as msgpack hands them over) is vetted with C-level passes instead: the set of row types, of
+    row lengths and of element types, then one numpy pass for finiteness and bounds; it is
+    returned as it is. Anything else takes the element-wise path, which names the bad element."""
     element = _number_checker(float, lo, hi)
+    row_lengths = frozenset({row_len})
 
     def check(value: Any, path: str) -> list:
+        if (
+            type(value) is list
+            and len(value) <= max_len
+            and set(map(type, value)) <= _ROW_TYPES
+            and set(map(len, value)) <= row_lengths
+            and set(map(type, itertools.chain.from_iterable(value))) <= _NUMBER_TYPES
+        ):
+            if not value:
+                return value
+            arr = np.fromiter(itertools.chain.from_iterable(value), dtype=np.float64, count=len(value) * row_len)
+            if (
+                np.isfinite(arr).all()
+                and (lo is None or arr.min() >= lo)
+                and (hi is None or arr.max() <= hi)
+            ):
+                return value
+        return check_each(value, path)
+
+    def check_each(value: Any, path: str) -> list:
         if not isinstance(value, (list, tuple)):
             _fail(path, f"expected list, got {_type_name(value)}")
         if len(value) > max_len:
@@ -265,7 +306,7 @@ def checker_for(hint: Any, meta: typing.Mapping[str, Any]) -> Checker:
         return _float_rows_checker(max_len or MAX_LIST, meta["row_len"], meta.get("lo"), meta.get("hi"))
     if origin is list:
         item_meta = {k: meta.get(k) for k in ("lo", "hi", "choices", "ident")}
-        return _list_checker(checker_for(args[0], item_meta), max_len or MAX_LIST, meta.get("row_len"))
+        return _list_checker(checker_for(args[0], item_meta), max_len or MAX_LIST, meta.get("row_len"), meta.get("lengths"))
     if origin is dict:
         if args[0] is not str:
             raise TypeError(f"wire maps must have str keys, not {args[0]}")
@@ -326,14 +367,7 @@ def record_from_wire(cls: type, data: Any, path: str = "") -> Any:
     """Check a decoded map against ``cls`` and build the record; unknown keys are ignored."""
     if not isinstance(data, dict):
         _fail(path or "(payload)", f"expected map, got {_type_name(data)}")
-    values = {}
-    prefix = f"{path}." if path else ""
-    for fp in plan_for(cls):
-        if fp.name in data:
-            values[fp.name] = fp.check(data[fp.name], prefix + fp.name)
-        elif fp.required:
-            _fail(prefix + fp.name, "required field is missing")
-    return cls(**values)
+    return from_wire_function(cls)(data, f"{path}." if path else "")
 
 
 def record_checker(cls: type) -> Checker:
@@ -344,8 +378,180 @@ def record_checker(cls: type) -> Checker:
 
 
 def record_to_wire(record: Any) -> dict[str, Any]:
-    out = {}
-    for fp in plan_for(type(record)):
-        value = getattr(record, fp.name)
-        out[fp.name] = value if fp.to_wire is None else fp.to_wire(value)
-    return out
+    """The record as a plain map ready for msgpack (nested records converted too)."""
+    return to_wire_function(type(record))(record)
+
+
+# ---------------------------------------------------------------------------- generated fast paths
+
+_FROM_WIRE: dict[type, Callable[[dict, str], Any]] = {}
+_TO_WIRE: dict[type, Callable[[Any], dict]] = {}
+_MISSING = object()
+
+
+def _missing(path: str) -> typing.NoReturn:
+    raise ProtocolError(path, "required field is missing")
+
+
+# Identifiers seen valid before (robot, door, room ids...). The same few recur in every message,
+# and a set lookup is far cheaper than running the regex engine, above all on a cold cache.
+_known_ids: set[str] = {""}
+MAX_KNOWN_IDS = 4096
+
+
+def _is_ident(value: str) -> bool:
+    if ID_PATTERN.match(value) is None:
+        return False
+    if len(_known_ids) < MAX_KNOWN_IDS:
+        _known_ids.add(value)
+    return True
+
+
+def _fast_test(hint: Any, meta: typing.Mapping[str, Any], x: str, consts: dict[str, Any], tag: str) -> str | None:
+    """A Python expression over the variable ``x``, true only when the value is valid *as it is*
+    for this field (so the full checker would return it unchanged). None: no cheap test exists.
+
+    It may be false for valid values (e.g. an int in a float field): those take the full checker,
+    which converts them. Constants the expression needs are put in ``consts`` under names ending
+    in ``tag``, so expressions of several fields can share one namespace."""
+    origin = typing.get_origin(hint)
+    if origin in (types.UnionType, typing.Union):
+        args = typing.get_args(hint)
+        members = [a for a in args if a is not type(None)]
+        if len(members) == 1 and len(members) < len(args):  # X | None
+            inner = _fast_test(members[0], meta, x, consts, tag)
+            return None if inner is None else f"({x} is None or ({inner}))"
+        return None
+    if hint is bool:
+        return f"({x} is True or {x} is False)"
+    if hint in (int, float):
+        lo, hi = meta.get("lo"), meta.get("hi")
+        if hint is float:
+            # Comparisons with these bounds are false for NaN and the infinities: those fail over
+            # to the full checker, which names the problem.
+            lo = -sys.float_info.max if lo is None else lo
+            hi = sys.float_info.max if hi is None else hi
+        test = [f"type({x}) is {hint.__name__}"]
+        if lo is not None:
+            consts[f"LO{tag}"] = lo
+            test.append(f"LO{tag} <= {x}")
+        if hi is not None:
+            consts[f"HI{tag}"] = hi
+            test.append(f"{x} <= HI{tag}")
+        return " and ".join(test)
+    if hint is str:
+        consts[f"N{tag}"] = meta.get("max_len") or MAX_STR
+        test = [f"type({x}) is str", f"len({x}) <= N{tag}"]
+        if meta.get("choices") is not None:
+            consts[f"CH{tag}"] = frozenset(meta["choices"])
+            test.append(f"{x} in CH{tag}")
+        if meta.get("ident"):
+            consts["KNOWN_IDS"] = _known_ids
+            consts["is_ident"] = _is_ident
+            test.append(f"({x} in KNOWN_IDS or is_ident({x}))")
+        return " and ".join(test)
+    return None
+
+
+def _plain_init(cls: type) -> bool:
+    """True when ``cls``'s __init__ is the dataclass one storing every field and nothing else."""
+    params = getattr(cls, "__dataclass_params__", None)
+    return (
+        params is not None
+        and params.init
+        and not params.frozen
+        and not hasattr(cls, "__post_init__")
+        and all(f.init for f in dataclasses.fields(cls))
+        and len(plan_for(cls)) == len(dataclasses.fields(cls))
+    )
+
+
+def record_source(cls: type, indent: str = "    ") -> tuple[list[str], dict[str, Any]]:
+    """Source lines that check the fields of the dict bound to ``data`` and ``return`` the record,
+    and the constants they refer to.
+
+    The lines expect ``prefix`` (the record's path plus a dot, or ``""``) to be bound; missing
+    required fields and bad values raise :class:`ProtocolError` with ``prefix + field``. Used by
+    :func:`from_wire_function` and by the codec's per-message decoders, so both share one check list.
+    """
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    hints = typing.get_type_hints(cls, include_extras=False)
+    consts: dict[str, Any] = {"MISSING": _MISSING, "missing": _missing, "cls": cls}
+    lines = ["get = data.get"]
+    args = []
+    for i, fp in enumerate(plan_for(cls)):
+        f, var, name = fields[fp.name], f"v{i}", repr(fp.name)
+        consts[f"C{i}"] = fp.check
+        lines.append(f"{var} = get({name}, MISSING)")
+        lines.append(f"if {var} is MISSING:")
+        if fp.required:
+            lines.append(f"    missing(prefix + {name})")
+        elif f.default_factory is not dataclasses.MISSING:
+            consts[f"F{i}"] = f.default_factory
+            lines.append(f"    {var} = F{i}()")
+        else:
+            consts[f"D{i}"] = f.default
+            lines.append(f"    {var} = D{i}")
+        test = _fast_test(hints[fp.name], f.metadata, var, consts, str(i))
+        lines.append(f"elif not ({test}):" if test else "else:")
+        lines.append(f"    {var} = C{i}({var}, prefix + {name})")
+        args.append((fp.name, var))
+    if _plain_init(cls):
+        # Same result as cls(**fields) without a second frame and keyword binding: the generated
+        # __init__ of such a dataclass only stores each field.
+        consts["new"] = object.__new__
+        lines.append("obj = new(cls)")
+        lines.extend(f"obj.{name} = {var}" for name, var in args)
+        lines.append("return obj")
+    else:
+        lines.append(f"return cls({', '.join(f'{name}={var}' for name, var in args)})")
+    return [indent + line for line in lines], consts
+
+
+def from_wire_function(cls: type) -> Callable[[dict, str], Any]:
+    """The generated decoder of a record class: ``f(data, prefix) -> record``.
+
+    ``data`` must already be a dict; ``prefix`` is the path of the record followed by a dot
+    (``""`` at top level). Unknown keys are ignored; missing optional fields take their defaults.
+    """
+    fn = _FROM_WIRE.get(cls)
+    if fn is not None:
+        return fn
+    body, consts = record_source(cls)
+    exec("\n".join(["def from_wire(data, prefix):", *body]), consts)  # noqa: S102 - from the class's own fields
+    fn = consts["from_wire"]
+    _FROM_WIRE[cls] = fn
+    return fn
+
+
+def wire_map_source(cls: type, trailer: typing.Mapping[str, Any] | None = None, var: str = "r") -> tuple[str, dict[str, Any]]:
+    """A dict display turning the record bound to ``var`` into plain msgpack data, and the constants
+    it refers to. ``trailer`` adds constant entries after the fields (the codec adds ``v``, ``type``)."""
+    consts: dict[str, Any] = {}
+    items = []
+    for i, fp in enumerate(plan_for(cls)):
+        if fp.to_wire is None:
+            items.append(f"{fp.name!r}: {var}.{fp.name}")
+        else:
+            consts[f"T{i}"] = fp.to_wire
+            items.append(f"{fp.name!r}: T{i}({var}.{fp.name})")
+    for i, (name, value) in enumerate((trailer or {}).items()):
+        consts[f"K{i}"] = value
+        items.append(f"{name!r}: K{i}")
+    return "{" + ", ".join(items) + "}", consts
+
+
+def to_wire_function(cls: type, trailer: typing.Mapping[str, Any] | None = None) -> Callable[[Any], dict]:
+    """The generated encoder of a record class: ``f(record) -> dict`` of plain msgpack data.
+
+    ``trailer`` adds constant entries after the fields; functions with a trailer are not cached
+    here (the caller keeps them)."""
+    fn = _TO_WIRE.get(cls) if trailer is None else None
+    if fn is not None:
+        return fn
+    expr, consts = wire_map_source(cls, trailer)
+    exec(f"def to_wire(r):\n    return {expr}", consts)  # noqa: S102 - from the class's own fields
+    fn = consts["to_wire"]
+    if trailer is None:
+        _TO_WIRE[cls] = fn
+    return fn

@@ -5,15 +5,22 @@ Zenoh callbacks only enqueue raw payloads; decoding, validation and the service'
 all run on the worker, one message at a time, so service code needs no locks and a slow
 handler never stalls Zenoh's receive thread.
 
+A subscription declared ``inline=True`` skips the worker: the payload is decoded and the handler
+called on Zenoh's receive thread. That saves the thread hand-off (tens of µs per message on a
+loaded machine) for cheap, thread-safe handlers such as the site clock or an echo; such handlers
+run concurrently with the worker and with each other.
+
 What it takes care of, so services don't:
 
 - publishing with the envelope stamped (``src``, per-sender ``seq``, ``stamp`` from the clock);
 - decoding with validation; a bad payload is dropped, counted per key, and logged at most once
   per sender per minute;
 - bounded inboxes: streams declared ``latest=True`` (poses, camera frames) keep only the newest
-  payload per key; other subscriptions queue up to ``inbox_size`` and count what overflowed;
+  payload per key and subscription; other subscriptions queue up to ``inbox_size`` and count what
+  overflowed;
 - a liveliness token ``arroch/<site>/@liveliness/<service>/<id>`` and a ``stats/<service>/<id>``
-  queryable answering with the counters;
+  queryable answering with the counters (also to wildcard queries such as ``stats/**``, each service
+  replying on its own key so replies are not merged);
 - SIGINT/SIGTERM: stop the loop, undeclare, close the session (bounded, so exit never hangs).
 """
 
@@ -27,12 +34,12 @@ import signal
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any, Callable, TypeVar
+from typing import Any, Callable, Mapping, TypeVar
 
 import zenoh
 
 from .clock import SimClock, WallClock
-from .codec import ENCODING, decode, encode
+from .codec import _ENCODERS, ENCODING, decode, decoder_for, encode, encoder_for
 from .errors import ProtocolError
 from .keys import Keys
 from .messages import Clock as ClockMessage
@@ -43,15 +50,24 @@ M = TypeVar("M", bound=Message)
 Handler = Callable[[Any, str], None]  # (message, key) -> None
 
 BAD_LOG_INTERVAL = 60.0  # seconds between two log lines about one sender's bad messages
+# Publisher options of every Service (and of raw-Zenoh baselines that want to compare like with like).
+# BLOCK: a reliable stream never silently drops under load. Express: messages are not batched, which
+# Zenoh documents as better latency for less throughput; ARROCH's messages are few, small and
+# latency-bound (poses at 20 Hz, plans, feedback). Bulk streams can opt out in advertise().
+CONGESTION_CONTROL = zenoh.CongestionControl.BLOCK
+EXPRESS = True
 CLOSE_TIMEOUT = 1.5  # seconds granted to zenoh's session.close()
+MAX_BAD_SENDERS = 1024  # senders remembered for log rate limiting; older ones are forgotten
 
 
-@dataclass
+# eq=False: subscriptions are compared and hashed by identity, so they can key the latest-slots.
+@dataclass(eq=False)
 class _Subscription:
     key: str
     msg_type: type[Message]
     handler: Handler
     latest: bool
+    inline: bool = False
 
 
 class Service:
@@ -68,7 +84,7 @@ class Service:
         inbox_size: int = 10_000,
     ) -> None:
         self.name = name
-        self.instance = instance or f"{name}-{os.getpid()}"
+        self.instance = instance or _default_instance(name)
         self.src = self.instance
         self.keys = Keys(namespace)
         self.log = logging.getLogger(f"arroch.{name}")
@@ -80,12 +96,17 @@ class Service:
         self._seq = 0
         self._seq_lock = threading.Lock()
         self._inbox: queue.Queue = queue.Queue(maxsize=inbox_size)
-        self._latest: dict[str, tuple[_Subscription, bytes]] = {}
+        # Newest waiting payload per (subscription, key): two latest-subscriptions matching the same
+        # key each get their own slot, so neither steals the other's sample.
+        self._latest: dict[tuple[_Subscription, str], bytes] = {}
         self._latest_lock = threading.Lock()
+        self._publishers_lock = threading.Lock()
         self._timers: list[list[Any]] = []  # [next_due_monotonic, period, fn]
         self._stop = threading.Event()
-        self._last_bad_log: dict[tuple[str, str], float] = {}
+        self._last_bad_log: dict[str, float] = {}  # sender -> monotonic time of its last log line
+        self._counters_lock = threading.Lock()
         self.counters: collections.Counter[str] = collections.Counter()
+        self.close_timed_out = False  # set when zenoh's close() overran CLOSE_TIMEOUT
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -101,7 +122,9 @@ class Service:
         self._declared.append(token)
         self._declared.append(self._session.declare_queryable(self.keys.stats(self.name, self.instance), self._answer_stats))
         if isinstance(self.clock, SimClock):
-            self.subscribe(self.keys.clock(), ClockMessage, lambda msg, key: self.clock.update(msg), latest=True)
+            # Inline: SimClock.update is cheap and locked, and the clock must not lag behind a slow
+            # handler on the worker (nor stall in processes that never call run()).
+            self.subscribe(self.keys.clock(), ClockMessage, lambda msg, key: self.clock.update(msg), inline=True)
         self.setup()
         self.log.info("%s %s up on namespace %s", self.name, self.instance, self.keys.site)
         return self
@@ -160,6 +183,7 @@ class Service:
         closer.start()
         closer.join(CLOSE_TIMEOUT)
         if closer.is_alive():
+            self.close_timed_out = True
             self.log.warning("zenoh session did not close within %.1f s; exiting anyway", CLOSE_TIMEOUT)
         self.log.info("%s %s stopped", self.name, self.instance)
 
@@ -189,58 +213,120 @@ class Service:
         try:
             fn(*args)
         except Exception:
-            self.counters["handler_errors"] += 1
-            self.log.exception("handler %s failed", getattr(fn, "__name__", fn))
+            self._handler_failed(fn)
+
+    def _handler_failed(self, fn: Callable[..., None]) -> None:
+        """Count and log the exception being handled; the service carries on."""
+        self.count("handler_errors")
+        self.log.exception("handler %s failed", getattr(fn, "__name__", fn))
+
+    # ------------------------------------------------------------------ counters
+
+    def count(self, name: str, n: int = 1) -> None:
+        """Add ``n`` to counter ``name``. Safe from any thread (Zenoh callbacks, inline handlers,
+        the worker): ``counter[k] += 1`` alone is a read and a write, and loses counts under races."""
+        with self._counters_lock:
+            self.counters[name] += n
+
+    def counters_snapshot(self) -> dict[str, int]:
+        """A consistent copy of the counters."""
+        with self._counters_lock:
+            return dict(self.counters)
 
     # ------------------------------------------------------------------ subscribing
 
-    def subscribe(self, key: str, msg_type: type[M], handler: Callable[[M, str], None], *, latest: bool = False) -> None:
+    def subscribe(
+        self,
+        key: str,
+        msg_type: type[M],
+        handler: Callable[[M, str], None],
+        *,
+        latest: bool = False,
+        inline: bool = False,
+    ) -> None:
         """Call ``handler(message, key)`` on the worker for each valid message on ``key``.
 
         ``latest=True`` for state streams where only the newest value per key matters: at most one
         payload per key waits, so a slow consumer sees fresh data and memory stays bounded.
-        """
-        sub = _Subscription(key, msg_type, handler, latest)
 
-        def on_sample(sample: zenoh.Sample) -> None:
-            if sample.kind != zenoh.SampleKind.PUT:
-                return
-            self._enqueue(sub, str(sample.key_expr), sample.payload.to_bytes())
+        ``inline=True`` decodes and calls the handler on Zenoh's receive thread instead, as soon as
+        the sample arrives (no queue, so ``latest`` does not apply). Only for handlers that are quick
+        (a slow one stalls the link) and thread-safe (they run beside the worker).
+        """
+        if latest and inline:
+            raise ValueError("a subscription is either latest (queued on the worker) or inline, not both")
+        sub = _Subscription(key, msg_type, handler, latest, inline)
+        put_kind = zenoh.SampleKind.PUT
+        counters, counters_lock = self.counters, self._counters_lock
+        decode_msg = decoder_for(msg_type)
+        # A key without wildcards is the key of every sample it receives: no need to ask Zenoh.
+        fixed_key = key if "*" not in key and "$" not in key else None
+        # Each path is one flat function, asking Zenoh (each attribute is a call into Rust) only
+        # what it needs: on a round trip the handler runs on a cold cache, where every extra frame
+        # and call costs several times what a micro-benchmark says.
+        if inline:
+
+            def on_sample(sample: zenoh.Sample) -> None:
+                payload = sample.payload.to_bytes()
+                try:
+                    message = decode_msg(payload)
+                except ProtocolError as exc:
+                    # Checked only now: a DELETE (no payload) never decodes, so PUTs skip the call.
+                    if sample.kind == put_kind:
+                        self.note_bad_message(fixed_key or str(sample.key_expr), payload, exc)
+                    return
+                with counters_lock:
+                    counters["received"] += 1
+                try:
+                    handler(message, fixed_key or str(sample.key_expr))
+                except Exception:
+                    self._handler_failed(handler)
+
+        else:
+
+            def on_sample(sample: zenoh.Sample) -> None:
+                if sample.kind == put_kind:
+                    self._enqueue(sub, fixed_key or str(sample.key_expr), sample.payload.to_bytes())
 
         self._declared.append(self.session.declare_subscriber(key, on_sample))
 
     def _enqueue(self, sub: _Subscription, key: str, payload: bytes) -> None:
         if sub.latest:
+            slot = (sub, key)
             with self._latest_lock:
-                pending = key in self._latest
-                self._latest[key] = (sub, payload)
+                pending = slot in self._latest
+                self._latest[slot] = payload
             if pending:
-                self.counters["superseded"] += 1
+                self.count("superseded")
                 return
-            item: Any = ("latest", key)
+            item: Any = ("latest", slot)
         else:
             item = (sub, key, payload)
         try:
             self._inbox.put_nowait(item)
         except queue.Full:
-            self.counters["dropped_inbox_full"] += 1
+            self.count("dropped_inbox_full")
             if item[0] == "latest":
                 with self._latest_lock:
-                    self._latest.pop(key, None)
+                    self._latest.pop(slot, None)
 
     def _dispatch(self, item: Any) -> None:
         if item[0] == "latest":
+            slot = item[1]
             with self._latest_lock:
-                entry = self._latest.pop(item[1], None)
-            if entry is None:
+                payload = self._latest.pop(slot, None)
+            if payload is None:
                 return
-            sub, payload = entry
-            key = item[1]
+            sub, key = slot
         else:
             sub, key, payload = item
+        self._deliver(sub, key, payload)
+
+    def _deliver(self, sub: _Subscription, key: str, payload: bytes) -> None:
+        """Decode, count and hand one payload to its handler (on the worker)."""
         message = self.decode_or_count(payload, sub.msg_type, key)
         if message is not None:
-            self.counters["received"] += 1
+            self.count("received")
             self._guarded(sub.handler, message, key)
 
     def decode_or_count(self, payload: bytes, msg_type: type[M], key: str) -> M | None:
@@ -252,13 +338,25 @@ class Service:
             return None
 
     def note_bad_message(self, key: str, payload: bytes, exc: Exception) -> None:
-        self.counters["bad_messages"] += 1
-        self.counters[f"bad_messages:{key}"] += 1
+        """Count a bad payload (in total and per key) and log it at most once per sender per minute.
+
+        Payloads too broken to name a sender share the sender ``unknown``."""
         sender = _guess_sender(payload)
         now = time.monotonic()
-        last = self._last_bad_log.get((key, sender))
-        if last is None or now - last >= BAD_LOG_INTERVAL:
-            self._last_bad_log[(key, sender)] = now
+        with self._counters_lock:
+            self.counters["bad_messages"] += 1
+            self.counters[f"bad_messages:{key}"] += 1
+            last = self._last_bad_log.get(sender)
+            should_log = last is None or now - last >= BAD_LOG_INTERVAL
+            if should_log:
+                if len(self._last_bad_log) >= MAX_BAD_SENDERS:
+                    # A flood of forged sender ids must not grow memory without bound: forget the
+                    # senders whose minute is over (or, failing that, everyone).
+                    stale = [s for s, t in self._last_bad_log.items() if now - t >= BAD_LOG_INTERVAL]
+                    for s in stale or list(self._last_bad_log):
+                        del self._last_bad_log[s]
+                self._last_bad_log[sender] = now
+        if should_log:
             self.log.warning("dropped bad message on %s from %s: %s (further ones from it counted, logged once a minute)", key, sender, exc)
 
     # ------------------------------------------------------------------ publishing
@@ -274,19 +372,37 @@ class Service:
         msg.stamp = self.clock.now()
         return msg
 
-    def publish(self, key: str, msg: Message, *, stamp: bool = True) -> None:
-        """Stamp (unless told not to) and publish; publishers are declared once per key."""
+    def advertise(self, key: str, *, express: bool = EXPRESS) -> zenoh.Publisher:
+        """Declare the publisher for ``key`` now rather than at the first :meth:`publish`.
+
+        Call it in ``setup()`` for keys published from inline handlers, so no Zenoh declaration
+        happens inside a Zenoh callback; it also lets subscribers match before the first message.
+        ``express=False`` lets Zenoh batch the key's messages (throughput over latency)."""
         publisher = self._publishers.get(key)
         if publisher is None:
-            publisher = self.session.declare_publisher(
-                key, encoding=zenoh.Encoding(ENCODING), congestion_control=zenoh.CongestionControl.BLOCK
-            )
-            self._publishers[key] = publisher
-            self._declared.append(publisher)
+            with self._publishers_lock:  # publish() may run on the worker and in inline handlers
+                publisher = self._publishers.get(key)
+                if publisher is None:
+                    publisher = self.session.declare_publisher(
+                        key, encoding=zenoh.Encoding(ENCODING), congestion_control=CONGESTION_CONTROL, express=express
+                    )
+                    self._publishers[key] = publisher
+                    self._declared.append(publisher)
+        return publisher
+
+    def publish(self, key: str, msg: Message, *, stamp: bool = True, extra: Mapping[str, Any] | None = None) -> None:
+        """Stamp (unless told not to) and publish; publishers are declared once per key.
+
+        ``extra`` adds fields unknown to the message type (see :func:`protocol.codec.encode`)."""
+        publisher = self._publishers.get(key) or self.advertise(key)
         if stamp:
             self.stamp(msg)
-        publisher.put(encode(msg))
-        self.counters["published"] += 1
+        payload = encode(msg, extra) if extra else (_ENCODERS.get(type(msg)) or encoder_for(type(msg)))(msg)
+        # Counted before the put, which is the last thing done: after it, an inline handler should
+        # return at once so Zenoh's thread moves on.
+        with self._counters_lock:
+            self.counters["published"] += 1
+        publisher.put(payload)
 
     # ------------------------------------------------------------------ queries
 
@@ -295,13 +411,16 @@ class Service:
 
         ``None`` means nothing to say (the querier gets no reply)."""
 
+        # A concrete key answers on itself; a wildcard queryable answers on the key it was asked.
+        concrete = "*" not in key and "$" not in key
+
         def on_query(query: zenoh.Query) -> None:
             try:
                 reply = answer(query)
                 if reply is not None:
-                    query.reply(key, encode(reply), encoding=zenoh.Encoding(ENCODING))
+                    query.reply(key if concrete else query.key_expr, encode(reply), encoding=zenoh.Encoding(ENCODING))
             except Exception:
-                self.counters["handler_errors"] += 1
+                self.count("handler_errors")
                 self.log.exception("answering a query on %s failed", key)
 
         self._declared.append(self.session.declare_queryable(key, on_query))
@@ -320,8 +439,28 @@ class Service:
         return out
 
     def _answer_stats(self, query: zenoh.Query) -> None:
-        stats = Event(kind="stats", data={"service": self.name, "instance": self.instance, **dict(self.counters)})
-        query.reply(query.key_expr, encode(self.stamp(stats)), encoding=zenoh.Encoding(ENCODING))
+        # Reply on this service's own key, not the query's: for ``stats/**`` the latter would be the
+        # same key for every service, and Zenoh's reply consolidation would keep only one of them.
+        try:
+            stats = Event(kind="stats", data={"service": self.name, "instance": self.instance, **self.counters_snapshot()})
+            query.reply(self.keys.stats(self.name, self.instance), encode(self.stamp(stats)), encoding=zenoh.Encoding(ENCODING))
+        except Exception:
+            self.count("handler_errors")
+            self.log.exception("answering a stats query failed")
+
+
+_instances_lock = threading.Lock()
+_instances_made: collections.Counter[str] = collections.Counter()
+
+
+def _default_instance(name: str) -> str:
+    """``<name>-<pid>``, with ``-<k>`` for the k-th further service of that name in this process:
+    two instances must never share ``src`` (receivers tell messages apart by ``src`` and ``seq``),
+    nor their liveliness and stats keys."""
+    with _instances_lock:
+        k = _instances_made[name]
+        _instances_made[name] += 1
+    return f"{name}-{os.getpid()}" if k == 0 else f"{name}-{os.getpid()}-{k}"
 
 
 def _guess_sender(payload: bytes) -> str:

@@ -39,6 +39,10 @@ class ZenohOptions:
     config_file: str | None = None
     multicast: bool = False
     shared_memory: bool | None = None  # None: Zenoh's default
+    # Names of the settings an environment variable or a command-line option gave explicitly
+    # ("mode", "connect", ...). With a config file only these override the file, so an explicit
+    # ``--mode client`` beats a file's ``mode: "peer"`` while the default "client" does not.
+    explicit: set[str] = field(default_factory=set)
 
     def effective_connect(self) -> list[str]:
         """Client mode with nothing to connect to would be useless: default to the local router."""
@@ -68,37 +72,63 @@ def options_from(args: argparse.Namespace | None = None, env: dict[str, str] | N
     opts.config_file = env.get("ARROCH_ZENOH_CONFIG") or None
     if env.get("ARROCH_ZENOH_MODE"):
         opts.mode = env["ARROCH_ZENOH_MODE"]
-    opts.connect = _split(env.get("ARROCH_ZENOH_CONNECT"))
-    opts.listen = _split(env.get("ARROCH_ZENOH_LISTEN"))
-    opts.multicast = env.get("ARROCH_ZENOH_MULTICAST", "0") == "1"
+        opts.explicit.add("mode")
+    if env.get("ARROCH_ZENOH_CONNECT"):
+        opts.connect = _split(env["ARROCH_ZENOH_CONNECT"])
+        opts.explicit.add("connect")
+    if env.get("ARROCH_ZENOH_LISTEN"):
+        opts.listen = _split(env["ARROCH_ZENOH_LISTEN"])
+        opts.explicit.add("listen")
+    if env.get("ARROCH_ZENOH_MULTICAST") is not None:
+        opts.multicast = env["ARROCH_ZENOH_MULTICAST"] == "1"
+        opts.explicit.add("multicast")
     if env.get("ARROCH_ZENOH_SHM") is not None:
         opts.shared_memory = env["ARROCH_ZENOH_SHM"] == "1"
+        opts.explicit.add("shared_memory")
     if args is not None:
         if getattr(args, "zenoh_config", None):
             opts.config_file = args.zenoh_config
         if getattr(args, "mode", None):
             opts.mode = args.mode
+            opts.explicit.add("mode")
         if getattr(args, "connect", None):
             opts.connect = _split(args.connect)
+            opts.explicit.add("connect")
         if getattr(args, "listen", None):
             opts.listen = _split(args.listen)
+            opts.explicit.add("listen")
         if getattr(args, "multicast", None):
             opts.multicast = True
+            opts.explicit.add("multicast")
     if opts.mode not in MODES:
         raise ValueError(f"zenoh mode {opts.mode!r} is not one of {', '.join(MODES)}")
     return opts
 
 
+def load_config_file(path: str | Path) -> zenoh.Config:
+    """A Zenoh config file as it is: ``.json``, ``.json5``, ``.yaml`` as Zenoh reads them, any other
+    name (``zenoh.conf``) as JSON5, which Zenoh itself would refuse for its extension alone."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"zenoh config file {path} does not exist")
+    try:
+        if path.suffix.lower() in (".json", ".json5", ".yaml"):
+            return zenoh.Config.from_file(str(path))
+        return zenoh.Config.from_json5(path.read_text())
+    except Exception as exc:  # zenoh raises its own ZError; callers report ValueError in one line
+        raise ValueError(f"zenoh config file {path}: {exc}") from None
+
+
 def build_config(opts: ZenohOptions) -> zenoh.Config:
     """A zenoh.Config from the options; a config file is loaded as it is, then options applied."""
     if opts.config_file:
-        path = Path(opts.config_file)
-        if not path.is_file():
-            raise FileNotFoundError(f"zenoh config file {path} does not exist")
-        config = zenoh.Config.from_file(str(path))
-        # A file is the deployment's word: only explicit options/env override it.
-        if opts.mode != "client" or os.environ.get("ARROCH_ZENOH_MODE"):
+        config = load_config_file(opts.config_file)
+        # A file is the deployment's word: only what env/options gave explicitly overrides it
+        # (a non-default value set in code counts as explicit too).
+        if "mode" in opts.explicit or opts.mode != "client":
             config.insert_json5("mode", json.dumps(opts.mode))
+        if "multicast" in opts.explicit or opts.multicast:
+            config.insert_json5("scouting/multicast/enabled", json.dumps(opts.multicast))
     else:
         config = zenoh.Config()
         config.insert_json5("mode", json.dumps(opts.mode))

@@ -1,0 +1,349 @@
+"""Protocol-layer figures: codec cost, and pose round-trip latency against raw zenoh-python.
+
+Prints one JSON object on stdout (progress goes to stderr):
+
+- ``codec``: encode, decode and encode+decode µs for a RobotPose and for an Intent with a
+  200-point trajectory (median of many timed loops);
+- ``latency``: RobotPose round trips between this process and echo processes over loopback TCP,
+  measured in the same run, in alternating small batches in random order so that machine noise
+  hits every variant alike:
+  - ``protocol``: ``arroch ping serve`` (a Service; echo decoded and re-encoded inline), timed
+    by :class:`protocol.ping.PingSender` (encode → Zenoh → decode, encode → Zenoh → decode);
+  - ``protocol_worker``: the same through the Service's worker thread (``ping serve --worker``);
+  - ``raw``: a plain zenoh-python echo of the very same payload bytes, no codec and no Service,
+    with the same key shapes and publisher options;
+  and the ratios of their p50/p99 (plus ``*_paired``: the median over rounds of the ratio of the
+  two variants' batch medians in that round, which shrugs off slow drifts in machine load).
+- ``floors``: protocol p50 ≤ 1.3 × raw p50, RobotPose encode+decode ≤ 20 µs.
+
+Transport: peer to peer by default (this process listens on a free port, the echoes connect), or
+through ``arroch router`` with ``--router``. Shared memory is off in every process, so the
+figures are those of the TCP path (a pose is far below the size where Zenoh would use it anyway).
+
+``python benchmarks/protocol.py [--pings N] [--batch B] [--router] [--check]``
+(``--check``: exit 1 when a floor is missed). ``--raw-echo`` is the raw echo process itself.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import queue
+import random
+import signal
+import statistics
+import subprocess
+import sys
+import threading
+import time
+import timeit
+import uuid
+from importlib import metadata
+from pathlib import Path
+from typing import Callable
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))  # run as a plain script from a checkout
+
+import zenoh  # noqa: E402
+
+from protocol.codec import ENCODING, decode, encode  # noqa: E402
+from protocol.keys import Keys  # noqa: E402
+from protocol.messages import Intent, RobotPose  # noqa: E402
+from protocol.ping import PingSender, summarize  # noqa: E402
+from protocol.service import CONGESTION_CONTROL, EXPRESS  # noqa: E402
+from protocol.transport import ZenohOptions, build_config, free_tcp_port  # noqa: E402
+
+FLOOR_RATIO = 1.3
+PUBLISHER_OPTIONS = {"encoding": zenoh.Encoding(ENCODING), "congestion_control": CONGESTION_CONTROL, "express": EXPRESS}
+FLOOR_POSE_CODEC_US = 20.0
+
+
+def progress(text: str) -> None:
+    print(f"[protocol bench] {text}", file=sys.stderr, flush=True)
+
+
+# ---------------------------------------------------------------------------- codec
+
+
+def _per_call_us(fn: Callable[[], object], number: int, repeat: int) -> float:
+    """Median over ``repeat`` loops of ``number`` calls, in µs per call."""
+    return statistics.median(timeit.repeat(fn, number=number, repeat=repeat)) / number * 1e6
+
+
+def sample_pose() -> RobotPose:
+    return RobotPose(robot="r0", x=3.25, y=5.5, theta=1.2, vel=0.5, omega=-0.1, src="sim-4242", seq=123456, stamp=1712.25)
+
+
+def sample_intent(points: int = 200) -> Intent:
+    trajectory = [[100.0 + 0.1 * i, 1.0 + 0.05 * i, 5.0 - 0.02 * i, 0.001 * i] for i in range(points)]
+    return Intent(robot="r0", plan_id=17, action_id=42, action="approach", args=["d_storage"],
+                  trajectory=trajectory, src="planner-4242", seq=99, stamp=100.0)
+
+
+def bench_codec(quick: bool) -> dict:
+    out = {}
+    for name, msg, number in (("RobotPose", sample_pose(), 2000), ("Intent200", sample_intent(), 100)):
+        cls = type(msg)
+        payload = encode(msg)
+        assert decode(payload, cls) == msg
+        repeat = 7 if quick else 31
+        enc = _per_call_us(lambda: encode(msg), number, repeat)
+        dec = _per_call_us(lambda: decode(payload, cls), number, repeat)
+        both = _per_call_us(lambda: decode(encode(msg), cls), number, repeat)
+        out[name] = {"bytes": len(payload), "encode_us": round(enc, 2), "decode_us": round(dec, 2),
+                     "encode_decode_us": round(both, 2)}
+        progress(f"codec {name}: {len(payload)} B, encode {enc:.1f} µs, decode {dec:.1f} µs, both {both:.1f} µs")
+    return out
+
+
+# ---------------------------------------------------------------------------- raw zenoh
+
+
+def raw_echo(args: argparse.Namespace) -> int:
+    """The raw echo process: every payload on robot/*/pose goes back as it is on ping/reply."""
+
+    keys = Keys(args.namespace)
+    opts = ZenohOptions(mode=args.mode, connect=[args.connect] if args.connect else [], shared_memory=False)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    with zenoh.open(build_config(opts)) as session:
+        # Same publisher options as protocol.service.Service.publish, so only the layer differs.
+        pub = session.declare_publisher(keys.ping_reply(), **PUBLISHER_OPTIONS)
+        sub = session.declare_subscriber(keys.robot_pose("*"), lambda sample: pub.put(sample.payload))
+        print("raw echo ready", flush=True)
+        stop.wait()
+        sub.undeclare()
+        pub.undeclare()
+    return 0
+
+
+class RawPinger:
+    """PingSender's twin in raw zenoh-python: same session, same payload bytes, no codec.
+
+    Payloads are made before timing starts (a raw user has bytes already); echoes are
+    time-stamped in the callback and handed over through a queue, exactly as PingSender does."""
+
+    def __init__(self, session: zenoh.Session, namespace: str, payload_of: Callable[[int], bytes]) -> None:
+        keys = Keys(namespace)
+        self._payload_of = payload_of
+        self._echoes: queue.SimpleQueue[tuple[bytes, int]] = queue.SimpleQueue()
+        self._pub = session.declare_publisher(keys.robot_pose("ping"), **PUBLISHER_OPTIONS)
+        self._sub = session.declare_subscriber(keys.ping_reply(), self._on_echo)
+        self._n = 0
+
+    def _on_echo(self, sample: zenoh.Sample) -> None:
+        self._echoes.put((sample.payload.to_bytes(), time.perf_counter_ns()))
+
+    def ping_once(self, timeout: float = 1.0) -> float | None:
+        self._n += 1
+        payload = self._payload_of(self._n)
+        sent_at = time.perf_counter_ns()
+        self._pub.put(payload)
+        deadline = time.monotonic() + timeout
+        while (remaining := deadline - time.monotonic()) > 0:
+            try:
+                echo, received_at = self._echoes.get(timeout=remaining)
+            except queue.Empty:
+                return None
+            if echo == payload:
+                return (received_at - sent_at) / 1000.0
+        return None
+
+    def run_pings(self, count: int) -> list[float]:
+        return [rtt for rtt in (self.ping_once() for _ in range(count)) if rtt is not None]
+
+    def wait_for_server(self, timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.ping_once(0.1) is not None:
+                return True
+        return False
+
+    def close(self) -> None:
+        self._sub.undeclare()
+        self._pub.undeclare()
+
+
+# ---------------------------------------------------------------------------- latency
+
+
+class Children:
+    """Processes started with subprocess (never fork: Zenoh is open here), all stopped at exit."""
+
+    def __init__(self) -> None:
+        self.procs: list[subprocess.Popen] = []
+
+    def start(self, argv: list[str], ready: str, timeout: float = 20.0) -> subprocess.Popen:
+        env = dict(os.environ, ARROCH_ZENOH_SHM="0", ARROCH_LOG_LEVEL="WARNING", PYTHONUNBUFFERED="1")
+        proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True, start_new_session=True)
+        self.procs.append(proc)
+        deadline = time.monotonic() + timeout
+        assert proc.stdout is not None
+        while time.monotonic() < deadline:
+            line = proc.stdout.readline()
+            if not line:
+                raise RuntimeError(f"{argv} exited ({proc.wait()}) before it was ready")
+            if ready in line:
+                # Keep draining its output so a chatty child never blocks on a full pipe.
+                threading.Thread(target=proc.stdout.read, daemon=True).start()
+                return proc
+        raise RuntimeError(f"{argv} not ready within {timeout} s")
+
+    def stop(self) -> None:
+        for proc in self.procs:
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGTERM)
+        for proc in self.procs:
+            try:
+                proc.wait(5)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait(5)
+
+
+def bench_latency(args: argparse.Namespace) -> dict:
+    arroch = [sys.executable, "-m", "services.cli"]
+    children = Children()
+    run = uuid.uuid4().hex[:6]
+    # Namespaces of equal length, so the three variants' keys are the same size on the wire.
+    ns = {"protocol": f"bp{run}", "protocol_worker": f"bw{run}", "raw": f"br{run}"}
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    try:
+        if args.router:
+            children.start([*arroch, "router", "--listen", endpoint], "router ready")
+            mine = worker_mine = ZenohOptions(mode="client", connect=[endpoint], shared_memory=False)
+            theirs = worker_theirs = ["--mode", "client", "--connect", endpoint]
+            transport = "client → arroch router → client, TCP loopback"
+        else:
+            # The protocol and raw pairs share this process's listening session (so both take the
+            # same links); the worker pair has its own, so no variant is routed through another.
+            worker_endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+            mine = ZenohOptions(mode="peer", listen=[endpoint], shared_memory=False)
+            worker_mine = ZenohOptions(mode="peer", listen=[worker_endpoint], shared_memory=False)
+            theirs = ["--mode", "peer", "--connect", endpoint]
+            worker_theirs = ["--mode", "peer", "--connect", worker_endpoint]
+            transport = "peer ↔ peer, TCP loopback"
+        progress(f"transport: {transport} ({endpoint}); shared memory off")
+
+        sender = PingSender(ns["protocol"], mine).open()
+        worker_sender = PingSender(ns["protocol_worker"], worker_mine).open()
+        payload_len = len(sender.typical_payload())
+
+        def raw_payload(n: int) -> bytes:
+            # What PingSender puts on the wire for its n-th ping: the same bytes, made beforehand.
+            msg = sender.make_pose(n)
+            msg.src, msg.seq, msg.stamp = sender.src, n, sender.clock.now()
+            return encode(msg)
+
+        raw = RawPinger(sender.session, ns["raw"], raw_payload)
+        children.start([*arroch, "ping", "serve", "--namespace", ns["protocol"], *theirs], "ping serve ready")
+        children.start([*arroch, "ping", "serve", "--worker", "--namespace", ns["protocol_worker"], *worker_theirs], "ping serve ready")
+        raw_argv = [sys.executable, __file__, "--raw-echo", "--mode", "client" if args.router else "peer", "--connect", endpoint]
+        children.start([*raw_argv, "--namespace", ns["raw"]], "raw echo ready")
+        for name, pinger in (("protocol", sender), ("protocol_worker", worker_sender), ("raw", raw)):
+            if not pinger.wait_for_server(15):
+                raise RuntimeError(f"the {name} echo never answered")
+
+        runs: dict[str, Callable[[int], list[float]]] = {
+            "protocol": lambda n: sender.run_pings(n, 0, warmup=0),
+            "protocol_worker": lambda n: worker_sender.run_pings(n, 0, warmup=0),
+            "raw": raw.run_pings,
+        }
+        for run_batch in runs.values():  # warm-up, uncounted
+            run_batch(200)
+        samples: dict[str, list[float]] = {name: [] for name in runs}
+        round_p50: dict[str, list[float]] = {name: [] for name in runs}  # each round's batch median
+        batches = max(1, args.pings // args.batch)
+        progress(f"{batches} rounds of {args.batch} pings per variant, variants in random order each round")
+        rng = random.Random(0)
+        started = time.monotonic()
+        for i in range(batches):
+            order = list(runs)
+            rng.shuffle(order)
+            for name in order:
+                batch = runs[name](args.batch)
+                samples[name].extend(batch)
+                round_p50[name].append(statistics.median(batch) if batch else float("nan"))
+            if (i + 1) % max(1, batches // 5) == 0:
+                progress(f"  {i + 1}/{batches} rounds ({time.monotonic() - started:.1f} s)")
+        raw.close()
+        sender.close()
+        worker_sender.close()
+    finally:
+        children.stop()
+
+    sent = batches * args.batch
+    result: dict = {"transport": transport, "endpoint_kind": "router" if args.router else "peer",
+                    "shared_memory": False, "payload_bytes": payload_len, "pings_per_variant": sent,
+                    "batch": args.batch}
+    for name, values in samples.items():
+        s = summarize(values, sent)
+        result[name] = {k: round(v, 1) if isinstance(v, float) else v for k, v in s.to_dict().items()}
+        progress(f"{name:16s} p50 {s.p50_us:6.0f} µs  p99 {s.p99_us:6.0f} µs  ({s.received}/{sent})")
+    for name in ("protocol", "protocol_worker"):
+        for q in ("p50", "p99"):
+            result[f"{name}_over_raw_{q}"] = round(result[name][f"{q}_us"] / result["raw"][f"{q}_us"], 3)
+        # Noise-robust companion: the two variants' batch medians compared round by round (the
+        # same few milliseconds of machine state), then the median of those ratios.
+        paired = [a / b for a, b in zip(round_p50[name], round_p50["raw"]) if b > 0]
+        result[f"{name}_over_raw_p50_paired"] = round(statistics.median(paired), 3)
+    return result
+
+
+# ---------------------------------------------------------------------------- main
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--pings", type=int, default=6000, help="timed round trips per variant (default 6000)")
+    parser.add_argument("--batch", type=int, default=20, help="pings per variant per round (default 20)")
+    parser.add_argument("--router", action="store_true", help="go through `arroch router` (client mode) instead of peer to peer")
+    parser.add_argument("--quick", action="store_true", help="fewer repetitions (for tests)")
+    parser.add_argument("--check", action="store_true", help="exit 1 if a floor is missed")
+    parser.add_argument("--raw-echo", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--namespace", help=argparse.SUPPRESS)
+    parser.add_argument("--mode", default="peer", help=argparse.SUPPRESS)
+    parser.add_argument("--connect", help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.raw_echo:
+        return raw_echo(args)
+    os.environ.setdefault("RUST_LOG", "error")
+
+    started = time.monotonic()
+    load_before = os.getloadavg()
+    codec = bench_codec(args.quick)
+    latency = bench_latency(args)
+    pose_codec = codec["RobotPose"]["encode_decode_us"]
+    ratio = latency["protocol_over_raw_p50"]
+    floors = {
+        "protocol_over_raw_p50_max": FLOOR_RATIO,
+        "protocol_over_raw_p50": ratio,
+        "ratio_met": ratio <= FLOOR_RATIO,
+        "pose_encode_decode_us_max": FLOOR_POSE_CODEC_US,
+        "pose_encode_decode_us": pose_codec,
+        "codec_met": pose_codec <= FLOOR_POSE_CODEC_US,
+    }
+    floors["met"] = floors["ratio_met"] and floors["codec_met"]
+    report = {
+        "benchmark": "protocol",
+        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform(),
+                    "zenoh": metadata.version("eclipse-zenoh"), "msgpack": metadata.version("msgpack"),
+                    "load_average_before": [round(x, 2) for x in load_before],
+                    "load_average_after": [round(x, 2) for x in os.getloadavg()]},
+        "codec": codec,
+        "latency": latency,
+        "floors": floors,
+        "seconds": round(time.monotonic() - started, 1),
+    }
+    print(json.dumps(report, indent=2))
+    progress(f"done in {report['seconds']} s; floors {'met' if floors['met'] else 'MISSED'}")
+    return 1 if args.check and not floors["met"] else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,205 @@
+"""Hypothesis strategies and sample values derived from the wire records' own declarations.
+
+Everything here reads the dataclass fields, their type hints and their :func:`protocol.schema.spec`
+limits, so a message added to ``protocol/messages.py`` is covered without touching the tests.
+
+- :func:`strategy_for` draws valid records (within every limit);
+- :func:`minimal_wire` gives one small valid wire map per class (the base of malformed-payload tests);
+- :func:`wrong_type_value`, :func:`oversized_value` give values a field must refuse.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import types
+import typing
+from typing import Any
+
+import msgpack
+from hypothesis import strategies as st
+
+from protocol.codec import decode
+from protocol.messages import Message
+from protocol.schema import ID_PATTERN, MAX_BYTES, MAX_JSON_DEPTH, MAX_LIST, MAX_STR, Json
+
+INT_MIN, INT_MAX = -(2**63), 2**64 - 1  # what msgpack can carry
+# Keep drawn collections small: limits are exercised by the dedicated oversize tests.
+DRAW_LIST, DRAW_STR, DRAW_BYTES, DRAW_MAP = 4, 24, 32, 3
+
+
+def fields_of(cls: type) -> list[tuple[dataclasses.Field, Any]]:
+    """(field, type hint) of every wire field of a record class, in declaration order."""
+    hints = typing.get_type_hints(cls)
+    return [(f, hints[f.name]) for f in dataclasses.fields(cls) if f.init and not f.name.startswith("_")]
+
+
+def is_required(f: dataclasses.Field) -> bool:
+    return f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+
+
+def _optional_inner(hint: Any) -> Any | None:
+    """``X`` for ``X | None``, else None."""
+    if typing.get_origin(hint) in (types.UnionType, typing.Union):
+        args = typing.get_args(hint)
+        members = [a for a in args if a is not type(None)]
+        if len(members) == 1 and len(members) < len(args):
+            return members[0]
+    return None
+
+
+def _json(depth: int) -> st.SearchStrategy:
+    base = st.none() | st.booleans() | st.integers(INT_MIN, INT_MAX) | st.floats(allow_nan=False, allow_infinity=False) | st.text(max_size=DRAW_STR)
+    if depth == 0:
+        return base
+    inner = _json(depth - 1)
+    return base | st.lists(inner, max_size=DRAW_LIST) | st.dictionaries(st.text(max_size=8), inner, max_size=DRAW_MAP)
+
+
+def value_strategy(hint: Any, meta: typing.Mapping[str, Any]) -> st.SearchStrategy:
+    """Valid values for one field of type ``hint`` with the limits ``meta``."""
+    lo, hi, max_len = meta.get("lo"), meta.get("hi"), meta.get("max_len")
+    inner = _optional_inner(hint)
+    if inner is not None:
+        return st.none() | value_strategy(inner, meta)
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if hint is bool:
+        return st.booleans()
+    if hint is int:
+        return st.integers(INT_MIN if lo is None else int(lo), INT_MAX if hi is None else int(hi))
+    if hint is float:
+        return st.floats(min_value=lo, max_value=hi, allow_nan=False, allow_infinity=False)
+    if hint is str:
+        if meta.get("choices"):
+            return st.sampled_from(meta["choices"])
+        if meta.get("ident"):
+            return st.just("") | st.from_regex(ID_PATTERN, fullmatch=True).filter(lambda s: len(s) <= (max_len or MAX_STR))
+        return st.text(max_size=min(max_len or MAX_STR, DRAW_STR))
+    if hint is bytes:
+        return st.binary(max_size=min(max_len or MAX_BYTES, DRAW_BYTES))
+    if hint is Json:
+        return _json(min(3, MAX_JSON_DEPTH))
+    if dataclasses.is_dataclass(hint):
+        return strategy_for(hint)
+    if origin in (types.UnionType, typing.Union):  # a union of scalars (Scalar)
+        return st.one_of([value_strategy(a, {}) for a in args])
+    if origin is list:
+        item_meta = {k: meta.get(k) for k in ("lo", "hi", "choices", "ident")}
+        item = value_strategy(args[0], item_meta)
+        row_len = meta.get("row_len")
+        if row_len:  # fixed rows of numbers (trajectories, points)
+            item = st.lists(value_strategy(typing.get_args(args[0])[0], item_meta), min_size=row_len, max_size=row_len)
+        if meta.get("lengths"):
+            return st.sampled_from(meta["lengths"]).flatmap(lambda n: st.lists(item, min_size=n, max_size=n))
+        return st.lists(item, max_size=min(max_len or MAX_LIST, DRAW_LIST))
+    if origin is dict:
+        return st.dictionaries(st.text(max_size=8), value_strategy(args[1], {}), max_size=min(max_len or 4096, DRAW_MAP))
+    raise TypeError(f"no strategy for {hint!r}")
+
+
+def strategy_for(cls: type) -> st.SearchStrategy:
+    """Valid instances of a record class: every field drawn within its declared limits."""
+    return st.builds(cls, **{f.name: value_strategy(hint, f.metadata) for f, hint in fields_of(cls)})
+
+
+# ---------------------------------------------------------------------------- sample values
+
+
+def sample_value(hint: Any, meta: typing.Mapping[str, Any]) -> Any:
+    """One small valid value for a field (wire form)."""
+    lo, hi = meta.get("lo"), meta.get("hi")
+    inner = _optional_inner(hint)
+    if inner is not None:
+        return sample_value(inner, meta)
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if hint is bool:
+        return True
+    if hint in (int, float):
+        value = 1 if lo is None else max(lo, 1)
+        value = value if hi is None else min(value, hi)
+        return hint(value)
+    if hint is str:
+        return meta["choices"][0] if meta.get("choices") else "a1"
+    if hint is bytes:
+        return b"\x00\x01"
+    if hint is Json:
+        return {"k": [1, 2.5, "x", None]}
+    if dataclasses.is_dataclass(hint):
+        return minimal_wire(hint, envelope=False)
+    if origin in (types.UnionType, typing.Union):
+        return sample_value(args[0], {})
+    if origin is list:
+        item_meta = {k: meta.get(k) for k in ("lo", "hi", "choices", "ident")}
+        if meta.get("row_len"):
+            return [[sample_value(float, item_meta)] * meta["row_len"]]
+        return [sample_value(args[0], item_meta)] * max(meta.get("lengths") or (1,))
+    if origin is dict:
+        return {"k": sample_value(args[1], {})}
+    raise TypeError(f"no sample for {hint!r}")
+
+
+def minimal_wire(cls: type, envelope: bool = True) -> dict[str, Any]:
+    """A valid wire map of ``cls``: every field present with a small valid value, plus the envelope."""
+    data = {f.name: sample_value(hint, f.metadata) for f, hint in fields_of(cls)}
+    if envelope and issubclass(cls, Message):
+        data.update(v=cls.VERSION, type=cls.TYPE, src="tester-1", seq=7, stamp=12.5)
+    return data
+
+
+def wrong_type_value(hint: Any) -> Any:
+    """A value of a type the field must refuse."""
+    inner = _optional_inner(hint)
+    if inner is not None:
+        return wrong_type_value(inner)
+    origin = typing.get_origin(hint)
+    if hint is str:
+        return 12
+    if hint in (int, float):
+        return "12"
+    if hint is bool:
+        return 1
+    if hint is bytes:
+        return "not bytes"
+    if hint is Json:
+        return b"bytes are not JSON"
+    if dataclasses.is_dataclass(hint):
+        return 5
+    if origin in (types.UnionType, typing.Union):
+        return [1]
+    if origin is list:
+        return "not a list"
+    if origin is dict:
+        return ["not", "a", "map"]
+    raise TypeError(f"no wrong value for {hint!r}")
+
+
+def oversized_value(hint: Any, meta: typing.Mapping[str, Any]) -> Any | None:
+    """A value one element (or character, or byte) over the field's size limit; None when the
+    field has no size limit of its own."""
+    inner = _optional_inner(hint)
+    if inner is not None:
+        return oversized_value(inner, meta)
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if hint is str and not meta.get("choices"):
+        limit = meta.get("max_len") or MAX_STR
+        return "a" * (limit + 1)
+    if hint is bytes:
+        return b"\x00" * ((meta.get("max_len") or MAX_BYTES) + 1)
+    if origin is list:
+        limit = meta.get("max_len") or MAX_LIST
+        item_meta = {k: meta.get(k) for k in ("lo", "hi", "choices", "ident")}
+        item = [sample_value(float, item_meta)] * meta["row_len"] if meta.get("row_len") else sample_value(args[0], item_meta)
+        return [item] * (limit + 1)
+    if origin is dict:
+        limit = meta.get("max_len") or 4096
+        value = sample_value(args[1], {})
+        return {f"k{i}": value for i in range(limit + 1)}
+    return None
+
+
+def pack(data: Any) -> bytes:
+    return msgpack.packb(data, use_bin_type=True)
+
+
+def sample_message(cls: type[Message]) -> Message:
+    """The minimal valid message of ``cls`` as an object."""
+    return decode(pack(minimal_wire(cls)), cls)

@@ -5,9 +5,10 @@ Usage::
     .venv/bin/python benchmarks/tablet_latency.py [--seconds 12] [--warmup 3] [--sizes 640x480,1280x720]
 
 For each camera size: a Zenoh router, ``arroch tablet`` (with the camera's intrinsics file) and a
-headless Chromium (Debian's ``chromium``) whose fake camera plays rendered frames of the office
-site's storage-room tags (``services.ar_client.synth``) with a robot and its intent in view (published
-on Zenoh), so the server localises and draws a real scene. The page measures with
+headless Chromium (Debian's ``chromium``) whose fake camera plays the simulator's snapshots of the
+office site (a tablet panning slowly across the storage room's tagged wall, rendered at that size by
+``services.sim.world.World``, the intrinsics file being the snapshots' own) with a robot and its
+intent in view (published on Zenoh), so the server localises and draws a real scene. The page measures with
 ``performance.now()`` for every answered frame (``window.arroch.stats()``):
 
 * ``capture_to_drawn``: the frame grabbed from the <video> → its overlay drawn on the canvas
@@ -40,9 +41,8 @@ from protocol.messages import Intent, RobotPose  # noqa: E402
 from protocol.service import Service  # noqa: E402
 from protocol.transport import ZenohOptions, free_tcp_port  # noqa: E402
 from services.ar_client.web.headless import Browser, chromium_path  # noqa: E402
-from services.ar_client.web.intrinsics import default_intrinsics  # noqa: E402
 from tests.procs import Proc, arroch  # noqa: E402
-from tests.tablet.helpers import ROBOT_XY, TRUTH, fake_camera, start_tablet  # noqa: E402
+from tests.tablet.helpers import ROBOT_XY, fake_camera, snapshots, start_tablet  # noqa: E402
 
 
 def log(*args: object) -> None:
@@ -65,8 +65,7 @@ def measure(width: int, height: int, seconds: float, warmup: float, workdir: Pat
         procs.append(proc)
         return proc
 
-    K = default_intrinsics(width, height)
-    video, intrinsics = fake_camera(workdir, TRUTH, K, n=6)
+    video, intrinsics = fake_camera(workdir, snapshots(6, width, height))
     namespace = f"bench{width}"
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     client = Service("bench", namespace, ZenohOptions(mode="client", connect=[endpoint]))

@@ -1,10 +1,13 @@
 """End to end in a real headless Chromium: router + restrictor + ``arroch tablet`` + a test client on
-Zenoh. The page's camera is Chromium's fake device playing a video of rendered frames of the office
-site from a known pose (the sim's snapshot command is not used: these frames come from
-``services.ar_client.synth``, the AR client's renderer of the site's wall tags).
+Zenoh. The page's camera is Chromium's fake device playing a video of the simulator's snapshots of
+the office site (``services.sim.world.World`` rendering through ``services.sim.camera.CameraSpec``,
+what ``arroch sim snapshot`` writes): a tablet panning slowly across the storage room's tagged
+wall, every frame's true pose and intrinsics known, the intrinsics given to the server as its
+calibration.
 
 Checked: the page gets the camera and connects; overlays come back and are drawn where the robot
-really is (screenshot pixels against the robot's position projected through the *true* camera);
+really is (screenshot pixels against the robot's position projected through the snapshot's *true*
+camera, not the server's estimate);
 a tap on a feedback button puts a Feedback on Zenoh, the restrictor accepts it and the ack shows
 on the page; viewer mode shows the sim's stream with the overlay and the robots on the map; a
 wrong token is refused by the page and the WebSocket.
@@ -22,16 +25,20 @@ import numpy as np
 import pytest
 
 from protocol.codec import decode
-from protocol.messages import CameraFrame, DoorState, Feedback, FeedbackAck, Intent, RobotPose
+from protocol.messages import DoorState, Feedback, FeedbackAck, Intent, RobotPose
 from services.ar_client.overlay import AVATAR_HEIGHT, OverlayBuilder
+from services.sim.camera import CameraSpec, frame_message
 from tests.conftest import wait_for_message
 from tests.procs import arroch
-from tests.tablet.helpers import CAMERA, ROBOT_XY, SITE, camera_frames, fake_camera, insecure, project, run, start_tablet
+from tests.tablet.helpers import (ROBOT_XY, SITE, Snapshots, fake_camera, hfov_deg, insecure, run, snapshot_at, snapshots,
+                                  start_tablet, write_video)
 
 pytestmark = pytest.mark.integration
 
 ROBOT = "r0"
 COLOUR = OverlayBuilder(SITE).colour(ROBOT)[:3]  # RGB
+#: A tablet in the kitchen facing its south wall (X, Y, Z, YAW, PITCH): no tag in view.
+KITCHEN_VIEW = (3.0, 3.0, 1.3, -90.0, -10.0)
 
 
 def _publish_world(client, now: float) -> None:  # noqa: ANN001
@@ -67,6 +74,26 @@ def _colour_hits(image: np.ndarray, points: np.ndarray, colour, radius: int = 3,
     return hits / len(points)
 
 
+def _on_screen(points: np.ndarray, camera: CameraSpec, box: tuple[float, float, float]) -> np.ndarray:
+    """Viewport pixels of world points seen through ``camera``, its picture shown in ``box`` (see _stage_box)."""
+    x0, y0, s = box
+    return camera.project(points) * s + [x0, y0]
+
+
+def _drawn_through(image: np.ndarray, shots: Snapshots, box: tuple[float, float, float]) -> CameraSpec:
+    """The true camera of the frame whose overlay the screenshot shows: the camera moves, and the overlay
+    on screen is the one of whichever frame was last answered, so take the frame that fits it best
+    (the avatar moves about 9 px across the whole pan)."""
+    return max(shots.cameras, key=lambda camera: _colour_hits(image, _on_screen(_avatar_rim(), camera, box), COLOUR))
+
+
+def _assert_pictures_lack_the_robot(shots: Snapshots) -> None:
+    """The pictures alone never show the robot's colour where its rim projects (the sim's robots are at
+    their starts, out of view): whatever the screenshot has there, the page drew."""
+    for frame, camera in zip(shots.frames, shots.cameras):
+        assert _colour_hits(frame, camera.project(_avatar_rim()), COLOUR) == 0.0
+
+
 def _avatar_rim() -> np.ndarray:
     """World points on the robot avatar's top ring (drawn by the overlay as a polyline)."""
     a = np.linspace(0, 2 * np.pi, 16, endpoint=False)
@@ -90,7 +117,9 @@ def _feedback_spy(client) -> "queue.Queue[Feedback]":  # noqa: ANN001
 def test_ar_page_overlays_where_the_robot_is_and_feedback_round_trips(router, namespace, client, spawn, browser, tmp_path):
     restrictor = spawn(arroch("restrictor", "--namespace", namespace, "--connect", router, "--clock", "wall",
                               "--state-dir", str(tmp_path / "restrictor")), name="restrictor")
-    video, intrinsics = fake_camera(tmp_path)
+    shots = snapshots()
+    _assert_pictures_lack_the_robot(shots)
+    video, intrinsics = fake_camera(tmp_path, shots)
     server = start_tablet(spawn, router, namespace, tmp_path / "tablet", "--intrinsics", str(intrinsics))
     restrictor.wait_for("up on namespace", timeout=30)
     feedback_seen = _feedback_spy(client)
@@ -102,7 +131,7 @@ def test_ar_page_overlays_where_the_robot_is_and_feedback_round_trips(router, na
     page.navigate(server.url)
     state = page.wait_for("window.arroch && window.arroch.state().overlay && window.arroch.state().overlay.ok"
                           " && window.arroch.state().overlay.primitives > 0 && window.arroch.state()", timeout=40)
-    assert state["camera"] == "on" and state["video"] == [CAMERA.width, CAMERA.height]
+    assert state["camera"] == "on" and state["video"] == [shots.intrinsics.width, shots.intrinsics.height]
     assert state["overlay"]["intrinsics"].startswith("calibrated")
     assert len(state["overlay"]["tags"]) >= 4 and state["overlay"]["rmse"] < 1.0
     assert page.evaluate("document.getElementById('pose').textContent").startswith("pose: ")
@@ -112,13 +141,14 @@ def test_ar_page_overlays_where_the_robot_is_and_feedback_round_trips(router, na
     time.sleep(0.3)
     image = _screen(page)
     assert image.shape[1] == page.evaluate("window.innerWidth")  # one screenshot pixel per CSS pixel
-    x0, y0, s = _stage_box(page, "stage", (CAMERA.width, CAMERA.height))
-    rim = project(_avatar_rim()) * s + [x0, y0]
+    box = _stage_box(page, "stage", (shots.intrinsics.width, shots.intrinsics.height))
+    truth = _drawn_through(image, shots, box)
+    rim = _on_screen(_avatar_rim(), truth, box)
     assert _colour_hits(image, rim, COLOUR) >= 0.8, "the avatar's rim is not where the robot is"
-    far = project(np.array([[9.6, 0.06, 1.9], [7.0, 0.06, 1.9], [8.3, 0.06, 1.7]])) * s + [x0, y0]  # wall above the tags
+    far = _on_screen(np.array([[9.6, 0.06, 1.9], [7.0, 0.06, 1.9], [8.3, 0.06, 1.7]]), truth, box)  # wall above the tags
     assert _colour_hits(image, far, COLOUR, radius=6) == 0.0
-    shifted = rim + [0.0, 40.0]  # 40 px off: the check must be able to fail
-    assert _colour_hits(image, shifted, COLOUR, radius=2) < 0.5
+    shifted = rim + [np.ptp(rim[:, 0]) + 20.0, 0.0]  # beside the avatar, clear of it: the check must be able to fail
+    assert _colour_hits(image, shifted, COLOUR, radius=2) < 0.2
 
     # A tap on "I can't open this door for a while" with 30 minutes: a Feedback on Zenoh, an ack on the page.
     page.evaluate("(() => { const s = document.getElementById('param-door_unavailable-minutes'); s.value = '30';"
@@ -152,15 +182,12 @@ def test_ar_page_overlays_where_the_robot_is_and_feedback_round_trips(router, na
     assert server.proc.alive() and restrictor.alive()
 
 
-def _sim_camera(client, stop: threading.Event) -> None:  # noqa: ANN001
-    """Publish rendered frames as the sim's camera, at 5 Hz, with their intrinsics."""
-    frames = [cv2.imencode(".jpg", f, [cv2.IMWRITE_JPEG_QUALITY, 90])[1].tobytes() for f in camera_frames(3)]
+def _sim_camera(client, shots: Snapshots, stop: threading.Event) -> None:  # noqa: ANN001
+    """Publish the snapshots as the sim's camera does (``frame_message``: JPEG and intrinsics), at 5 Hz."""
+    messages = [frame_message("simcam", frame, camera) for frame, camera in zip(shots.frames, shots.cameras)]
     k = 0
     while not stop.is_set():
-        jpeg = frames[k % len(frames)]
-        client.publish(client.keys.camera_frame("simcam"), CameraFrame(
-            camera="simcam", jpeg=jpeg, width=CAMERA.width, height=CAMERA.height,
-            intrinsics=[CAMERA.fx, CAMERA.fy, CAMERA.cx, CAMERA.cy]))
+        client.publish(client.keys.camera_frame("simcam"), messages[k % len(messages)])
         k += 1
         stop.wait(0.2)
 
@@ -170,8 +197,10 @@ def test_viewer_mode_shows_the_sim_stream_with_overlay_and_the_map(router, names
     assert "mode=viewer" in server.url
     time.sleep(0.5)
     _publish_world(client, time.time())
+    shots = snapshots()
+    _assert_pictures_lack_the_robot(shots)
     stop = threading.Event()
-    feeder = threading.Thread(target=_sim_camera, args=(client, stop), daemon=True)
+    feeder = threading.Thread(target=_sim_camera, args=(client, shots, stop), daemon=True)
     feeder.start()
     try:
         page = browser(window=(1280, 800))  # no camera at all
@@ -183,8 +212,8 @@ def test_viewer_mode_shows_the_sim_stream_with_overlay_and_the_map(router, names
         time.sleep(0.3)
         image = _screen(page)
         # The stream with its overlay: the avatar where the (sim) camera sees the robot.
-        x0, y0, s = _stage_box(page, "stage", (CAMERA.width, CAMERA.height))
-        assert _colour_hits(image, project(_avatar_rim()) * s + [x0, y0], COLOUR) >= 0.8
+        box = _stage_box(page, "stage", (shots.intrinsics.width, shots.intrinsics.height))
+        assert _colour_hits(image, _on_screen(_avatar_rim(), _drawn_through(image, shots, box), box), COLOUR) >= 0.8
         # The map: the robot's disc at its position (the page's map transform: fit the site's bounds, 16 px margin).
         mx, my, mw, mh = page.evaluate("(() => { const r = document.getElementById('map').getBoundingClientRect(); return [r.x, r.y, r.width, r.height]; })()")
         bx0, by0, bx1, by1 = SITE.bounds
@@ -199,16 +228,15 @@ def test_viewer_mode_shows_the_sim_stream_with_overlay_and_the_map(router, names
 
 
 def test_no_tags_in_view_means_lost_and_nothing_drawn(router, namespace, client, spawn, browser, tmp_path):
-    """A camera that sees no tag: the page says LOST and draws no robot, even though one is published."""
-    from services.ar_client.web.fakecam import write_y4m
-
-    rng = np.random.default_rng(0)
-    blank = [np.clip(120 + rng.normal(0, 3, (CAMERA.height, CAMERA.width, 3)), 0, 255).astype(np.uint8) for _ in range(4)]
-    write_y4m(tmp_path / "blank.y4m", blank)
-    server = start_tablet(spawn, router, namespace, tmp_path / "tablet", "--no-qr")
+    """A camera that sees no tag (a sim snapshot of the kitchen's south wall; only the storage room has
+    tags): the page says LOST and draws no robot, even though one is published."""
+    frame, camera = snapshot_at(KITCHEN_VIEW)
+    video = write_video(tmp_path / "kitchen.y4m", [frame, frame])
+    # No calibration: the documented default, given the snapshot's horizontal field of view.
+    server = start_tablet(spawn, router, namespace, tmp_path / "tablet", "--no-qr", "--fov", f"{hfov_deg(camera):.4f}")
     time.sleep(0.5)
     _publish_world(client, time.time())
-    page = browser(fake_camera=tmp_path / "blank.y4m", window=(1280, 800))
+    page = browser(fake_camera=video, window=(1280, 800))
     page.navigate(server.url)
     state = page.wait_for("window.arroch && window.arroch.stats().overlays > 5 && window.arroch.state()", timeout=40)
     assert state["overlay"]["ok"] is False and state["overlay"]["primitives"] == 0
@@ -216,8 +244,8 @@ def test_no_tags_in_view_means_lost_and_nothing_drawn(router, namespace, client,
     pose = page.evaluate("document.getElementById('pose').textContent")
     assert pose.startswith("LOST (no pose yet)"), pose
     image = _screen(page)
-    x0, y0, s = _stage_box(page, "stage", (CAMERA.width, CAMERA.height))
-    stage = image[int(y0):int(y0 + CAMERA.height * s), int(x0):int(x0 + CAMERA.width * s)].astype(int)
+    x0, y0, s = _stage_box(page, "stage", (camera.width, camera.height))
+    stage = image[int(y0):int(y0 + camera.height * s), int(x0):int(x0 + camera.width * s)].astype(int)
     assert not (np.abs(stage - np.array(COLOUR)).max(axis=2) <= 45).any()
 
 

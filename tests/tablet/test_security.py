@@ -15,18 +15,14 @@ import ssl
 import subprocess
 
 import aiohttp
-import cv2
 import pytest
 
 from services.ar_client.web import wire
+from services.sim.camera import encode_jpeg
 from tests.procs import ROOT, arroch
-from tests.tablet.helpers import camera_frames, insecure, run, start_tablet
+from tests.tablet.helpers import insecure, run, snapshots, start_tablet, write_calibration
 
 pytestmark = pytest.mark.integration
-
-
-def _jpeg(image) -> bytes:  # noqa: ANN001
-    return cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 85])[1].tobytes()
 
 
 async def _open(http: aiohttp.ClientSession, base: str, token: str, *, origin: str | None = None, mode: str = "ar"):  # noqa: ANN202
@@ -132,8 +128,10 @@ def _bad_messages() -> list[tuple[str, object, int | tuple[int, ...]]]:
 
 
 def test_garbage_disconnects_only_its_sender(router, namespace, spawn, tmp_path):
-    server = start_tablet(spawn, router, namespace, tmp_path / "state", "--no-qr")
-    frame = _jpeg(camera_frames(1)[0])
+    shots = snapshots()  # sim snapshots of the storage room's tags, and their intrinsics as the calibration
+    calibration = write_calibration(tmp_path / "intrinsics.json", shots)
+    server = start_tablet(spawn, router, namespace, tmp_path / "state", "--no-qr", "--intrinsics", str(calibration))
+    frame = encode_jpeg(shots.frames[0])
 
     async def check() -> None:
         async with aiohttp.ClientSession(connector=insecure()) as http:
@@ -179,7 +177,7 @@ def test_a_refusal_and_its_reason_reach_the_client(router, namespace, spawn, tmp
             update = await inbox.next("constraints")
             assert [c["id"] for c in update["items"]] == [ack["constraint_id"]]
             # A viewer sends no frames: that is a protocol violation too.
-            await ws.send_bytes(wire.pack_frame(1, _jpeg(camera_frames(1)[0])))
+            await ws.send_bytes(wire.pack_frame(1, encode_jpeg(snapshots().frames[0])))
             assert await _closed_with(ws) == wire.CLOSE_POLICY
 
     run(check())

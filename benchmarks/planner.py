@@ -1,0 +1,166 @@
+"""Planner figures: replanning wall time, plan quality, IIDP against the joint optimum.
+
+For each team size (robots x 3 objects, on sites from ``protocol.site.generate_site``) and seed:
+
+- the first plan, IIDP from scratch (every robot alone, then rounds): wall time, makespan, human
+  door openings, IIDP rounds;
+- replans as the service makes them while the mission runs: the world the current plan leads to at
+  ``--replans`` evenly spaced times (``services.planner.replay``), each planned with IIDP starting
+  from the plan being executed, plus one replan at each of those times after the human declares the
+  storage door unavailable for two minutes (a new ConstraintSet); wall time of each;
+- for 2-3 robots, the joint program (all robots in one ASP program) with ``--joint-limit`` seconds:
+  makespan, openings, whether optimality was proven, and IIDP/joint ratios.
+
+Prints one JSON document: per team size, medians and p95 of the replan times, the first plans'
+figures, and whether the floors hold (6 robots: median replan <= 0.5 s; 20 robots: <= 5 s;
+IIDP makespan <= 1.15 x joint where the joint program finished).
+
+    .venv/bin/python benchmarks/planner.py                 # the full set (takes several minutes)
+    .venv/bin/python benchmarks/planner.py --robots 2,6 --seeds 1
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from protocol.site import generate_site, loads_site  # noqa: E402
+from services.planner.constraints import ConstraintProgram, unavailable  # noqa: E402
+from services.planner.planner import PlannerSettings, TaskPlanner  # noqa: E402
+from services.planner.replay import world_at  # noqa: E402
+from services.planner.validator import Windows, validate_result  # noqa: E402
+from services.planner.world import initial_world  # noqa: E402
+
+FLOORS = {6: 0.5, 20: 5.0}  # robots -> median replan wall time (s)
+RATIO_FLOOR = 1.15
+
+
+def pct(values: list[float], q: float) -> float:
+    ordered = sorted(values)
+    if not ordered:
+        return float("nan")
+    k = min(int(round(q * (len(ordered) - 1))), len(ordered) - 1)
+    return ordered[k]
+
+
+def summary(values: list[float]) -> dict:
+    return {"n": len(values), "median": round(statistics.median(values), 4), "p95": round(pct(values, 0.95), 4), "max": round(max(values), 4)} if values else {"n": 0}
+
+
+def run_size(robots: int, seeds: int, replans: int, joint_limit: float, time_limit: float, first_limit: float, validate: bool) -> dict:
+    cold_times, makespans, openings, rounds = [], [], [], []
+    replan_times, constraint_times = [], []
+    invalid = 0
+    joint_rows = []
+    for seed in range(seeds):
+        site = loads_site(generate_site(robots, 3, seed=seed))
+        planner = TaskPlanner(site, PlannerSettings(time_limit=time_limit, joint_time_limit=joint_limit))
+        world = initial_world(site)
+        t0 = time.perf_counter()
+        first = planner.plan(world, time_limit=first_limit)
+        cold_times.append(time.perf_counter() - t0)
+        makespans.append(first.makespan)
+        openings.append(first.door_openings)
+        rounds.append(first.iterations)
+        if validate and validate_result(site, world, first):
+            invalid += 1
+        current, current_world = first, world
+        for k in range(1, replans + 1):
+            t = first.makespan * k / (replans + 1)
+            w = world_at(planner.builder, current_world, current, t)
+            t0 = time.perf_counter()
+            nxt = planner.plan(w, warm=current)
+            replan_times.append(time.perf_counter() - t0)
+            if validate and validate_result(site, w, nxt):
+                invalid += 1
+            # the human says: "I can't open the storage door for two minutes" (restrictor's form)
+            start = int(t)
+            item = unavailable("d_storage", start, start + 120, "bench")
+            program = ConstraintProgram.build([item])
+            t0 = time.perf_counter()
+            constrained = planner.plan(w, program, warm=nxt)
+            constraint_times.append(time.perf_counter() - t0)
+            if validate and validate_result(site, w, constrained, Windows.from_asp([item.asp])):
+                invalid += 1
+            current, current_world = nxt, w
+        if robots <= 3 and joint_limit > 0:
+            t0 = time.perf_counter()
+            joint = planner.plan(world, method="joint")
+            took = time.perf_counter() - t0
+            if validate and validate_result(site, world, joint):
+                invalid += 1
+            joint_rows.append({
+                "seed": seed, "iidp_makespan": first.makespan, "iidp_openings": first.door_openings,
+                "joint_makespan": joint.makespan, "joint_openings": joint.door_openings, "joint_optimal": joint.optimal,
+                "joint_seconds": round(took, 2),
+                "ratio_makespan": round(first.makespan / joint.makespan, 4) if joint.makespan else None,
+                "ratio_openings": round(first.door_openings / joint.door_openings, 4) if joint.door_openings else None,
+            })
+    all_replans = replan_times + constraint_times
+    row = {
+        "robots": robots,
+        "objects": 3 * robots,
+        "seeds": seeds,
+        "first_plan_seconds": summary(cold_times),
+        "replan_seconds": summary(all_replans),
+        "replan_seconds_after_progress": summary(replan_times),
+        "replan_seconds_after_new_constraint": summary(constraint_times),
+        "makespan": {"median": statistics.median(makespans), "values": makespans},
+        "door_openings": {"median": statistics.median(openings), "values": openings},
+        "iidp_rounds": {"median": statistics.median(rounds), "values": rounds},
+        "invalid_plans": invalid,  # plans (first, replans, joint) the validator refuses
+    }
+    if joint_rows:
+        row["joint"] = joint_rows
+        finished = [r for r in joint_rows if r["joint_optimal"]]
+        row["joint_finished_within_limit"] = len(finished)
+        row["ratio_makespan_median"] = statistics.median(r["ratio_makespan"] for r in joint_rows if r["ratio_makespan"])
+        if finished:
+            row["ratio_makespan_max_where_joint_finished"] = max(r["ratio_makespan"] for r in finished)
+    return row
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robots", default="2,3,4,6,10,20", help="team sizes, comma-separated")
+    parser.add_argument("--seeds", type=int, default=3, help="generated sites per team size")
+    parser.add_argument("--replans", type=int, default=5, help="mid-mission replanning points per site")
+    parser.add_argument("--joint-limit", type=float, default=60.0, help="s for the joint program (2-3 robots; 0: skip)")
+    parser.add_argument("--time-limit", type=float, default=5.0, help="s for one IIDP plan (the service's default)")
+    parser.add_argument("--first-plan-limit", type=float, default=60.0, help="s for the first plan from scratch")
+    parser.add_argument("--no-validate", action="store_true", help="skip validating every plan")
+    args = parser.parse_args(argv)
+    sizes = [int(x) for x in args.robots.split(",") if x]
+    results = []
+    for n in sizes:
+        t0 = time.perf_counter()
+        results.append(run_size(n, args.seeds, args.replans, args.joint_limit, args.time_limit, args.first_plan_limit, not args.no_validate))
+        print(f"{n} robots done in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+    floors = {}
+    for row in results:
+        if row["robots"] in FLOORS:
+            floors[f"median_replan_{row['robots']}_robots<= {FLOORS[row['robots']]} s"] = row["replan_seconds"]["median"] <= FLOORS[row["robots"]]
+        if "ratio_makespan_max_where_joint_finished" in row:
+            floors[f"iidp/joint_makespan_{row['robots']}_robots<= {RATIO_FLOOR}"] = row["ratio_makespan_max_where_joint_finished"] <= RATIO_FLOOR
+    doc = {
+        "benchmark": "planner",
+        "command": " ".join([Path(sys.executable).name, "benchmarks/planner.py", *(argv if argv is not None else sys.argv[1:])]),
+        "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "platform": platform.platform()},
+        "settings": {"objects_per_robot": 3, "replan_time_limit": args.time_limit, "joint_limit": args.joint_limit},
+        "results": results,
+        "floors": floors,
+    }
+    print(json.dumps(doc, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,118 @@
+"""Reading an answer set back into timed robot plans.
+
+The model says, per robot, which stop comes at each position (``at/3``), which leg leads there
+(``use/3``), when it is beside each opening (``arr/5``), when it goes through (``go/5``) and when
+each stop is done (``done/3``); together with the leg facts from :mod:`.problem` that fixes every
+action and its times. Openings (``opens/2``) are matched to the passes they cover here.
+"""
+
+from __future__ import annotations
+
+from typing import Iterable
+
+import clingo
+
+from .plan import Pass, RobotPlan, Step
+from .problem import RobotProblem
+
+
+def _num(sym: clingo.Symbol) -> int:
+    return sym.number
+
+
+def decode(
+    atoms: Iterable[clingo.Symbol],
+    problems: dict[str, RobotProblem],
+    hold: int,
+    given: Iterable[tuple[str, int]] = (),
+) -> dict[str, RobotPlan]:
+    at: dict[tuple[str, int], str] = {}
+    use: dict[tuple[str, int], str] = {}
+    arr: dict[tuple[str, int, int], int] = {}
+    go: dict[tuple[str, int, int], int] = {}
+    done: dict[tuple[str, int], int] = {}
+    fin: dict[str, int] = {}
+    opens: set[tuple[str, int]] = set()
+    unoffered: set[tuple[str, int]] = set()
+    for a in atoms:
+        name, args = a.name, a.arguments
+        if name == "at":
+            at[(args[0].name, _num(args[1]))] = str(args[2])
+        elif name == "use":
+            use[(args[0].name, _num(args[1]))] = str(args[2])
+        elif name == "arr":
+            arr[(args[0].name, _num(args[1]), _num(args[3]))] = _num(args[4])
+        elif name == "go":
+            go[(args[0].name, _num(args[1]), _num(args[3]))] = _num(args[4])
+        elif name == "done":
+            done[(args[0].name, _num(args[1]))] = _num(args[3])
+        elif name == "fin":
+            fin[args[0].name] = _num(args[1])
+        elif name == "opens":
+            opens.add((args[0].name, _num(args[1])))
+        elif name == "unoffered":
+            unoffered.add((args[0].name, _num(args[1])))
+    given_windows = set(given)
+    windows = opens | given_windows
+    plans: dict[str, RobotPlan] = {}
+    for rid, prob in problems.items():
+        legs = {leg.id: leg for leg in prob.legs}
+        steps = [Step(p.action, p.args, p.start, p.end) for p in prob.prefix]
+        passes = [Pass(p.opening, p.start, p.end, "", "", False) for p in prob.prefix if p.action == "gothrough"]
+        uses: set[tuple[str, int]] = set()
+        t = prob.ready
+        for pos in range(1, len(prob.stops) + 1):
+            leg = legs[use[(rid, pos)]]
+            for k, c in enumerate(leg.crossings, start=1):
+                a, g = arr[(rid, pos, k)], go[(rid, pos, k)]
+                if not (c.approach == 0 and k == 1 and leg.origin == "start" and prob.beside == c.opening):
+                    steps.append(Step("approach", (c.opening,), t, a))
+                if c.human:
+                    steps.append(Step("opendoor", (c.opening,), a, g))
+                steps.append(Step("gothrough", (c.opening,), g, g + c.through))
+                passes.append(Pass(c.opening, g, g + c.through, c.src, c.dst, c.human))
+                if c.human:
+                    cover = _cover(windows, opens, c.opening, g, g + c.through, hold)
+                    if cover is not None:
+                        uses.add(cover)
+                t = g + c.through
+            stop = prob.stops[leg.stop]
+            end = done[(rid, pos)]
+            steps.append(Step(stop.action, (stop.obj,), t, end))
+            t = end
+        finish = fin.get(rid, prob.ready if not prob.stops else t)
+        own = {w for w in uses if w in opens and w not in given_windows}
+        plans[rid] = RobotPlan(
+            robot=rid,
+            steps=tuple(steps),
+            finish=finish if prob.stops else (steps[-1].end if steps else 0),
+            passes=tuple(passes),
+            uses=frozenset(uses),
+            unoffered=frozenset(own & unoffered),
+            visits=tuple(visits(prob, passes, finish)),
+            order=tuple(at[(rid, pos)] for pos in range(1, len(prob.stops) + 1)),
+            legs=tuple(use[(rid, pos)] for pos in range(1, len(prob.stops) + 1)),
+            routes=tuple(tuple(c.opening for c in legs[use[(rid, pos)]].crossings) for pos in range(1, len(prob.stops) + 1)),
+        )
+    return plans
+
+
+def _cover(windows: set[tuple[str, int]], opens: set[tuple[str, int]], door: str, start: int, end: int, hold: int) -> tuple[str, int] | None:
+    """The opening window of ``door`` that a pass [start, end) lies in (own openings first)."""
+    covering = sorted((d, t) for d, t in windows if d == door and t <= start and end <= t + hold)
+    own = [w for w in covering if w in opens]
+    return (own or covering or [None])[0]
+
+
+def visits(prob: RobotProblem, passes: list[Pass], finish: int) -> list[tuple[str, int, int]]:
+    """(room, S, E) stays of the robot; during a gothrough it is in both rooms."""
+    out = list(prob.rooms_at_start)
+    room = prob.room
+    since = prob.prefix[0].start if prob.prefix else prob.ready
+    for p in passes:
+        if not p.src:  # the prefix's pass: already in rooms_at_start
+            continue
+        out.append((room, since, p.end))
+        room, since = p.dst, p.start
+    out.append((room, since, max(finish, since)))
+    return out

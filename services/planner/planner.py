@@ -1,0 +1,135 @@
+"""The task planner P^t as one call: world + constraints -> a timed plan for every robot.
+
+Builds each robot's problem (:mod:`.problem`), then runs IIDP (:mod:`.iidp`) or the joint program
+(:mod:`.joint`, which first runs IIDP for its horizon and hints). When the constraints leave a robot
+no plan at all, the result says which constraints conflict (status ``conflict``) instead of a plan.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass
+
+from protocol.site import Site
+
+from .constraints import ConstraintProgram
+from .facts import hold_seconds, site_facts, time_point_facts
+from .iidp import NoPlan, iidp
+from .joint import joint
+from .motion import MotionPlanner, NoPath
+from .plan import TeamResult
+from .problem import PlanningError, ProblemBuilder, RobotProblem
+from .single import SingleRobotSolver
+from .world import World
+
+log = logging.getLogger("arroch.planner")
+
+METHODS = ("iidp", "joint")
+
+
+@dataclass
+class PlannerSettings:
+    time_limit: float = 10.0  # s for a whole IIDP plan; past it the best plan so far is used
+    solve_limit: float = 2.0  # s for one clingo call inside IIDP
+    joint_time_limit: float = 60.0  # s for the joint program
+    routes_per_leg: int = 1  # candidate routes per leg; 2 when constraints mention rooms
+    max_rounds: int | None = None  # IIDP rounds (default 2·N)
+
+
+class TaskPlanner:
+    def __init__(self, site: Site, settings: PlannerSettings | None = None) -> None:
+        self.site = site
+        self.settings = settings or PlannerSettings()
+        self.motion = MotionPlanner(site)
+        self.builder = ProblemBuilder(site, self.motion, routes_per_leg=self.settings.routes_per_leg)
+        self.hold = hold_seconds(site)
+
+    def problems(self, world: World, base: int, constraints: ConstraintProgram | None = None) -> dict[str, RobotProblem]:
+        routes = max(self.settings.routes_per_leg, 2) if constraints is not None and constraints.mentions_rooms else None
+        return {rid: self.builder.problem(world, rid, base, routes) for rid in sorted(world.robots) if rid in self.site.robots}
+
+    def existing_windows(self, world: World, base: int) -> tuple[tuple[str, int], ...]:
+        """Doors the human opened that are still open: windows every robot may use, not counted."""
+        return tuple(sorted((d, int(math.floor(t)) - base) for d, t in world.open_doors.items() if d in self.builder.human_doors))
+
+    def plan(
+        self,
+        world: World,
+        constraints: ConstraintProgram | None = None,
+        method: str = "iidp",
+        *,
+        time_limit: float | None = None,
+        warm: TeamResult | None = None,
+    ) -> TeamResult:
+        """Plan for every robot of ``world``. ``warm``: the plan being executed, to start IIDP from."""
+        if method not in METHODS:
+            raise ValueError(f"unknown method {method!r} (use {' or '.join(METHODS)})")
+        t0 = time.perf_counter()
+        base = int(math.floor(world.now))
+        result = TeamResult(method=method, base=base, hold=self.hold, plans={})
+        try:
+            problems = self.problems(world, base, constraints)
+        except (PlanningError, NoPath) as exc:
+            result.status, result.diagnostic = "failed", str(exc)
+            return result
+        existing = self.existing_windows(world, base)
+        result.existing = frozenset(existing)
+        common = site_facts(self.site, base)
+        if constraints is not None:
+            common += time_point_facts(self.site, base, constraints.numbers())
+            common += "".join(f"watched({room}).\n" for room in sorted(constraints.watched_rooms(self.site.rooms)))
+        single = SingleRobotSolver(common, self.hold, constraints, self.settings.solve_limit, existing, base=base)
+        limit = self.settings.time_limit if time_limit is None else time_limit
+        try:
+            plans, stats = iidp(single, problems, time_limit=limit, max_rounds=self.settings.max_rounds, warm=self._warm(warm, base))
+        except NoPlan as exc:
+            return self._no_plan(result, single, problems, exc, t0)
+        result.plans, result.iterations = plans, stats.rounds
+        cap = self.settings.max_rounds if self.settings.max_rounds is not None else 2 * len(problems)
+        result.status = "ok" if stats.converged or stats.rounds >= cap else "timeout"
+        result.converged = stats.converged
+        if result.conflicts:
+            result.diagnostic = f"{result.conflicts} conflicts left after the time limit"
+        if method == "joint":
+            jplans, out = joint(
+                single.site_facts, problems, self.hold, constraints, existing=existing,
+                horizon=result.makespan, hints=plans, time_limit=self.settings.joint_time_limit,
+            )
+            if jplans is not None:
+                result.plans = jplans
+                result.optimal = out.status == "optimal"
+                result.status = "ok" if result.optimal else "timeout"
+            else:
+                result.diagnostic = f"joint program gave no plan ({out.status}); IIDP's plan kept"
+        result.solve_time = time.perf_counter() - t0
+        log.debug("%s plan: makespan %d, openings %d, %d rounds, %d solves (%d cached), %.3f s",
+                  method, result.makespan, result.door_openings, result.iterations, single.calls, single.cache_hits, result.solve_time)
+        result.solves = single.calls
+        return result
+
+    @staticmethod
+    def _warm(previous: TeamResult | None, base: int) -> dict | None:
+        if previous is None or not previous.plans or previous.status not in ("ok", "timeout"):
+            return None
+        delta = previous.base - base
+        return {rid: plan.shifted(delta) for rid, plan in previous.plans.items()}
+
+    def _no_plan(self, result: TeamResult, single: SingleRobotSolver, problems: dict[str, RobotProblem], exc: NoPlan, t0: float) -> TeamResult:
+        prob = problems[exc.robot]
+        out = exc.outcome
+        if out.status == "unsat":
+            out = single.diagnose(prob, single.context(prob, {}))
+        if out.conflict:
+            result.status = "conflict"
+            result.conflict_ids = list(out.conflict)
+            result.diagnostic = f"constraints {', '.join(out.conflict)} leave robot {exc.robot} no plan"
+        elif out.status == "unsat":
+            result.status = "failed"
+            result.diagnostic = f"robot {exc.robot} has no plan even without constraints"
+        else:
+            result.status = "failed"
+            result.diagnostic = f"no plan for robot {exc.robot} within the time limit ({out.status})"
+        result.solve_time = time.perf_counter() - t0
+        return result

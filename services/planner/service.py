@@ -1,0 +1,334 @@
+"""The planner service: keeps the world, plans, dispatches front actions, replans (Algorithm 1).
+
+Inputs: robot poses and statuses, door states, the ConstraintSet, events (action done/failed),
+and the clock (its ``world_version``). Outputs: the TeamPlan on ``plan`` (also served to late
+joiners), each robot's RobotCommand for its front action and its Intent, and ``plan_conflict``
+events.
+
+When it replans: at start; on a new ConstraintSet; when a robot's action ends, fails, or the robot
+reports a new state for it; when a robot is far off its trajectory; when a human-operated door opens
+or closes; and on every new ``world_version`` - every one is answered with a TeamPlan, even if
+nothing changed, because the simulator's lockstep mode waits for that answer. Triggers arriving
+together (a clock tick, a status and an event for one action) are answered by one replan.
+
+Replanning starts from the plan being executed (IIDP warm start). When the constraints leave a
+robot no plan, the service publishes ``plan_conflict`` naming the constraints that conflict, keeps
+planning with the last constraint set that worked (so the plan it keeps is the last valid one,
+brought up to date), and keeps running.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+from protocol.clock import SimClock, WallClock
+from protocol.messages import ConstraintSet, DoorState, Event, PlannedOpening, PlanStep, RobotPose, RobotStatus, TeamPlan
+from protocol.service import Service
+from protocol.site import Site
+from protocol.transport import ZenohOptions
+
+from .constraints import ConstraintProgram, from_constraint_set
+from .dispatcher import FINISHED_STATES, Dispatcher
+from .motion import polyline_distance
+from .plan import TeamResult
+from .planner import PlannerSettings, TaskPlanner
+from .world import InProgress, RobotState, World
+
+SETTLE = 0.03  # s without a new trigger before replanning (one replan for a burst)
+MAX_DELAY = 0.25  # s: replan at the latest this long after the first trigger
+OFF_TRACK = 1.0  # m from the commanded trajectory that counts as "far off"
+OFF_TRACK_COOLDOWN = 2.0  # s between two off-track replans for one robot
+
+
+@dataclass
+class ServiceSettings:
+    method: str = "iidp"
+    planner: PlannerSettings = field(default_factory=lambda: PlannerSettings(time_limit=5.0))
+    off_track: float = OFF_TRACK
+
+
+class PlannerService(Service):
+    def __init__(
+        self,
+        site: Site,
+        namespace: str,
+        zenoh_options: ZenohOptions,
+        *,
+        clock: WallClock | SimClock | None = None,
+        settings: ServiceSettings | None = None,
+        instance: str | None = None,
+    ) -> None:
+        super().__init__("planner", namespace, zenoh_options, clock=clock, instance=instance)
+        self.site = site
+        self.settings = settings or ServiceSettings()
+        self.planner = TaskPlanner(site, self.settings.planner)
+        self.dispatcher = Dispatcher(self.planner.builder, self.planner.motion)
+        self.poses: dict[str, tuple[float, float, float]] = {}
+        self.statuses: dict[str, RobotStatus] = {}
+        self.doors: dict[str, DoorState] = {}
+        self.constraint_set: ConstraintSet | None = None
+        self.constraints: ConstraintProgram | None = None
+        self.valid_constraints: ConstraintProgram | None = None  # the last set that left a plan
+        self.reported_conflicts: set[tuple] = set()
+        self.world_version = 0
+        self.result: TeamResult | None = None
+        self.message: TeamPlan | None = None
+        # plan ids keep increasing across restarts of the service
+        self.plan_id = int(time.time() * 1000)
+        self._dirty: set[str] = set()
+        self._first_trigger = 0.0
+        self._last_trigger = 0.0
+        self._finished: set[str] = set()
+        self._force: set[str] = set()
+        self._off_track_at: dict[str, float] = {}
+
+    # ------------------------------------------------------------------ wiring
+
+    def setup(self) -> None:
+        k = self.keys
+        self.subscribe(k.robot_pose("*"), RobotPose, self.on_pose, latest=True)
+        self.subscribe(k.robot_status("*"), RobotStatus, self.on_status)
+        self.subscribe(k.door_state("*"), DoorState, self.on_door)
+        self.subscribe(k.constraints(), ConstraintSet, self.on_constraints)
+        self.subscribe(k.event(), Event, self.on_event)
+        self.serve(k.plan(), lambda _query: self.message)
+        self.every(0.02, self.tick)
+        try:  # a restarted planner picks up the active constraints at once
+            for cs in self.query(k.constraints(), ConstraintSet, timeout=1.0):
+                self.on_constraints(cs, k.constraints())
+        except Exception as exc:  # no restrictor yet: its first ConstraintSet will come by pub/sub
+            self.log.debug("no constraints to fetch at start: %s", exc)
+        self.trigger("start")
+
+    def trigger(self, reason: str) -> None:
+        now = time.monotonic()
+        if not self._dirty:
+            self._first_trigger = now
+        self._last_trigger = now
+        self._dirty.add(reason)
+
+    # ------------------------------------------------------------------ inputs
+
+    def _note_version(self, version: int) -> None:
+        if version > self.world_version:
+            self.world_version = version
+            self.trigger("world_version")
+
+    def on_pose(self, msg: RobotPose, _key: str) -> None:
+        if msg.robot not in self.site.robots:
+            self.counters["unknown_robot"] += 1
+            return
+        self.poses[msg.robot] = (msg.x, msg.y, msg.theta)
+        sent = self.dispatcher.current.get(msg.robot)
+        status = self.statuses.get(msg.robot)
+        if sent is None or len(sent.trajectory) < 2 or status is None or status.state != "moving" or status.action_id != sent.action_id:
+            return
+        if polyline_distance((msg.x, msg.y), sent.trajectory) > self.settings.off_track:
+            last = self._off_track_at.get(msg.robot, -math.inf)
+            if time.monotonic() - last >= OFF_TRACK_COOLDOWN:
+                self._off_track_at[msg.robot] = time.monotonic()
+                self._force.add(msg.robot)
+                self.counters["off_track"] += 1
+                self.trigger(f"off_track:{msg.robot}")
+
+    def on_status(self, msg: RobotStatus, _key: str) -> None:
+        if msg.robot not in self.site.robots:
+            self.counters["unknown_robot"] += 1
+            return
+        before = self.statuses.get(msg.robot)
+        self.statuses[msg.robot] = msg
+        self.dispatcher.note_reported_id(msg.robot, msg.action_id)
+        self._note_version(msg.world_version)
+        sent = self.dispatcher.current.get(msg.robot)
+        changed = before is None or (before.state, before.action_id, tuple(before.carrying), tuple(before.delivered)) != (
+            msg.state, msg.action_id, tuple(msg.carrying), tuple(msg.delivered))
+        if sent is not None and msg.action_id == sent.action_id and msg.state in FINISHED_STATES:
+            self._finished.add(msg.robot)
+        if changed:
+            self.trigger(f"status:{msg.robot}:{msg.state}")
+
+    def on_door(self, msg: DoorState, _key: str) -> None:
+        if msg.door not in self.site.openings:
+            self.counters["unknown_door"] += 1
+            return
+        before = self.doors.get(msg.door)
+        self.doors[msg.door] = msg
+        self._note_version(msg.world_version)
+        opening = self.site.openings[msg.door]
+        if opening.human_operated and (before is None or before.open != msg.open):
+            self.trigger(f"door:{msg.door}:{'open' if msg.open else 'closed'}")
+
+    def on_constraints(self, msg: ConstraintSet, _key: str) -> None:
+        if self.constraint_set is not None and msg.version <= self.constraint_set.version:
+            return
+        self.constraint_set = msg
+        program = ConstraintProgram.build(from_constraint_set(msg))
+        for cid, why in sorted(program.invalid.items()):
+            self.log.warning("constraint %s is left out: %s", cid, why)
+        if program.invalid:
+            self.publish_conflict(sorted(program.invalid), "invalid: " + "; ".join(f"{c}: {w}" for c, w in sorted(program.invalid.items())))
+        self.constraints = program if program.active else None
+        self.trigger(f"constraints:v{msg.version}")
+
+    def on_event(self, msg: Event, _key: str) -> None:
+        if msg.kind in ("action_done", "action_failed") and msg.robot in self.site.robots:
+            data = msg.data if isinstance(msg.data, dict) else {}
+            # The pose that goes with the event travels in it: poses come on another key, which may
+            # be delivered later than the event.
+            pose = data.get("pose")
+            if isinstance(pose, list) and len(pose) == 3 and all(isinstance(v, (int, float)) and math.isfinite(v) for v in pose):
+                self.poses[msg.robot] = (float(pose[0]), float(pose[1]), float(pose[2]))
+            sent = self.dispatcher.current.get(msg.robot)
+            if sent is not None and data.get("action_id") == sent.action_id:
+                self._finished.add(msg.robot)
+            self.trigger(f"{msg.kind}:{msg.robot}")
+
+    # ------------------------------------------------------------------ replanning
+
+    def tick(self) -> None:
+        if isinstance(self.clock, SimClock):
+            self._note_version(self.clock.world_version)
+        if not self._dirty:
+            return
+        now = time.monotonic()
+        if now - self._last_trigger < SETTLE and now - self._first_trigger < MAX_DELAY:
+            return
+        reasons = sorted(self._dirty)
+        self._dirty.clear()
+        self.replan(reasons)
+
+    def world(self) -> World:
+        now = self.clock.now()
+        hold = self.site.params.door_hold_time
+        robots: dict[str, RobotState] = {}
+        for rid, spec in self.site.robots.items():
+            pose = self.poses.get(rid, spec.start)
+            status = self.statuses.get(rid)
+            if status is None:
+                robots[rid] = RobotState(id=rid, pose=pose)
+                continue
+            robots[rid] = RobotState(
+                id=rid,
+                pose=pose,
+                carrying=frozenset(o for o in status.carrying if o in self.site.objects),
+                delivered=frozenset(o for o in status.delivered if o in self.site.objects),
+                beside=self._beside(status),
+                in_progress=self._in_progress(rid, status, pose, now),
+            )
+        open_doors = {}
+        for did, ds in self.doors.items():
+            opening = self.site.openings.get(did)
+            if ds.open and opening is not None and opening.human_operated:
+                open_doors[did] = ds.until - hold if ds.until > 0 else ds.stamp
+        return World(now=now, robots=robots, open_doors=open_doors)
+
+    def _beside(self, status: RobotStatus) -> str:
+        """The opening a robot stands beside: the door it waits at, or the one its last action
+        (approach or opendoor, now over) brought it to."""
+        if status.state == "waiting_at_door" and status.waiting_door in self.site.openings:
+            return status.waiting_door
+        if status.state in ("done", "idle") and status.action in ("approach", "opendoor") and status.args and status.args[0] in self.site.openings:
+            return status.args[0]
+        return ""
+
+    def _in_progress(self, rid: str, status: RobotStatus, pose: tuple[float, float, float], now: float) -> InProgress | None:
+        """Actions that must be finished first: a gothrough while in the doorway, a load/unload in place."""
+        sent = self.dispatcher.current.get(rid)
+        if sent is None or status.action_id != sent.action_id or not status.args:
+            return None
+        if status.state in ("loading", "unloading") and status.action in ("load", "unload"):
+            left = max(1.0 - status.progress, 0.0) * self.site.params.load_time
+            return InProgress(status.action, tuple(status.args[:1]), now + left)
+        if status.state == "moving" and status.action == "gothrough" and status.args[0] in self.site.openings:
+            opening = self.site.openings[status.args[0]]
+            depth = self.planner.builder.beside_distance
+            if math.dist((pose[0], pose[1]), opening.center) < depth * 0.9 and len(sent.trajectory) >= 2:
+                end = sent.trajectory[-1]
+                target = self.site.room_at(end[1], end[2])
+                if target is not None and target.id in opening.rooms:
+                    return InProgress("gothrough", (opening.id,), now, target.id)
+        return None
+
+    def replan(self, reasons: list[str]) -> None:
+        world = self.world()
+        self.log.debug("replanning at %.1f (world v%d): %s", world.now, self.world_version, ", ".join(reasons))
+        result = self.planner.plan(world, self.constraints, self.settings.method, warm=self.result)
+        if result.status == "conflict":
+            self.publish_conflict(result.conflict_ids, result.diagnostic)
+            fallback = self.planner.plan(world, self.valid_constraints, self.settings.method, warm=self.result)
+            if fallback.status in ("ok", "timeout"):
+                fallback.diagnostic = f"{result.diagnostic}; planned with the last constraint set that worked"
+                result = fallback
+        elif result.status in ("ok", "timeout"):
+            self.valid_constraints = self.constraints
+        if result.status in ("ok", "timeout"):
+            self.result = result
+            self.counters["plans"] += 1
+        else:
+            self.counters["planning_failures"] += 1
+            self.log.warning("no new plan (%s): %s", result.status, result.diagnostic)
+        self.publish_plan(world, result if result.status in ("ok", "timeout") else None, result.diagnostic)
+
+    def publish_plan(self, world: World, result: TeamResult | None, diagnostic: str) -> None:
+        """Publish the TeamPlan (the new one, or the kept one re-stamped) and the commands."""
+        self.plan_id += 1
+        cs_version = self.constraint_set.version if self.constraint_set is not None else 0
+        kept = self.result
+        if kept is None:
+            self.message = TeamPlan(plan_id=self.plan_id, world_version=self.world_version, constraints_version=cs_version, method=self.settings.method, diagnostic=diagnostic[:4096])
+            self.publish(self.keys.plan(), self.message)
+            return
+        finished, force = set(self._finished), set(self._force)
+        self._finished.clear()
+        self._force.clear()
+        commands, front = self.dispatcher.dispatch(kept, world, self.plan_id, finished=finished, force=force) if result is not None else ([], {})
+        if result is None:
+            front = {rid: d.action_id for rid, d in self.dispatcher.current.items()}
+        # Commands first: a simulator in lockstep waits for the commands a plan names before it runs on.
+        for cmd in commands:
+            self.publish(self.keys.robot_command(cmd.robot), cmd)
+        for intent in self.dispatcher.intents(self.plan_id):
+            if intent.robot in kept.plans and not kept.plans[intent.robot].empty:
+                self.publish(self.keys.intent(intent.robot), intent)
+        self.message = to_message(kept, self.plan_id, self.world_version, cs_version, front, diagnostic)
+        self.publish(self.keys.plan(), self.message)
+        self.log.info(
+            "plan %d for world v%d, constraints v%d: makespan %d s, %d door openings, %d rounds, %.2f s%s",
+            self.plan_id, self.world_version, cs_version, kept.makespan, kept.door_openings, kept.iterations, kept.solve_time,
+            f" ({diagnostic})" if diagnostic else "",
+        )
+
+    def publish_conflict(self, ids: list[str], reason: str) -> None:
+        version = self.constraint_set.version if self.constraint_set is not None else 0
+        key = (version, tuple(ids))
+        if key in self.reported_conflicts:
+            return
+        self.reported_conflicts.add(key)
+        self.counters["plan_conflicts"] += 1
+        self.log.warning("constraints %s: %s", ", ".join(ids) or "(none)", reason)
+        self.publish(self.keys.event(), Event(kind="plan_conflict", data={"constraints": list(ids), "constraints_version": version, "reason": reason[:1000]}))
+
+
+def to_message(result: TeamResult, plan_id: int, world_version: int, constraints_version: int, front: dict[str, int], diagnostic: str) -> TeamPlan:
+    robots = {}
+    for rid, plan in sorted(result.plans.items()):
+        steps = []
+        for i, s in enumerate(plan.steps):
+            steps.append(PlanStep(action=s.action, args=list(s.args), start=float(result.absolute(s.start)), end=float(result.absolute(s.end)), action_id=front.get(rid, 0) if i == 0 else 0))
+        robots[rid] = steps
+    openings = [PlannedOpening(door=o.door, start=float(result.absolute(o.start)), end=float(result.absolute(o.end)), robots=list(o.robots)) for o in result.openings]
+    return TeamPlan(
+        plan_id=plan_id,
+        world_version=world_version,
+        constraints_version=constraints_version,
+        method=result.method,
+        makespan=float(result.makespan),
+        door_openings=result.door_openings,
+        solve_time=round(result.solve_time, 4),
+        iterations=result.iterations,
+        robots=robots,
+        openings=openings,
+        diagnostic=diagnostic[:4096],
+    )

@@ -1,0 +1,154 @@
+"""Running clingo on the encoding: ground, solve with a time cap, keep the best model, explain unsat.
+
+One call builds one program (encoding parts + facts + the guarded constraints), grounds it once and
+optimises with branch-and-bound, single-threaded so results do not depend on thread timing. The
+solve runs asynchronously and is cancelled at the time limit; the best model found so far is kept
+("feasible" rather than "optimal"). When the program is unsatisfiable under the constraints, the
+unsatisfiable core over the constraints' ``cactive/1`` switches is shrunk by deletion to a minimal
+set of constraint ids that cannot hold together (see :mod:`.constraints`).
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import clingo
+
+from .constraints import ConstraintProgram
+
+HERE = Path(__file__).resolve().parent
+ENCODING = {
+    "domain": "domain.lp",  # stops, order, legs, the time chain, fluents
+    "doors": "doors.lp",  # human door openings, sharing them, other robots' doorway occupancy
+    "vocabulary": "vocabulary.lp",  # human_opens/goes_through and the restrictor's facts
+    "rooms": "rooms.lp",  # robot_in/4 and room_forbidden/3
+    "joint": "joint.lp",  # interactions between robots planned together
+    "objective": "objective.lp",  # openings, offers, total time
+    "makespan": "makespan.lp",  # team completion time with one robot free (IIDP)
+}
+DIAGNOSE_LIMIT = 2.0  # s for each satisfiability check while shrinking a conflict
+
+
+@functools.cache
+def encoding_text(part: str) -> str:
+    return (HERE / ENCODING[part]).read_text(encoding="utf-8")
+
+
+@dataclass
+class Outcome:
+    status: str  # "optimal" | "feasible" (time limit hit, best so far) | "unsat" | "unknown" (no model in time)
+    atoms: list[clingo.Symbol] = field(default_factory=list)
+    cost: tuple[int, ...] = ()
+    seconds: float = 0.0
+    ground_seconds: float = 0.0
+    conflict: list[str] = field(default_factory=list)  # minimal conflicting constraint ids (unsat only)
+    inherent: bool = False  # unsat even without any constraint
+
+    @property
+    def ok(self) -> bool:
+        return self.status in ("optimal", "feasible")
+
+
+def parts_for(constraints: ConstraintProgram | None, *, joint: bool = False) -> list[str]:
+    parts = ["domain", "doors", "vocabulary", "objective"]
+    if constraints is not None and constraints.mentions_rooms:
+        parts.append("rooms")
+    parts.append("joint" if joint else "makespan")
+    return parts
+
+
+def solve(
+    facts: str,
+    parts: Sequence[str],
+    constraints: ConstraintProgram | None = None,
+    *,
+    time_limit: float = 5.0,
+    consts: dict[str, int] | None = None,
+    diagnose: bool = True,
+    extra: str = "",
+    options: Sequence[str] = (),
+) -> Outcome:
+    """Ground and optimise; on unsat (and ``diagnose``) name the conflicting constraints."""
+    t0 = time.perf_counter()
+    args = ["--opt-strategy=bb", "--warn=none", "--parallel-mode=1", *options]
+    for name, value in (consts or {}).items():
+        args += ["-c", f"{name}={int(value)}"]
+    ctl = clingo.Control(args)
+    for part in parts:
+        ctl.add("base", [], encoding_text(part))
+    ctl.add("base", [], facts)
+    if extra:
+        ctl.add("base", [], extra)
+    if constraints is not None:
+        constraints.add_to(ctl)
+    ctl.ground([("base", [])])
+    ground = time.perf_counter() - t0
+    # An #external atom is false unless released; free ones can then be assumed true or false per solve.
+    for i in constraints.active if constraints else []:
+        ctl.assign_external(ConstraintProgram.guard_symbol(i), None)  # None: free
+    assumptions = [(ConstraintProgram.guard_symbol(i), True) for i in (constraints.active if constraints else [])]
+    best: list = []
+    core: list[int] = []
+
+    def on_model(model: clingo.Model) -> None:
+        best[:] = [model.symbols(shown=True), tuple(model.cost)]
+
+    # Grounding cannot be interrupted; whatever it took, leave the search some time for a first model.
+    remaining = max(time_limit - ground, min(1.0, time_limit))
+    with ctl.solve(assumptions=assumptions, on_model=on_model, on_core=core.extend, async_=True) as handle:
+        finished = handle.wait(remaining)
+        if not finished:
+            handle.cancel()
+        result = handle.get()
+    out = Outcome(status="unknown", seconds=time.perf_counter() - t0, ground_seconds=ground)
+    if best:
+        out.atoms, out.cost = best[0], best[1]
+        out.status = "optimal" if finished and result.exhausted else "feasible"
+    elif finished and result.unsatisfiable:
+        out.status = "unsat"
+        if diagnose:
+            _explain(ctl, constraints, core, out)
+        out.seconds = time.perf_counter() - t0
+    return out
+
+
+def _check(ctl: clingo.Control, constraints: ConstraintProgram, on: set[int]) -> bool | None:
+    """Satisfiable with exactly the constraints ``on``? None when the check runs out of time."""
+    assumptions = [(ConstraintProgram.guard_symbol(i), i in on) for i in constraints.active]
+    with ctl.solve(assumptions=assumptions, async_=True) as handle:
+        if not handle.wait(DIAGNOSE_LIMIT):
+            handle.cancel()
+            return None
+        return bool(handle.get().satisfiable)
+
+
+def _explain(ctl: clingo.Control, constraints: ConstraintProgram | None, core: list[int], out: Outcome) -> None:
+    if constraints is None or not constraints.active:
+        out.inherent = True
+        return
+    ctl.configuration.solve.opt_mode = "ignore"  # satisfiability is all the checks need
+    ctl.configuration.solve.models = 1
+    literal_of = {}
+    for i in constraints.active:
+        atom = ctl.symbolic_atoms[ConstraintProgram.guard_symbol(i)]
+        if atom is not None:
+            literal_of[atom.literal] = i
+    suspects = {literal_of[lit] for lit in core if lit in literal_of}
+    if not suspects:
+        if _check(ctl, constraints, set()) is False:
+            out.inherent = True
+            return
+        suspects = set(constraints.active)
+    if _check(ctl, constraints, set()) is False:
+        out.inherent = True
+        return
+    # Deletion: drop each suspect whose absence keeps the rest unsatisfiable.
+    for i in sorted(suspects):
+        trial = suspects - {i}
+        if _check(ctl, constraints, trial) is False:
+            suspects = trial
+    out.conflict = constraints.ids(suspects)

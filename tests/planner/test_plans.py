@@ -1,0 +1,97 @@
+"""Plans on the default site and on generated sites are executable, IIDP converges, openings are shared."""
+
+from __future__ import annotations
+
+import pytest
+
+from services.planner.facts import Context, site_facts
+from services.planner.plan import TeamResult, share_windows
+from services.planner.planner import PlannerSettings, TaskPlanner
+from services.planner.single import SingleRobotSolver
+from services.planner.validator import validate_result
+from services.planner.world import initial_world
+from tests.planner.conftest import planner_for, site_named
+
+_cache: dict[tuple[str, str], TeamResult] = {}
+
+
+def plan(name: str, method: str = "iidp") -> TeamResult:
+    key = (name, method)
+    if key not in _cache:
+        _cache[key] = planner_for(name).plan(initial_world(site_named(name)), method=method)
+    return _cache[key]
+
+
+@pytest.mark.parametrize("name", ["office", "gen2", "gen3", "gen4", "gen5", "gen6"])
+def test_iidp_plans_are_valid(name):
+    site = site_named(name)
+    result = plan(name)
+    assert result.status == "ok", result.diagnostic
+    assert validate_result(site, initial_world(site), result) == []
+    assert result.conflicts == 0
+    # every robot has work, and the team needs the human at least once
+    assert all(not p.empty for p in result.plans.values())
+    assert result.door_openings >= 1
+    assert result.makespan == max(p.finish for p in result.plans.values())
+
+
+@pytest.mark.parametrize("name", ["office", "gen3", "gen6"])
+def test_iidp_converges_within_its_round_cap(name):
+    result = plan(name)
+    n = len(site_named(name).robots)
+    assert result.converged, "stopped because no robot could improve the team"
+    assert 0 <= result.iterations <= 2 * n
+
+
+def test_iidp_improves_on_planning_each_robot_alone():
+    """Plans made alone (IIDP's first step) put robots in one doorway at once or ask the human for
+    overlapping openings; the team IIDP hands out has none of that and is no worse otherwise."""
+    name = "gen4"
+    site = site_named(name)
+    tp = planner_for(name)
+    world = initial_world(site)
+    problems = tp.problems(world, 0)
+    single = SingleRobotSolver(site_facts(site, 0), tp.hold, None)
+    alone = {rid: single.solve(p, Context())[0] for rid, p in problems.items()}
+    alone_team = TeamResult("alone", 0, tp.hold, share_windows(alone, tp.hold))
+    team = plan(name)
+    assert alone_team.conflicts > 0 and team.conflicts == 0
+    assert team.cost() < alone_team.cost()
+    # and the rounds after placing the robots never make the team worse
+    unpolished = TaskPlanner(site, PlannerSettings(max_rounds=0)).plan(world)
+    assert team.cost() <= unpolished.cost()
+
+
+def test_iidp_is_deterministic():
+    name = "gen3"
+    site = site_named(name)
+    again = planner_for(name).plan(initial_world(site))
+    first = plan(name)
+    strip = lambda r: {k: v for k, v in r.as_json().items() if k != "solve_time"}  # noqa: E731
+    assert strip(again) == strip(first)
+
+
+def test_robots_heading_to_one_door_share_an_opening():
+    site = site_named("pair")
+    result = plan("pair")
+    assert validate_result(site, initial_world(site), result) == []
+    passes = [p for plan_ in result.plans.values() for p in plan_.passes if p.human]
+    assert len(passes) == 2 and {p.opening for p in passes} == {"d_storage"}
+    assert result.door_openings == 1 < len(site.robots)
+    assert result.openings[0].robots == ("r0", "r1")
+
+
+def test_openings_are_shared_on_the_default_site():
+    result = plan("office")
+    human_passes = sum(1 for p in result.plans.values() for x in p.passes if x.human)
+    assert result.door_openings < human_passes
+    assert any(len(o.robots) >= 2 for o in result.openings)
+
+
+@pytest.mark.parametrize("name", ["pair", "gen2"])
+def test_joint_plans_are_valid_and_no_worse_than_iidp(name):
+    site = site_named(name)
+    joint = plan(name, "joint")
+    assert joint.status in ("ok", "timeout") and joint.plans
+    assert validate_result(site, initial_world(site), joint) == []
+    assert joint.cost()[1:3] <= plan(name).cost()[1:3]

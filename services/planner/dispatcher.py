@@ -33,6 +33,7 @@ class Dispatched:
     plan_id: int
     trajectory: list[list[float]]
     duration: float = 0.0
+    command: RobotCommand | None = None  # as sent, to send again if the robot never got it
 
 
 @dataclass
@@ -40,6 +41,8 @@ class Dispatcher:
     builder: ProblemBuilder
     motion: MotionPlanner
     current: dict[str, Dispatched] = field(default_factory=dict)
+    # index of each robot's front step in its plan (1 when a leading opendoor is skipped)
+    front_index: dict[str, int] = field(default_factory=dict)
     _next_id: dict[str, int] = field(default_factory=dict)
 
     def note_reported_id(self, robot: str, action_id: int) -> None:
@@ -69,12 +72,14 @@ class Dispatcher:
         front_ids: dict[str, int] = {}
         for rid, plan in sorted(result.plans.items()):
             if plan.empty:
-                self.current.pop(rid, None)
+                self.forget(rid)
                 continue
-            step = plan.steps[0]
             state = world.robots.get(rid)
             if state is None:
                 continue
+            index = self.front(plan, world)
+            self.front_index[rid] = index
+            step = plan.steps[index]
             now_cmd = self.current.get(rid)
             same = now_cmd is not None and now_cmd.action == step.action and now_cmd.args == step.args
             if same and rid not in finished and rid not in force:
@@ -82,10 +87,39 @@ class Dispatcher:
                 continue
             trajectory, duration = self.trajectory(rid, plan, step, world)
             action_id = self._new_id(rid)
-            self.current[rid] = Dispatched(step.action, step.args, action_id, plan_id, trajectory, duration)
+            cmd = RobotCommand(robot=rid, plan_id=plan_id, action_id=action_id, action=step.action, args=list(step.args), trajectory=trajectory, duration=duration)
+            self.current[rid] = Dispatched(step.action, step.args, action_id, plan_id, trajectory, duration, cmd)
             front_ids[rid] = action_id
-            commands.append(RobotCommand(robot=rid, plan_id=plan_id, action_id=action_id, action=step.action, args=list(step.args), trajectory=trajectory, duration=duration))
+            commands.append(cmd)
         return commands, front_ids
+
+    @staticmethod
+    def front(plan: RobotPlan, world: World) -> int:
+        """Index of the step to dispatch: 0, or 1 when the plan starts with ``opendoor(D)`` for a
+        door that is open now, followed by ``gothrough(D)``.
+
+        An opendoor on an open door is done at once (execution contract), and each action done is a
+        new world version that is answered by a new plan starting with that same opendoor again:
+        robots would open an open door forever, at nearly constant sim time, until it closes. The
+        door being open is what the opendoor waits for, so the gothrough comes next. (If the plan
+        meant to pass in a later opening, a robot that reaches the door after it closed waits at it.)
+        """
+        steps = plan.steps
+        if (
+            len(steps) >= 2
+            and steps[0].action == "opendoor"
+            and steps[1].action == "gothrough"
+            and steps[0].args[:1] == steps[1].args[:1]
+            and steps[0].args[:1]
+            and steps[0].args[0] in world.open_doors
+        ):
+            return 1
+        return 0
+
+    def resend(self, robot: str) -> RobotCommand | None:
+        """The command last sent to ``robot`` (same id), to publish again when it never arrived."""
+        sent = self.current.get(robot)
+        return sent.command if sent is not None else None
 
     def intents(self, plan_id: int) -> list[Intent]:
         """What every robot with a command is about to follow (for the AR client)."""
@@ -96,6 +130,7 @@ class Dispatcher:
 
     def forget(self, robot: str) -> None:
         self.current.pop(robot, None)
+        self.front_index.pop(robot, None)
 
     # ------------------------------------------------------------------ trajectories
 

@@ -40,6 +40,7 @@ SETTLE = 0.03  # s without a new trigger before replanning (one replan for a bur
 MAX_DELAY = 0.25  # s: replan at the latest this long after the first trigger
 OFF_TRACK = 1.0  # m from the commanded trajectory that counts as "far off"
 OFF_TRACK_COOLDOWN = 2.0  # s between two off-track replans for one robot
+RESEND_INTERVAL = 1.0  # wall s after sending a command before it is sent again (robot reports no such id)
 
 
 @dataclass
@@ -83,6 +84,7 @@ class PlannerService(Service):
         self._finished: set[str] = set()
         self._force: set[str] = set()
         self._off_track_at: dict[str, float] = {}
+        self._sent_at: dict[str, float] = {}
 
     # ------------------------------------------------------------------ wiring
 
@@ -146,8 +148,29 @@ class PlannerService(Service):
             msg.state, msg.action_id, tuple(msg.carrying), tuple(msg.delivered))
         if sent is not None and msg.action_id == sent.action_id and msg.state in FINISHED_STATES:
             self._finished.add(msg.robot)
+        if sent is not None and msg.action_id < sent.action_id:
+            self._resend(msg.robot)
         if changed:
             self.trigger(f"status:{msg.robot}:{msg.state}")
+
+    def _resend(self, robot: str) -> None:
+        """Send the robot's current command again (same id) when its status shows an older action.
+
+        A command published before the robot (or the simulator) subscribed is lost, and a replan
+        that keeps the same front action does not send it again, so a lockstep simulator would wait
+        for it forever. Statuses come at least once a wall second, so a lost command is sent again
+        within about a second; one that did arrive is ignored as a duplicate (same id). A command
+        younger than RESEND_INTERVAL is left alone: the status may have been sent before it arrived."""
+        now = time.monotonic()
+        if now - self._sent_at.get(robot, -math.inf) < RESEND_INTERVAL:
+            return
+        cmd = self.dispatcher.resend(robot)
+        if cmd is None:
+            return
+        self._sent_at[robot] = now
+        self.counters["commands_resent"] += 1
+        self.log.debug("sending %s's command %d (%s) again: its status shows action %d", robot, cmd.action_id, cmd.action, self.statuses[robot].action_id)
+        self.publish(self.keys.robot_command(robot), cmd)
 
     def on_door(self, msg: DoorState, _key: str) -> None:
         if msg.door not in self.site.openings:
@@ -289,10 +312,11 @@ class PlannerService(Service):
         # Commands first: a simulator in lockstep waits for the commands a plan names before it runs on.
         for cmd in commands:
             self.publish(self.keys.robot_command(cmd.robot), cmd)
+            self._sent_at[cmd.robot] = time.monotonic()
         for intent in self.dispatcher.intents(self.plan_id):
             if intent.robot in kept.plans and not kept.plans[intent.robot].empty:
                 self.publish(self.keys.intent(intent.robot), intent)
-        self.message = to_message(kept, self.plan_id, self.world_version, cs_version, front, diagnostic)
+        self.message = to_message(kept, self.plan_id, self.world_version, cs_version, front, diagnostic, self.dispatcher.front_index)
         self.publish(self.keys.plan(), self.message)
         self.log.info(
             "plan %d for world v%d, constraints v%d: makespan %d s, %d door openings, %d rounds, %.2f s%s",
@@ -311,11 +335,13 @@ class PlannerService(Service):
         self.publish(self.keys.event(), Event(kind="plan_conflict", data={"constraints": list(ids), "constraints_version": version, "reason": reason[:1000]}))
 
 
-def to_message(result: TeamResult, plan_id: int, world_version: int, constraints_version: int, front: dict[str, int], diagnostic: str) -> TeamPlan:
+def to_message(result: TeamResult, plan_id: int, world_version: int, constraints_version: int, front: dict[str, int], diagnostic: str, skip: dict[str, int] | None = None) -> TeamPlan:
+    """``skip``: leading steps of a robot's plan that need not be executed (an opendoor of a door
+    open now, see :meth:`Dispatcher.front`); the message starts at the step dispatched."""
     robots = {}
     for rid, plan in sorted(result.plans.items()):
         steps = []
-        for i, s in enumerate(plan.steps):
+        for i, s in enumerate(plan.steps[(skip or {}).get(rid, 0):]):
             steps.append(PlanStep(action=s.action, args=list(s.args), start=float(result.absolute(s.start)), end=float(result.absolute(s.end)), action_id=front.get(rid, 0) if i == 0 else 0))
         robots[rid] = steps
     openings = [PlannedOpening(door=o.door, start=float(result.absolute(o.start)), end=float(result.absolute(o.end)), robots=list(o.robots)) for o in result.openings]

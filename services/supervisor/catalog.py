@@ -61,7 +61,9 @@ class ServiceSpec:
 SERVICES: dict[str, ServiceSpec] = {
     spec.name: spec
     for spec in (
-        ServiceSpec("planner", ("planner",), ("method",), "task and motion planner, dispatcher"),
+        # ``up --method`` is the experiment's method (arroch, no-feedback, no-comm): it shapes the
+        # simulated human only. The planner's own --method (iidp or joint) is a different option.
+        ServiceSpec("planner", ("planner",), (), "task and motion planner, dispatcher"),
         ServiceSpec("restrictor", ("restrictor",), ("state",), "feedback -> constraints"),
         # The sim starts the mission clock: the planner and restrictor must be listening by then.
         ServiceSpec("sim", ("sim",), ("method", "mode", "rate", "seed"), "simulated robots, doors, human, tablet camera",

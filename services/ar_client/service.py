@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from protocol.clock import SimClock, WallClock
-from protocol.messages import CameraFrame, ConstraintSet, DoorState, Intent, RobotPose, RobotStatus
+from protocol.messages import CameraFrame, ConstraintSet
 from protocol.service import Service
 from protocol.transport import ZenohOptions
 
@@ -82,10 +82,7 @@ class ArService(Service):
 
     def setup(self) -> None:
         k = self.keys
-        self.subscribe(k.robot_pose("*"), RobotPose, self.world.on_pose, latest=True)
-        self.subscribe(k.robot_status("*"), RobotStatus, self.world.on_status)
-        self.subscribe(k.intent("*"), Intent, self.world.on_intent)
-        self.subscribe(k.door_state("*"), DoorState, self.world.on_door)
+        self.world.follow(self)
         if self.panel is not None:
             self.panel.sender = restrictor_sender(self)
             self.subscribe(k.constraints(), ConstraintSet, self.panel.on_constraints)

@@ -81,6 +81,15 @@ class WorldView:
 
     # ------------------------------------------------------------------ reading
 
+    def follow(self, service: Any) -> None:
+        """Subscribe ``service`` (a protocol Service) to everything this view shows: poses (latest
+        only), statuses, intents and door states of its namespace."""
+        keys = service.keys
+        service.subscribe(keys.robot_pose("*"), RobotPose, self.on_pose, latest=True)
+        service.subscribe(keys.robot_status("*"), RobotStatus, self.on_status)
+        service.subscribe(keys.intent("*"), Intent, self.on_intent)
+        service.subscribe(keys.door_state("*"), DoorState, self.on_door)
+
     def snapshot(self, now: float) -> WorldSnapshot:
         with self._lock:
             robots = {

@@ -22,7 +22,7 @@ import threading
 from typing import Any, Callable
 
 from protocol.clock import SimClock, WallClock
-from protocol.messages import CameraFrame, ConstraintSet, DoorState, FeedbackAck, Intent, Overlay, RobotPose, RobotStatus
+from protocol.messages import CameraFrame, ConstraintSet, FeedbackAck, Overlay
 from protocol.service import Service
 from protocol.transport import ZenohOptions
 
@@ -53,10 +53,7 @@ class TabletBridge(Service):
 
     def setup(self) -> None:
         k = self.keys
-        self.subscribe(k.robot_pose("*"), RobotPose, self.world.on_pose, latest=True)
-        self.subscribe(k.robot_status("*"), RobotStatus, self.world.on_status)
-        self.subscribe(k.intent("*"), Intent, self.world.on_intent)
-        self.subscribe(k.door_state("*"), DoorState, self.world.on_door)
+        self.world.follow(self)
         self.subscribe(k.constraints(), ConstraintSet, self._constraints)
         if self.sim_camera is not None:
             self.subscribe(k.camera_frame(self.sim_camera), CameraFrame, lambda msg, key: self.on_sim_frame(msg), latest=True)

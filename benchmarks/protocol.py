@@ -4,23 +4,34 @@ Prints one JSON object on stdout (progress goes to stderr):
 
 - ``codec``: encode, decode and encode+decode µs for a RobotPose and for an Intent with a
   200-point trajectory (median of many timed loops);
-- ``latency``: RobotPose round trips between this process and echo processes over loopback TCP,
-  measured in the same run, in alternating small batches in random order so that machine noise
-  hits every variant alike:
-  - ``protocol``: ``arroch ping serve`` (a Service; echo decoded and re-encoded inline), timed
-    by :class:`protocol.ping.PingSender` (encode → Zenoh → decode, encode → Zenoh → decode);
-  - ``protocol_worker``: the same through the Service's worker thread (``ping serve --worker``);
-  - ``raw``: a plain zenoh-python echo of the very same payload bytes, no codec and no Service,
-    with the same key shapes and publisher options;
-  and the ratios of their p50/p99 (plus ``*_paired``: the median over rounds of the ratio of the
-  two variants' batch medians in that round, which shrugs off slow drifts in machine load).
-- ``floors``: protocol p50 ≤ 1.3 × raw p50, RobotPose encode+decode ≤ 20 µs.
+- ``latency``: RobotPose round trips between this process and echo processes over loopback TCP:
+  - ``protocol``: ``arroch ping serve`` (a Service relaying inline, on Zenoh's thread: each pose is
+    validated, then the bytes received go back out), timed by :class:`protocol.ping.PingSender`
+    (stamp and encode → Zenoh → validate → Zenoh → decode and validate);
+  - ``protocol_worker``: the same through the Service's worker thread (``ping serve --worker``,
+    which decodes, queues, and re-encodes on the worker);
+  - ``raw``: a plain zenoh-python echo of the very same payload bytes, no codec and no Service.
+  Like is compared with like: the raw side uses the Service's publisher options
+  (:func:`protocol.service.publisher_options`), its session options (the same command-line and
+  environment path, shared memory off in every process; the raw and protocol pingers even share
+  one session), and its subscriber mode (callbacks on Zenoh's own thread,
+  :func:`protocol.transport.on_zenoh_thread`).
+
+  The figures come from ``--runs`` runs, each with freshly started echo processes (a process's
+  luck with the machine, worth ±5-10 % here, does not carry over), and within a run from small
+  batches of each variant in random order, so that load changes hit every variant alike. Reported:
+  the p50/p99 of all round trips of each variant and their ratios; ``*_paired``, the median over all
+  rounds of the ratio of two variants' batch medians in that round (the same few milliseconds of
+  machine state); ``per_run``, each run's figures; and ``*_runs_median``, the median over runs of
+  each run's paired ratio, which is what the floor is checked on.
+- ``floors``: protocol p50 ≤ 1.3 × raw p50 (``protocol_over_raw_p50_runs_median``), RobotPose
+  encode+decode ≤ 20 µs.
 
 Transport: peer to peer by default (this process listens on a free port, the echoes connect), or
 through ``arroch router`` with ``--router``. Shared memory is off in every process, so the
 figures are those of the TCP path (a pose is far below the size where Zenoh would use it anyway).
 
-``python benchmarks/protocol.py [--pings N] [--batch B] [--router] [--check]``
+``python benchmarks/protocol.py [--pings N] [--runs R] [--batch B] [--router] [--check]``
 (``--check``: exit 1 when a floor is missed). ``--raw-echo`` is the raw echo process itself.
 """
 
@@ -40,6 +51,7 @@ import threading
 import time
 import timeit
 import uuid
+from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
 from typing import Callable
@@ -49,16 +61,16 @@ sys.path.insert(0, str(ROOT))  # run as a plain script from a checkout
 
 import zenoh  # noqa: E402
 
-from protocol.codec import ENCODING, decode, encode  # noqa: E402
+from protocol.codec import decode, encode  # noqa: E402
 from protocol.keys import Keys  # noqa: E402
 from protocol.messages import Intent, RobotPose  # noqa: E402
 from protocol.ping import PingSender, summarize  # noqa: E402
-from protocol.service import CONGESTION_CONTROL, EXPRESS  # noqa: E402
-from protocol.transport import ZenohOptions, build_config, free_tcp_port  # noqa: E402
+from protocol.service import publisher_options  # noqa: E402
+from protocol.transport import ZenohOptions, build_config, free_tcp_port, on_zenoh_thread, options_from  # noqa: E402
 
 FLOOR_RATIO = 1.3
-PUBLISHER_OPTIONS = {"encoding": zenoh.Encoding(ENCODING), "congestion_control": CONGESTION_CONTROL, "express": EXPRESS}
 FLOOR_POSE_CODEC_US = 20.0
+VARIANTS = ("protocol", "protocol_worker", "raw")
 
 
 def progress(text: str) -> None:
@@ -106,14 +118,14 @@ def raw_echo(args: argparse.Namespace) -> int:
     """The raw echo process: every payload on robot/*/pose goes back as it is on ping/reply."""
 
     keys = Keys(args.namespace)
-    opts = ZenohOptions(mode=args.mode, connect=[args.connect] if args.connect else [], shared_memory=False)
+    # The session options come the way `arroch ping serve` gets them (options and environment).
+    opts = options_from(args)
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     with zenoh.open(build_config(opts)) as session:
-        # Same publisher options as protocol.service.Service.publish, so only the layer differs.
-        pub = session.declare_publisher(keys.ping_reply(), **PUBLISHER_OPTIONS)
-        sub = session.declare_subscriber(keys.robot_pose("*"), lambda sample: pub.put(sample.payload))
+        pub = session.declare_publisher(keys.ping_reply(), **publisher_options())
+        sub = session.declare_subscriber(keys.robot_pose("*"), on_zenoh_thread(lambda sample: pub.put(sample.payload)))
         print("raw echo ready", flush=True)
         stop.wait()
         sub.undeclare()
@@ -131,8 +143,8 @@ class RawPinger:
         keys = Keys(namespace)
         self._payload_of = payload_of
         self._echoes: queue.SimpleQueue[tuple[bytes, int]] = queue.SimpleQueue()
-        self._pub = session.declare_publisher(keys.robot_pose("ping"), **PUBLISHER_OPTIONS)
-        self._sub = session.declare_subscriber(keys.ping_reply(), self._on_echo)
+        self._pub = session.declare_publisher(keys.robot_pose("ping"), **publisher_options())
+        self._sub = session.declare_subscriber(keys.ping_reply(), on_zenoh_thread(self._on_echo))
         self._n = 0
 
     def _on_echo(self, sample: zenoh.Sample) -> None:
@@ -177,22 +189,26 @@ class Children:
     def __init__(self) -> None:
         self.procs: list[subprocess.Popen] = []
 
-    def start(self, argv: list[str], ready: str, timeout: float = 20.0) -> subprocess.Popen:
+    def start(self, *commands: tuple[list[str], str], timeout: float = 30.0) -> None:
+        """Start every ``(argv, ready line)`` at once, then wait until each has printed its line."""
         env = dict(os.environ, ARROCH_ZENOH_SHM="0", ARROCH_LOG_LEVEL="WARNING", PYTHONUNBUFFERED="1")
-        proc = subprocess.Popen(argv, cwd=ROOT, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                stderr=subprocess.STDOUT, text=True, start_new_session=True)
-        self.procs.append(proc)
+        started = [(argv, ready, subprocess.Popen(argv, cwd=ROOT, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                                  stderr=subprocess.STDOUT, text=True, start_new_session=True))
+                   for argv, ready in commands]
+        self.procs.extend(proc for _, _, proc in started)
         deadline = time.monotonic() + timeout
-        assert proc.stdout is not None
-        while time.monotonic() < deadline:
-            line = proc.stdout.readline()
-            if not line:
-                raise RuntimeError(f"{argv} exited ({proc.wait()}) before it was ready")
-            if ready in line:
-                # Keep draining its output so a chatty child never blocks on a full pipe.
-                threading.Thread(target=proc.stdout.read, daemon=True).start()
-                return proc
-        raise RuntimeError(f"{argv} not ready within {timeout} s")
+        for argv, ready, proc in started:
+            assert proc.stdout is not None
+            while True:
+                if time.monotonic() > deadline:
+                    raise RuntimeError(f"{argv} not ready within {timeout} s")
+                line = proc.stdout.readline()
+                if not line:
+                    raise RuntimeError(f"{argv} exited ({proc.wait()}) before it was ready")
+                if ready in line:
+                    break
+            # Keep draining its output so a chatty child never blocks on a full pipe.
+            threading.Thread(target=proc.stdout.read, daemon=True).start()
 
     def stop(self) -> None:
         for proc in self.procs:
@@ -204,18 +220,33 @@ class Children:
             except subprocess.TimeoutExpired:
                 os.killpg(proc.pid, signal.SIGKILL)
                 proc.wait(5)
+        self.procs.clear()
 
 
-def bench_latency(args: argparse.Namespace) -> dict:
+@dataclass
+class Run:
+    """One run's round trips (µs) and, per variant, the median of each of its batches."""
+
+    samples: dict[str, list[float]] = field(default_factory=lambda: {name: [] for name in VARIANTS})
+    batch_p50: dict[str, list[float]] = field(default_factory=lambda: {name: [] for name in VARIANTS})
+
+    def paired(self, name: str) -> list[float]:
+        """Per round: this variant's batch median over raw's batch median in the same round."""
+        return [a / b for a, b in zip(self.batch_p50[name], self.batch_p50["raw"]) if b > 0]
+
+
+def one_run(args: argparse.Namespace, index: int, rounds: int) -> tuple[Run, dict]:
+    """Fresh echo processes, then ``rounds`` rounds of one batch per variant in random order."""
     arroch = [sys.executable, "-m", "services.cli"]
     children = Children()
-    run = uuid.uuid4().hex[:6]
+    run_id = uuid.uuid4().hex[:6]
     # Namespaces of equal length, so the three variants' keys are the same size on the wire.
-    ns = {"protocol": f"bp{run}", "protocol_worker": f"bw{run}", "raw": f"br{run}"}
+    ns = {"protocol": f"bp{run_id}", "protocol_worker": f"bw{run_id}", "raw": f"br{run_id}"}
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    pingers: list = []
     try:
         if args.router:
-            children.start([*arroch, "router", "--listen", endpoint], "router ready")
+            children.start(([*arroch, "router", "--listen", endpoint], "router ready"))
             mine = worker_mine = ZenohOptions(mode="client", connect=[endpoint], shared_memory=False)
             theirs = worker_theirs = ["--mode", "client", "--connect", endpoint]
             transport = "client → arroch router → client, TCP loopback"
@@ -228,11 +259,11 @@ def bench_latency(args: argparse.Namespace) -> dict:
             theirs = ["--mode", "peer", "--connect", endpoint]
             worker_theirs = ["--mode", "peer", "--connect", worker_endpoint]
             transport = "peer ↔ peer, TCP loopback"
-        progress(f"transport: {transport} ({endpoint}); shared memory off")
 
         sender = PingSender(ns["protocol"], mine).open()
+        pingers.append(sender)
         worker_sender = PingSender(ns["protocol_worker"], worker_mine).open()
-        payload_len = len(sender.typical_payload())
+        pingers.append(worker_sender)
 
         def raw_payload(n: int) -> bytes:
             # What PingSender puts on the wire for its n-th ping: the same bytes, made beforehand.
@@ -241,57 +272,70 @@ def bench_latency(args: argparse.Namespace) -> dict:
             return encode(msg)
 
         raw = RawPinger(sender.session, ns["raw"], raw_payload)
-        children.start([*arroch, "ping", "serve", "--namespace", ns["protocol"], *theirs], "ping serve ready")
-        children.start([*arroch, "ping", "serve", "--worker", "--namespace", ns["protocol_worker"], *worker_theirs], "ping serve ready")
-        raw_argv = [sys.executable, __file__, "--raw-echo", "--mode", "client" if args.router else "peer", "--connect", endpoint]
-        children.start([*raw_argv, "--namespace", ns["raw"]], "raw echo ready")
+        pingers.insert(0, raw)  # closed before the session it uses
+        children.start(
+            ([*arroch, "ping", "serve", "--namespace", ns["protocol"], *theirs], "ping serve ready"),
+            ([*arroch, "ping", "serve", "--worker", "--namespace", ns["protocol_worker"], *worker_theirs], "ping serve ready"),
+            ([sys.executable, __file__, "--raw-echo", "--namespace", ns["raw"], *theirs], "raw echo ready"),
+        )
         for name, pinger in (("protocol", sender), ("protocol_worker", worker_sender), ("raw", raw)):
             if not pinger.wait_for_server(15):
                 raise RuntimeError(f"the {name} echo never answered")
 
-        runs: dict[str, Callable[[int], list[float]]] = {
+        batches: dict[str, Callable[[int], list[float]]] = {
             "protocol": lambda n: sender.run_pings(n, 0, warmup=0),
             "protocol_worker": lambda n: worker_sender.run_pings(n, 0, warmup=0),
             "raw": raw.run_pings,
         }
-        for run_batch in runs.values():  # warm-up, uncounted
-            run_batch(200)
-        samples: dict[str, list[float]] = {name: [] for name in runs}
-        round_p50: dict[str, list[float]] = {name: [] for name in runs}  # each round's batch median
-        batches = max(1, args.pings // args.batch)
-        progress(f"{batches} rounds of {args.batch} pings per variant, variants in random order each round")
-        rng = random.Random(0)
-        started = time.monotonic()
-        for i in range(batches):
-            order = list(runs)
+        for run_batch in batches.values():  # warm-up, uncounted
+            run_batch(args.warmup)
+        run = Run()
+        rng = random.Random(index)
+        for _ in range(rounds):
+            order = list(VARIANTS)
             rng.shuffle(order)
             for name in order:
-                batch = runs[name](args.batch)
-                samples[name].extend(batch)
-                round_p50[name].append(statistics.median(batch) if batch else float("nan"))
-            if (i + 1) % max(1, batches // 5) == 0:
-                progress(f"  {i + 1}/{batches} rounds ({time.monotonic() - started:.1f} s)")
-        raw.close()
-        sender.close()
-        worker_sender.close()
+                batch = batches[name](args.batch)
+                run.samples[name].extend(batch)
+                run.batch_p50[name].append(statistics.median(batch) if batch else float("nan"))
+        info = {"transport": transport, "payload_bytes": len(sender.typical_payload())}
+        return run, info
     finally:
+        for pinger in pingers:
+            pinger.close()
         children.stop()
 
-    sent = batches * args.batch
-    result: dict = {"transport": transport, "endpoint_kind": "router" if args.router else "peer",
-                    "shared_memory": False, "payload_bytes": payload_len, "pings_per_variant": sent,
-                    "batch": args.batch}
-    for name, values in samples.items():
-        s = summarize(values, sent)
+
+def bench_latency(args: argparse.Namespace) -> dict:
+    rounds = max(1, args.pings // (args.batch * args.runs))
+    runs: list[Run] = []
+    info: dict = {}
+    progress(f"{args.runs} runs of {rounds} rounds of {args.batch} pings per variant, variants in random order each round")
+    started = time.monotonic()
+    for index in range(args.runs):
+        run, info = one_run(args, index, rounds)
+        runs.append(run)
+        figures = ", ".join(f"{name} {statistics.median(run.samples[name]):.0f}" for name in VARIANTS)
+        progress(f"  run {index + 1}/{args.runs}: p50 µs {figures}; protocol/raw paired "
+                 f"{statistics.median(run.paired('protocol')):.3f} ({time.monotonic() - started:.1f} s)")
+
+    sent = rounds * args.batch * args.runs
+    result: dict = {"transport": info["transport"], "endpoint_kind": "router" if args.router else "peer",
+                    "shared_memory": False, "payload_bytes": info["payload_bytes"], "pings_per_variant": sent,
+                    "batch": args.batch, "runs": args.runs, "rounds_per_run": rounds}
+    for name in VARIANTS:
+        s = summarize([x for run in runs for x in run.samples[name]], sent)
         result[name] = {k: round(v, 1) if isinstance(v, float) else v for k, v in s.to_dict().items()}
         progress(f"{name:16s} p50 {s.p50_us:6.0f} µs  p99 {s.p99_us:6.0f} µs  ({s.received}/{sent})")
+    per_run: list[dict] = [{f"{name}_p50_us": round(statistics.median(run.samples[name]), 1) for name in VARIANTS} for run in runs]
     for name in ("protocol", "protocol_worker"):
         for q in ("p50", "p99"):
             result[f"{name}_over_raw_{q}"] = round(result[name][f"{q}_us"] / result["raw"][f"{q}_us"], 3)
-        # Noise-robust companion: the two variants' batch medians compared round by round (the
-        # same few milliseconds of machine state), then the median of those ratios.
-        paired = [a / b for a, b in zip(round_p50[name], round_p50["raw"]) if b > 0]
-        result[f"{name}_over_raw_p50_paired"] = round(statistics.median(paired), 3)
+        result[f"{name}_over_raw_p50_paired"] = round(statistics.median([r for run in runs for r in run.paired(name)]), 3)
+        for figures, run in zip(per_run, runs):
+            figures[f"{name}_over_raw_p50_paired"] = round(statistics.median(run.paired(name)), 3)
+        result[f"{name}_over_raw_p50_runs_median"] = round(statistics.median(f[f"{name}_over_raw_p50_paired"] for f in per_run), 3)
+    result["per_run"] = per_run
     return result
 
 
@@ -300,8 +344,10 @@ def bench_latency(args: argparse.Namespace) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--pings", type=int, default=6000, help="timed round trips per variant (default 6000)")
+    parser.add_argument("--pings", type=int, default=6000, help="timed round trips per variant, all runs together (default 6000)")
+    parser.add_argument("--runs", type=int, default=None, help="runs, each with fresh echo processes (default 5; 2 with --quick)")
     parser.add_argument("--batch", type=int, default=20, help="pings per variant per round (default 20)")
+    parser.add_argument("--warmup", type=int, default=None, help="uncounted pings per variant at the start of a run (default 200; 50 with --quick)")
     parser.add_argument("--router", action="store_true", help="go through `arroch router` (client mode) instead of peer to peer")
     parser.add_argument("--quick", action="store_true", help="fewer repetitions (for tests)")
     parser.add_argument("--check", action="store_true", help="exit 1 if a floor is missed")
@@ -312,6 +358,13 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.raw_echo:
         return raw_echo(args)
+    if args.runs is None:
+        args.runs = 2 if args.quick else 5
+    if args.warmup is None:
+        args.warmup = 50 if args.quick else 200
+    for name in ("pings", "runs", "batch"):
+        if getattr(args, name) < 1:
+            parser.error(f"--{name} must be at least 1")
     os.environ.setdefault("RUST_LOG", "error")
 
     started = time.monotonic()
@@ -319,10 +372,14 @@ def main(argv: list[str] | None = None) -> int:
     codec = bench_codec(args.quick)
     latency = bench_latency(args)
     pose_codec = codec["RobotPose"]["encode_decode_us"]
-    ratio = latency["protocol_over_raw_p50"]
+    # Checked on the median over runs of each run's paired ratio: neither one unlucky echo process
+    # nor a burst of load elsewhere on the machine decides it. The pooled ratio is given beside it.
+    ratio = latency["protocol_over_raw_p50_runs_median"]
     floors = {
         "protocol_over_raw_p50_max": FLOOR_RATIO,
         "protocol_over_raw_p50": ratio,
+        "protocol_over_raw_p50_basis": "median over runs of the per-round paired p50 ratio (latency.protocol_over_raw_p50_runs_median)",
+        "protocol_over_raw_p50_pooled": latency["protocol_over_raw_p50"],
         "ratio_met": ratio <= FLOOR_RATIO,
         "pose_encode_decode_us_max": FLOOR_POSE_CODEC_US,
         "pose_encode_decode_us": pose_codec,

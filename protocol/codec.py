@@ -21,7 +21,7 @@ import msgpack
 
 from .errors import ProtocolError
 from .messages import BY_TYPE, Message
-from .schema import from_wire_function, record_source, to_wire_function, wire_map_source
+from .schema import from_wire_function, record_source, to_wire_function, whole_record_source, wire_map_source
 
 M = TypeVar("M", bound=Message)
 
@@ -34,6 +34,7 @@ MAX_MAP_LEN = 100_000
 _unpackb = msgpack.unpackb
 _ENCODERS: dict[type, Callable[[Message], bytes]] = {}
 _DECODERS: dict[type, Callable[[Any], Message]] = {}
+_VALIDATORS: dict[type, Callable[[Any], object]] = {}
 _WIRE_MAPS: dict[type, Callable[[Message], dict]] = {}
 _local = threading.local()  # one msgpack.Packer per thread: a Packer has a buffer, so is not shared
 
@@ -81,25 +82,55 @@ def decoder_for(cls: type[M]) -> Callable[[Any], M]:
     """The generated decoder of one message class: ``f(payload) -> msg``, what ``decode(payload, cls)``
     does, in one Python frame for a valid payload.
 
-    It tries the checks a valid payload passes in one go (size, one msgpack call, ``type``, ``v``,
-    envelope present, each field's inline test); anything unusual goes to the full path, which
-    produces the precise error. Built once per class."""
+    It tries the checks a valid payload passes in one go (size, one msgpack call, then ``type``,
+    ``v`` and every field at once when the class allows it, else ``type``, ``v``, envelope present,
+    each field's inline test); anything unusual goes to the full path, which produces the precise
+    error. Built once per class."""
     fn = _DECODERS.get(cls)
-    if fn is not None:
-        return fn
+    if fn is None:
+        fn = _DECODERS[cls] = _generate_decoder(cls, build=True)
+    return fn
+
+
+def validator_for(cls: type[Message]) -> Callable[[Any], object]:
+    """The generated checker of one message class: ``f(payload)`` raises :class:`ProtocolError`
+    exactly when ``decode(payload, cls)`` would, with the same error, and builds no message when
+    it need not (what a relay wants: it passes the payload on as it is). Its return value means
+    nothing. Built once per class."""
+    fn = _VALIDATORS.get(cls)
+    if fn is None:
+        fn = _VALIDATORS[cls] = _generate_decoder(cls, build=False)
+    return fn
+
+
+def _generate_decoder(cls: type[M], *, build: bool) -> Callable[[Any], Any]:
     body, consts = record_source(cls, indent="        ")
     limit = cls.MAX_SIZE
+    # The envelope's type and version are checked with the fields; literals, like the fields' bounds.
+    lead = (("type", f"{{x}} == {cls.TYPE!r}"), ("v", f"type({{x}}) is int and 0 < {{x}} <= {cls.VERSION!r}"))
+    whole = whole_record_source(cls, lead, build=build)
+    if whole is not None:
+        consts.update(whole[1])
     consts.update(unpackb=_unpackb, checked=_decode_checked, ProtocolError=ProtocolError,
                   TYPE=cls.TYPE, VERSION=cls.VERSION, LIMIT=limit)
+    # msgpack's own limits are the payload's length (half of it for maps), which no valid payload
+    # exceeds and which the size check above keeps within the class's: only the limits those do
+    # not imply are passed (each keyword is work on every call), and ext types are refused.
+    # msgpack >= 1.0 defaults to raw=False and strict_map_key=True, as _unpack asks.
+    limits = ["max_ext_len=0"]
+    if limit > MAX_ARRAY_LEN:
+        limits.append(f"max_array_len={MAX_ARRAY_LEN}")
+    if limit // 2 > MAX_MAP_LEN:
+        limits.append(f"max_map_len={MAX_MAP_LEN}")
     source = [
         "def decode_msg(payload):",
         "    if type(payload) is not bytes or not 0 < len(payload) <= LIMIT:",
         "        return checked(payload, cls)",
         "    try:",
-        f"        data = unpackb(payload, raw=False, strict_map_key=True, max_str_len={limit}, max_bin_len={limit},"
-        f" max_array_len={MAX_ARRAY_LEN}, max_map_len={MAX_MAP_LEN}, max_ext_len=0)",
+        f"        data = unpackb(payload, {', '.join(limits)})",
         "    except Exception:",
         "        return checked(payload, cls)",
+        *(whole[0] if whole is not None else []),
         "    if type(data) is not dict or data.get('type') != TYPE:",
         "        return checked(payload, cls)",
         "    version = data.get('v')",
@@ -112,8 +143,7 @@ def decoder_for(cls: type[M]) -> Callable[[Any], M]:
         "        raise ProtocolError(exc.field, exc.problem, TYPE) from None",
     ]
     exec("\n".join(source), consts)  # noqa: S102 - generated from the class's own fields
-    fn = _DECODERS[cls] = consts["decode_msg"]
-    return fn
+    return consts["decode_msg"]
 
 
 def encode(msg: Message, extra: Mapping[str, Any] | None = None) -> bytes:

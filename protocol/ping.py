@@ -1,10 +1,11 @@
 """``arroch ping``: RobotPose round trips through the protocol layer, to check a link and time it.
 
 ``arroch ping serve`` is a :class:`~protocol.service.Service` that hears every ``robot/*/pose``
-(RobotPose) and republishes it unchanged (envelope included) on ``ping/reply``.
+(RobotPose), validates it and republishes it unchanged (envelope included) on ``ping/reply``.
 
 ``arroch ping send`` publishes RobotPoses on ``robot/<robot>/pose`` one at a time and times each
-until its echo comes back: encode → Zenoh → decode in the server → encode → Zenoh → decode.
+until its echo comes back: encode → Zenoh → decode (validation) in the server, which relays the
+bytes it got → Zenoh → decode.
 It waits for a server first (up to ``--wait`` seconds), sends a few uncounted warm-up pings, then
 prints p50/p90/p99 round-trip times (``--json``: one JSON object on stdout).
 
@@ -37,12 +38,13 @@ PAD_FIELD = "pad"  # unknown to RobotPose: receivers ignore it, so it only adds 
 
 
 class PingServer(Service):
-    """Echoes every RobotPose heard on ``robot/*/pose`` onto ``ping/reply``, unchanged.
+    """Echoes every valid RobotPose heard on ``robot/*/pose`` onto ``ping/reply``, unchanged.
 
-    ``inline=True`` (the default) echoes on Zenoh's receive thread: the handler is a decode and a
-    publish, quick and thread-safe, and skipping the hand-off to the worker thread saves 20-40 µs
-    per echo on loopback. ``inline=False`` goes through the worker like an ordinary handler (kept
-    to measure that path: ``ping serve --worker``).
+    ``inline=True`` (the default) relays on Zenoh's receive thread (:meth:`Service.relay`): each
+    payload is validated and the bytes received go back out, so the echo is the sender's own
+    message, padding included. ``inline=False`` goes through the worker like an ordinary handler,
+    which decodes and re-encodes (fields unknown to RobotPose, such as padding, are dropped); kept
+    to measure that path: ``ping serve --worker``.
     """
 
     def __init__(self, namespace: str, zenoh_options: ZenohOptions, *, inline: bool = True, **kwargs) -> None:
@@ -51,8 +53,12 @@ class PingServer(Service):
 
     def setup(self) -> None:
         self.reply_key = self.keys.ping_reply()
-        self.advertise(self.reply_key)  # echoes are published from Zenoh's thread: declare up front
-        self.subscribe(self.keys.robot_pose("*"), RobotPose, self._echo, inline=self.inline)
+        if self.inline:
+            self.relay(self.keys.robot_pose("*"), RobotPose, self.reply_key)
+        else:
+            self.advertise(self.reply_key)  # declared up front, so listeners match before the first echo
+            # sample_key=False: the echo goes to ping/reply whatever robot's key the pose came on.
+            self.subscribe(self.keys.robot_pose("*"), RobotPose, self._echo, sample_key=False)
         print(f"ping serve ready: {self.keys.robot_pose('*')} -> {self.keys.ping_reply()}", flush=True)
 
     def _echo(self, msg: RobotPose, key: str) -> None:
@@ -279,7 +285,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     send.add_argument("--count", type=_positive_int, default=100, help="timed pings (default 100)")
     send.add_argument("--rate", type=float, default=100.0, help="pings per second at most; 0 = back to back (default 100)")
     send.add_argument("--payload-bytes", type=int, default=0, metavar="N",
-                      help="pad each ping with a field receivers ignore, to N bytes on the wire (echoes come back unpadded)")
+                      help="pad each ping with a field receivers ignore, to N bytes on the wire (an inline server's echoes come back padded too)")
     send.add_argument("--robot", default="ping", help="robot id in the pose key robot/<id>/pose (default ping)")
     send.add_argument("--timeout", type=float, default=1.0, help="seconds before a ping counts as lost (default 1)")
     send.add_argument("--warmup", type=int, default=10, help="uncounted pings first (default 10)")

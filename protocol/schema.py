@@ -21,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import operator
 import re
 import sys
 import types
@@ -412,8 +413,10 @@ def _fast_test(hint: Any, meta: typing.Mapping[str, Any], x: str, consts: dict[s
     for this field (so the full checker would return it unchanged). None: no cheap test exists.
 
     It may be false for valid values (e.g. an int in a float field): those take the full checker,
-    which converts them. Constants the expression needs are put in ``consts`` under names ending
-    in ``tag``, so expressions of several fields can share one namespace."""
+    which converts them. Bounds and limits are written as literals (the compiled code holds them
+    next to each other; on a cold cache each global looked up is one more miss); other constants
+    the expression needs are put in ``consts`` under names ending in ``tag``, so expressions of
+    several fields can share one namespace."""
     origin = typing.get_origin(hint)
     if origin in (types.UnionType, typing.Union):
         args = typing.get_args(hint)
@@ -433,24 +436,35 @@ def _fast_test(hint: Any, meta: typing.Mapping[str, Any], x: str, consts: dict[s
             hi = sys.float_info.max if hi is None else hi
         test = [f"type({x}) is {hint.__name__}"]
         if lo is not None:
-            consts[f"LO{tag}"] = lo
-            test.append(f"LO{tag} <= {x}")
+            test.append(f"{_literal(lo, f'LO{tag}', consts)} <= {x}")
         if hi is not None:
-            consts[f"HI{tag}"] = hi
-            test.append(f"{x} <= HI{tag}")
+            test.append(f"{x} <= {_literal(hi, f'HI{tag}', consts)}")
         return " and ".join(test)
     if hint is str:
-        consts[f"N{tag}"] = meta.get("max_len") or MAX_STR
-        test = [f"type({x}) is str", f"len({x}) <= N{tag}"]
+        test = [f"type({x}) is str", f"len({x}) <= {_literal(meta.get('max_len') or MAX_STR, f'N{tag}', consts)}"]
         if meta.get("choices") is not None:
-            consts[f"CH{tag}"] = frozenset(meta["choices"])
-            test.append(f"{x} in CH{tag}")
+            choices = tuple(meta["choices"])
+            if choices and all(type(c) is str for c in choices):
+                # `x in {'a', 'b'}`: Python compiles a set display of constants to a frozenset constant.
+                test.append(f"{x} in {{{', '.join(map(repr, choices))}}}")
+            else:
+                consts[f"CH{tag}"] = frozenset(choices)
+                test.append(f"{x} in CH{tag}")
         if meta.get("ident"):
             consts["KNOWN_IDS"] = _known_ids
             consts["is_ident"] = _is_ident
             test.append(f"({x} in KNOWN_IDS or is_ident({x}))")
         return " and ".join(test)
     return None
+
+
+def _literal(value: Any, name: str, consts: dict[str, Any]) -> str:
+    """``value`` as source: a literal for ints and finite floats (``repr`` gives them back exactly),
+    else the name of a constant put in ``consts``."""
+    if type(value) is int or (type(value) is float and math.isfinite(value)):
+        return repr(value)
+    consts[name] = value
+    return name
 
 
 def _plain_init(cls: type) -> bool:
@@ -496,15 +510,60 @@ def record_source(cls: type, indent: str = "    ") -> tuple[list[str], dict[str,
         lines.append(f"elif not ({test}):" if test else "else:")
         lines.append(f"    {var} = C{i}({var}, prefix + {name})")
         args.append((fp.name, var))
+    lines.extend(_return_record(cls, args, consts))
+    return [indent + line for line in lines], consts
+
+
+def _return_record(cls: type, args: list[tuple[str, str]], consts: dict[str, Any]) -> list[str]:
+    """Lines returning ``cls`` built from ``(field, variable)`` pairs."""
     if _plain_init(cls):
         # Same result as cls(**fields) without a second frame and keyword binding: the generated
         # __init__ of such a dataclass only stores each field.
         consts["new"] = object.__new__
-        lines.append("obj = new(cls)")
-        lines.extend(f"obj.{name} = {var}" for name, var in args)
-        lines.append("return obj")
-    else:
-        lines.append(f"return cls({', '.join(f'{name}={var}' for name, var in args)})")
+        return ["obj = new(cls)", *(f"obj.{name} = {var}" for name, var in args), "return obj"]
+    return [f"return cls({', '.join(f'{name}={var}' for name, var in args)})"]
+
+
+def whole_record_source(
+    cls: type, lead: typing.Sequence[tuple[str, str]] = (), indent: str = "    ", *, build: bool = True
+) -> tuple[list[str], dict[str, Any]] | None:
+    """Source lines of an all-or-nothing first check of the dict bound to ``data``, and their constants.
+
+    When every field is present and passes its inline test (and so do the ``lead`` entries:
+    ``(key, test)`` for keys outside the record, ``test`` a format string over ``{x}``), the lines
+    return the record; otherwise they fall through, to the field-by-field lines of
+    :func:`record_source`, which convert or raise exactly as before. One C call fetches every value
+    and one condition checks them all: about half the Python work of going field by field, which
+    counts most on a cold cache. ``build=False`` returns None instead of the record (for checking
+    alone). None when some field has no inline test (lists, maps, records)."""
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    hints = typing.get_type_hints(cls, include_extras=False)
+    consts: dict[str, Any] = {"cls": cls}
+    names, tests, args = [], [], []
+    for i, (key, test) in enumerate(lead):
+        names.append(key)
+        tests.append(f"({test.format(x=f'u{i}')})")
+    for i, fp in enumerate(plan_for(cls)):
+        var = f"w{i}"
+        test = _fast_test(hints[fp.name], fields[fp.name].metadata, var, consts, var)
+        if test is None:
+            return None
+        names.append(fp.name)
+        tests.append(f"({test})")
+        args.append((fp.name, var))
+    if len(names) < 2:  # itemgetter of one key returns the value, not a tuple
+        return None
+    consts["GET_ALL"] = operator.itemgetter(*names)
+    variables = [f"u{i}" for i in range(len(lead))] + [var for _, var in args]
+    lines = [
+        "try:",
+        f"    {', '.join(variables)} = GET_ALL(data)",
+        "except (KeyError, TypeError):  # a key missing, or data not a map",
+        "    pass",
+        "else:",
+        f"    if {' and '.join(tests)}:",
+        *("        " + line for line in (_return_record(cls, args, consts) if build else ["return None"])),
+    ]
     return [indent + line for line in lines], consts
 
 
@@ -536,8 +595,8 @@ def wire_map_source(cls: type, trailer: typing.Mapping[str, Any] | None = None, 
             consts[f"T{i}"] = fp.to_wire
             items.append(f"{fp.name!r}: T{i}({var}.{fp.name})")
     for i, (name, value) in enumerate((trailer or {}).items()):
-        consts[f"K{i}"] = value
-        items.append(f"{name!r}: K{i}")
+        literal = repr(value) if type(value) is str else _literal(value, f"K{i}", consts)
+        items.append(f"{name!r}: {literal}")
     return "{" + ", ".join(items) + "}", consts
 
 

@@ -1,14 +1,17 @@
 """The small base every ARROCH service process is built on.
 
 A :class:`Service` owns one Zenoh session and one worker thread (the caller's, in :meth:`run`).
-Zenoh callbacks only enqueue raw payloads; decoding, validation and the service's handlers
-all run on the worker, one message at a time, so service code needs no locks and a slow
-handler never stalls Zenoh's receive thread.
+Zenoh callbacks only decode and validate payloads (bounded work: payloads are size-limited) and
+enqueue the valid messages; the service's handlers all run on the worker, one message at a time,
+so service code needs no locks and a slow handler never stalls Zenoh's receive thread. Checking
+on arrival keeps bad payloads out of the inbox: however many arrive, they take no room from valid
+messages.
 
 A subscription declared ``inline=True`` skips the worker: the payload is decoded and the handler
-called on Zenoh's receive thread. That saves the thread hand-off (tens of µs per message on a
-loaded machine) for cheap, thread-safe handlers such as the site clock or an echo; such handlers
-run concurrently with the worker and with each other.
+called on Zenoh's own receive thread (:func:`protocol.transport.on_zenoh_thread`; other callbacks
+run on a Python thread zenoh-python feeds from it). That saves two thread hand-offs (tens of µs per
+message on a loaded machine) for cheap, thread-safe handlers such as the site clock or an echo;
+such handlers run concurrently with the worker and with each other.
 
 What it takes care of, so services don't:
 
@@ -16,8 +19,10 @@ What it takes care of, so services don't:
 - decoding with validation; a bad payload is dropped, counted per key, and logged at most once
   per sender per minute;
 - bounded inboxes: streams declared ``latest=True`` (poses, camera frames) keep only the newest
-  payload per key and subscription; other subscriptions queue up to ``inbox_size`` and count what
-  overflowed;
+  valid message per key and subscription (checked on arrival, so a bad payload never displaces a
+  good one); other subscriptions queue up to ``inbox_size`` and count what overflowed;
+- bounded counters: per-key counts (bad, superseded, dropped) for at most ``MAX_KEYED_COUNTERS``
+  keys; payloads on further keys are counted under their subscription's key expression;
 - a liveliness token ``arroch/<site>/@liveliness/<service>/<id>`` and a ``stats/<service>/<id>``
   queryable answering with the counters (also to wildcard queries such as ``stats/**``, each service
   replying on its own key so replies are not merged);
@@ -39,12 +44,12 @@ from typing import Any, Callable, Mapping, TypeVar
 import zenoh
 
 from .clock import SimClock, WallClock
-from .codec import _ENCODERS, ENCODING, decode, decoder_for, encode, encoder_for
+from .codec import _ENCODERS, ENCODING, decode, decoder_for, encode, encoder_for, validator_for
 from .errors import ProtocolError
 from .keys import Keys
 from .messages import Clock as ClockMessage
 from .messages import Event, Message
-from .transport import ZenohOptions, open_session
+from .transport import ZenohOptions, on_zenoh_thread, open_session
 
 M = TypeVar("M", bound=Message)
 Handler = Callable[[Any, str], None]  # (message, key) -> None
@@ -56,8 +61,15 @@ BAD_LOG_INTERVAL = 60.0  # seconds between two log lines about one sender's bad 
 # latency-bound (poses at 20 Hz, plans, feedback). Bulk streams can opt out in advertise().
 CONGESTION_CONTROL = zenoh.CongestionControl.BLOCK
 EXPRESS = True
+# Zenoh's defaults, spelled out so that a baseline built with publisher_options() cannot differ.
+PRIORITY = zenoh.Priority.DATA
+RELIABILITY = zenoh.Reliability.RELIABLE
 CLOSE_TIMEOUT = 1.5  # seconds granted to zenoh's session.close()
 MAX_BAD_SENDERS = 1024  # senders remembered for log rate limiting; older ones are forgotten
+# Distinct ``<counter>:<key>`` counters a service keeps: a peer putting on ever new keys under a
+# wildcard subscription (robot/<anything>/pose) must not grow the counters, and the stats reply with
+# them, without bound.
+MAX_KEYED_COUNTERS = 256
 
 
 # eq=False: subscriptions are compared and hashed by identity, so they can key the latest-slots.
@@ -106,6 +118,8 @@ class Service:
         self._last_bad_log: dict[str, float] = {}  # sender -> monotonic time of its last log line
         self._counters_lock = threading.Lock()
         self.counters: collections.Counter[str] = collections.Counter()
+        self._keyed_counters = 0  # distinct "<counter>:<key>" entries in counters
+        self._inbox_max = 0  # the deepest the inbox has been (stats: inbox_depth_max)
         self.close_timed_out = False  # set when zenoh's close() overran CLOSE_TIMEOUT
 
     # ------------------------------------------------------------------ lifecycle
@@ -228,6 +242,26 @@ class Service:
         with self._counters_lock:
             self.counters[name] += n
 
+    def count_keyed(self, name: str, key: str, subscription: str | None = None) -> None:
+        """Add one to counter ``name`` and to its per-key counter ``name:key`` (bounded: see
+        :data:`MAX_KEYED_COUNTERS`)."""
+        with self._counters_lock:
+            self.counters[name] += 1
+            self.counters[self._keyed_name(name, key, subscription)] += 1
+
+    def _keyed_name(self, name: str, key: str, subscription: str | None) -> str:
+        """``name:key``, or once :data:`MAX_KEYED_COUNTERS` are in use and the key is new,
+        ``name:<subscription>`` (``name:(other keys)`` without one). Called with the counters lock held."""
+        keyed = f"{name}:{key}"
+        if keyed in self.counters:
+            return keyed
+        if self._keyed_counters >= MAX_KEYED_COUNTERS:
+            keyed = f"{name}:{subscription or '(other keys)'}"
+            if keyed in self.counters:
+                return keyed
+        self._keyed_counters += 1
+        return keyed
+
     def counters_snapshot(self) -> dict[str, int]:
         """A consistent copy of the counters."""
         with self._counters_lock:
@@ -243,6 +277,7 @@ class Service:
         *,
         latest: bool = False,
         inline: bool = False,
+        sample_key: bool = True,
     ) -> None:
         """Call ``handler(message, key)`` on the worker for each valid message on ``key``.
 
@@ -252,15 +287,25 @@ class Service:
         ``inline=True`` decodes and calls the handler on Zenoh's receive thread instead, as soon as
         the sample arrives (no queue, so ``latest`` does not apply). Only for handlers that are quick
         (a slow one stalls the link) and thread-safe (they run beside the worker).
+
+        ``sample_key=False`` hands the handler this subscription's ``key`` itself rather than each
+        sample's own key, for handlers that do not look at it: with a wildcard, asking Zenoh for the
+        sample's key costs two calls into it per message. (Bad payloads are still counted per key.)
         """
         if latest and inline:
             raise ValueError("a subscription is either latest (queued on the worker) or inline, not both")
+        if latest and not sample_key:
+            raise ValueError("a latest subscription keeps the newest message per key: it needs sample_key")
         sub = _Subscription(key, msg_type, handler, latest, inline)
         put_kind = zenoh.SampleKind.PUT
-        counters, counters_lock = self.counters, self._counters_lock
+        counters = self.counters
+        # The lock's own methods, bound once: a with-block looks up and calls __enter__/__exit__,
+        # measurably more on a cold cache; try/finally releases just as surely.
+        lock, unlock = self._counters_lock.acquire, self._counters_lock.release
         decode_msg = decoder_for(msg_type)
         # A key without wildcards is the key of every sample it receives: no need to ask Zenoh.
         fixed_key = key if "*" not in key and "$" not in key else None
+        given_key = fixed_key if fixed_key is not None or sample_key else key  # the key handlers get, if known
         # Each path is one flat function, asking Zenoh (each attribute is a call into Rust) only
         # what it needs: on a round trip the handler runs on a cold cache, where every extra frame
         # and call costs several times what a micro-benchmark says.
@@ -273,61 +318,107 @@ class Service:
                 except ProtocolError as exc:
                     # Checked only now: a DELETE (no payload) never decodes, so PUTs skip the call.
                     if sample.kind == put_kind:
-                        self.note_bad_message(fixed_key or str(sample.key_expr), payload, exc)
+                        self.note_bad_message(fixed_key or str(sample.key_expr), payload, exc, subscription=key)
                     return
-                with counters_lock:
-                    counters["received"] += 1
+                lock()
                 try:
-                    handler(message, fixed_key or str(sample.key_expr))
+                    counters["received"] += 1
+                finally:
+                    unlock()
+                try:
+                    handler(message, given_key or str(sample.key_expr))
                 except Exception:
                     self._handler_failed(handler)
 
         else:
-
+            # Decoded on arrival, so only valid messages wait for the worker: a flood of bad payloads
+            # takes no room in the inbox (valid messages are never dropped for it) and, on a latest
+            # subscription, never displaces a good message from its slot.
             def on_sample(sample: zenoh.Sample) -> None:
+                if sample.kind != put_kind:
+                    return
+                payload = sample.payload.to_bytes()
+                try:
+                    message = decode_msg(payload)
+                except ProtocolError as exc:
+                    self.note_bad_message(fixed_key or str(sample.key_expr), payload, exc, subscription=key)
+                    return
+                self._enqueue(sub, given_key or str(sample.key_expr), message)
+
+        # Inline: on Zenoh's receive thread itself, not on the Python thread zenoh-python would
+        # hand the sample to (one thread wake-up less per message).
+        self._declared.append(self.session.declare_subscriber(key, on_zenoh_thread(on_sample) if inline else on_sample))
+
+    def relay(self, key: str, msg_type: type[Message], to_key: str) -> None:
+        """Republish every valid ``msg_type`` payload heard on ``key`` on ``to_key``, as it came.
+
+        Each payload is checked like an inline subscription's (on Zenoh's thread; a bad one is
+        counted and dropped, never passed on; a valid one counts as received and as published), and
+        then the very bytes received go out again: nothing is re-encoded, so the envelope (``src``,
+        ``seq``, ``stamp``) and any fields unknown to ``msg_type`` travel on unchanged."""
+        publisher = self.advertise(to_key)  # declared now: never inside a Zenoh callback
+        put_kind = zenoh.SampleKind.PUT
+        counters = self.counters
+        lock, unlock = self._counters_lock.acquire, self._counters_lock.release  # see subscribe()
+        check = validator_for(msg_type)  # decoding's checks, without building a message
+        fixed_key = key if "*" not in key and "$" not in key else None
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            received = sample.payload  # put back as it is: no copy, no encoding
+            payload = received.to_bytes()
+            try:
+                check(payload)
+            except ProtocolError as exc:
                 if sample.kind == put_kind:
-                    self._enqueue(sub, fixed_key or str(sample.key_expr), sample.payload.to_bytes())
+                    self.note_bad_message(fixed_key or str(sample.key_expr), payload, exc, subscription=key)
+                return
+            lock()
+            try:
+                counters["received"] += 1
+                counters["published"] += 1
+            finally:
+                unlock()
+            publisher.put(received)
 
-        self._declared.append(self.session.declare_subscriber(key, on_sample))
+        self._declared.append(self.session.declare_subscriber(key, on_zenoh_thread(on_sample)))
 
-    def _enqueue(self, sub: _Subscription, key: str, payload: bytes) -> None:
+    def _enqueue(self, sub: _Subscription, key: str, message: Message) -> None:
+        """Queue a decoded message for the worker (a latest-subscription: put it in its slot)."""
         if sub.latest:
             slot = (sub, key)
             with self._latest_lock:
                 pending = slot in self._latest
-                self._latest[slot] = payload
+                self._latest[slot] = message
             if pending:
-                self.count("superseded")
+                self.count_keyed("superseded", key, sub.key)
                 return
             item: Any = ("latest", slot)
         else:
-            item = (sub, key, payload)
+            item = (sub, key, message)
         try:
             self._inbox.put_nowait(item)
         except queue.Full:
-            self.count("dropped_inbox_full")
+            self.count_keyed("dropped_inbox_full", key, sub.key)
             if item[0] == "latest":
                 with self._latest_lock:
                     self._latest.pop(slot, None)
+            return
+        depth = len(self._inbox.queue)  # a read of the deque's length: no lock needed for a high-water mark
+        if depth > self._inbox_max:
+            self._inbox_max = depth
 
     def _dispatch(self, item: Any) -> None:
         if item[0] == "latest":
             slot = item[1]
             with self._latest_lock:
-                payload = self._latest.pop(slot, None)
-            if payload is None:
+                message = self._latest.pop(slot, None)
+            if message is None:
                 return
             sub, key = slot
         else:
-            sub, key, payload = item
-        self._deliver(sub, key, payload)
-
-    def _deliver(self, sub: _Subscription, key: str, payload: bytes) -> None:
-        """Decode, count and hand one payload to its handler (on the worker)."""
-        message = self.decode_or_count(payload, sub.msg_type, key)
-        if message is not None:
-            self.count("received")
-            self._guarded(sub.handler, message, key)
+            sub, key, message = item
+        self.count("received")
+        self._guarded(sub.handler, message, key)
 
     def decode_or_count(self, payload: bytes, msg_type: type[M], key: str) -> M | None:
         """Decode a payload; on failure count it, log it (rate-limited per sender) and return None."""
@@ -337,15 +428,16 @@ class Service:
             self.note_bad_message(key, payload, exc)
             return None
 
-    def note_bad_message(self, key: str, payload: bytes, exc: Exception) -> None:
+    def note_bad_message(self, key: str, payload: bytes, exc: Exception, *, subscription: str | None = None) -> None:
         """Count a bad payload (in total and per key) and log it at most once per sender per minute.
 
-        Payloads too broken to name a sender share the sender ``unknown``."""
+        Payloads too broken to name a sender share the sender ``unknown``. ``subscription`` is the key
+        expression it arrived through, where it is counted once the per-key counters are full."""
         sender = _guess_sender(payload)
         now = time.monotonic()
         with self._counters_lock:
             self.counters["bad_messages"] += 1
-            self.counters[f"bad_messages:{key}"] += 1
+            self.counters[self._keyed_name("bad_messages", key, subscription)] += 1
             last = self._last_bad_log.get(sender)
             should_log = last is None or now - last >= BAD_LOG_INTERVAL
             if should_log:
@@ -383,9 +475,7 @@ class Service:
             with self._publishers_lock:  # publish() may run on the worker and in inline handlers
                 publisher = self._publishers.get(key)
                 if publisher is None:
-                    publisher = self.session.declare_publisher(
-                        key, encoding=zenoh.Encoding(ENCODING), congestion_control=CONGESTION_CONTROL, express=express
-                    )
+                    publisher = self.session.declare_publisher(key, **publisher_options(express=express))
                     self._publishers[key] = publisher
                     self._declared.append(publisher)
         return publisher
@@ -399,9 +489,13 @@ class Service:
             self.stamp(msg)
         payload = encode(msg, extra) if extra else (_ENCODERS.get(type(msg)) or encoder_for(type(msg)))(msg)
         # Counted before the put, which is the last thing done: after it, an inline handler should
-        # return at once so Zenoh's thread moves on.
-        with self._counters_lock:
+        # return at once so Zenoh's thread moves on. (try/finally rather than a with-block: see subscribe().)
+        lock = self._counters_lock
+        lock.acquire()
+        try:
             self.counters["published"] += 1
+        finally:
+            lock.release()
         publisher.put(payload)
 
     # ------------------------------------------------------------------ queries
@@ -442,11 +536,19 @@ class Service:
         # Reply on this service's own key, not the query's: for ``stats/**`` the latter would be the
         # same key for every service, and Zenoh's reply consolidation would keep only one of them.
         try:
-            stats = Event(kind="stats", data={"service": self.name, "instance": self.instance, **self.counters_snapshot()})
+            # Gauges beside the counters: how much waits on the worker now, and the most that ever did.
+            gauges = {"inbox_depth": self._inbox.qsize(), "inbox_depth_max": self._inbox_max, "latest_waiting": len(self._latest)}
+            stats = Event(kind="stats", data={"service": self.name, "instance": self.instance, **self.counters_snapshot(), **gauges})
             query.reply(self.keys.stats(self.name, self.instance), encode(self.stamp(stats)), encoding=zenoh.Encoding(ENCODING))
         except Exception:
             self.count("handler_errors")
             self.log.exception("answering a stats query failed")
+
+
+def publisher_options(*, express: bool = EXPRESS) -> dict[str, Any]:
+    """The options every Service publisher is declared with (``declare_publisher(key, **options)``)."""
+    return {"encoding": zenoh.Encoding(ENCODING), "congestion_control": CONGESTION_CONTROL, "priority": PRIORITY,
+            "express": express, "reliability": RELIABILITY}
 
 
 _instances_lock = threading.Lock()

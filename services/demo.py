@@ -1,29 +1,87 @@
 """``arroch demo``: the main job on the packaged default site, all on localhost.
 
 It checks and draws the site, then runs one whole mission under the supervisor
-(``arroch up --until-done``): a Zenoh router, the planner, the restrictor and the simulator with
-its simulated human, in lockstep so the mission takes seconds of wall time instead of the ~12
-minutes it lasts on the site clock. The supervisor prints progress and the final metrics and
-leaves a run folder (metrics.json, events.jsonl, the merged log); the site picture goes there too.
-Everything it starts is stopped before it returns.
+(``arroch up --until-done``): a Zenoh router, the planner, the restrictor, the simulator with its
+simulated human and the virtual tablet camera (the human's tablet), the AR client drawing the robots
+and their intents over that camera's frames, and the tablet page (viewer mode: the camera with its
+overlay, and a map), whose URL and access token are printed as soon as it serves. The mission runs
+in lockstep, so it takes seconds of wall time instead of the ~12 minutes it lasts on the site clock.
+
+Lockstep and the camera: site time only advances while the sim is not waiting for the planner, and
+then many times faster than wall time, while the camera renders two frames per *wall* second and
+the AR client always takes the latest one. So the overlays (and the tablet page) show the mission in
+jumps, and the AR client keeps as pictures only frames whose drawing matches the image (captured
+while the sim waited for a plan; see ``services/ar_client/snapshots.py``). ``arroch up ... --mode
+realtime`` shows it at its own pace.
+
+The supervisor prints progress and the final metrics and leaves a run folder (metrics.json,
+events.jsonl, the merged log, ``overlays/`` with a few overlay frames); the site picture goes there
+too. Everything it starts is stopped before it returns.
 """
 
 from __future__ import annotations
 
 import argparse
+import re
 import subprocess
 import sys
 from pathlib import Path
+from typing import Iterable, TextIO
 
 from protocol.site import default_site_path
+
+SERVICES = "planner,restrictor,sim,ar,tablet"
+CAMERA = "tablet"
+# The tablet's announcement, as the supervisor passes it on: "[tablet]   https://HOST:PORT/?token=T&mode=viewer".
+_URL = re.compile(r"^\[tablet\]\s+(https://\S+\?token=([A-Za-z0-9_\-]+)\S*)\s*$")
 
 
 def _arroch(*args: str) -> list[str]:
     return [sys.executable, "-m", "services.cli", *args]
 
 
-def _step(text: str) -> None:
-    print(f"==> {text}", flush=True)
+def _step(text: str, out: TextIO = sys.stdout) -> None:
+    print(f"==> {text}", file=out, flush=True)
+
+
+class TabletAnnouncement:
+    """Watches the supervisor's output for the tablet page's URLs and says them once, clearly."""
+
+    def __init__(self, out: TextIO) -> None:
+        self.out = out
+        self.urls: list[str] = []
+        self.token: str | None = None
+        self.announced = False
+
+    def feed(self, line: str) -> None:
+        match = _URL.match(line)
+        if match:
+            self.urls.append(match.group(1))
+            self.token = match.group(2)
+            if "://127.0.0.1:" in match.group(1):
+                self.announce()  # loopback comes last: the block is complete
+        elif self.urls:
+            self.announce()  # the first line after the URL block
+
+    def announce(self) -> None:
+        if self.announced or not self.urls:
+            return
+        self.announced = True
+        local = [u for u in self.urls if "://127.0.0.1:" in u or "://localhost:" in u]
+        _step("tablet page (viewer: the tablet camera with its overlay, and a map of the robots):", self.out)
+        for url in dict.fromkeys([*local, *self.urls]):
+            print(f"      {url}", file=self.out)
+        print(f"    access token: {self.token}  (this run's key; the browser will warn about the certificate:"
+              f" its authority is at /ca.pem)", file=self.out, flush=True)
+
+
+def relay(lines: Iterable[str], out: TextIO, announcement: TabletAnnouncement) -> None:
+    """Pass the supervisor's lines on, adding the tablet announcement when its URLs have come."""
+    for raw in lines:
+        line = raw.rstrip("\n")
+        print(line, file=out, flush=True)
+        announcement.feed(line)
+    announcement.announce()
 
 
 def run_demo(args: argparse.Namespace) -> int:
@@ -35,25 +93,38 @@ def run_demo(args: argparse.Namespace) -> int:
     run_root.mkdir(parents=True, exist_ok=True)
     before = set(run_root.iterdir())
 
-    _step(f"running one mission ({args.method}, seed {args.seed}, {args.mode}) with router, planner, restrictor and sim")
-    mission = subprocess.run(_arroch(
-        "up", "--site", site_file, "--services", "planner,restrictor,sim", "--method", args.method,
+    _step(f"running one mission ({args.method}, seed {args.seed}, {args.mode}) with router, planner, restrictor, "
+          f"sim (+ tablet camera), AR client and tablet page")
+    command = _arroch(
+        "up", "--site", site_file, "--services", SERVICES, "--camera", CAMERA, "--method", args.method,
         "--mode", args.mode, "--seed", str(args.seed), "--until-done", "--timeout", str(args.timeout),
-        "--run-dir", str(run_root), "--progress", "line", "--log-level", "WARNING",
-    ))
+        "--run-dir", str(run_root), "--progress", "line", "--log-level", args.log_level or "WARNING",
+    )
+    # Line by line through us, so the tablet's URL can be repeated where it is seen; the supervisor
+    # stops its children on SIGINT/SIGTERM, which a terminal's Ctrl-C sends it (same process group).
+    with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, errors="replace") as up:
+        assert up.stdout is not None
+        code = None
+        while code is None:
+            try:
+                relay(up.stdout, sys.stdout, TabletAnnouncement(sys.stdout))
+                code = up.wait()
+            except KeyboardInterrupt:
+                pass  # the supervisor got the same Ctrl-C and is stopping everything: wait for it
     new_runs = sorted(set(run_root.iterdir()) - before)
     run_dir = new_runs[-1] if new_runs else run_root
     subprocess.run(_arroch("site", "show", site_file, "--png", str(run_dir / "site.png")), check=False, stdout=subprocess.DEVNULL)
-    if mission.returncode != 0:
-        print(f"the mission did not complete (exit {mission.returncode}); see {run_dir}", file=sys.stderr)
-        return mission.returncode
-    _step(f"done; metrics, event log and site picture in {run_dir}")
+    if code != 0:
+        print(f"the mission did not complete (exit {code}); see {run_dir}", file=sys.stderr)
+        return code
+    frames = sorted((run_dir / "overlays").glob("*.png"))
+    _step(f"done; metrics, event log, site picture and {len(frames)} overlay frame(s) (overlays/) in {run_dir}")
     return 0
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser("demo", help="run one mission on the default site (localhost) and print its metrics", description=__doc__,
-                            formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = sub.add_parser("demo", help="run one mission on the default site (localhost), with the AR view, and print its metrics",
+                            description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--site", help="site file (default: the packaged office site)")
     parser.add_argument("--method", default="arroch", choices=("arroch", "no-feedback", "no-comm"), help="method (default arroch)")
     parser.add_argument("--mode", default="lockstep", choices=("lockstep", "realtime", "rate"), help="sim clock mode (default lockstep)")

@@ -59,13 +59,23 @@ def cmd_check(args: argparse.Namespace) -> int:
     return 0
 
 
+MIN_DPI, MAX_DPI = 10, 600  # a site drawing is about 16 x 12 inches: 600 dpi is already 70 megapixels
+
+
 def cmd_show(args: argparse.Namespace) -> int:
+    if not MIN_DPI <= args.dpi <= MAX_DPI:
+        print(f"--dpi must be within [{MIN_DPI}, {MAX_DPI}], got {args.dpi}", file=sys.stderr)
+        return 2
     site = _load_or_report(args.file)
     if site is None:
         return 1
     from .render import render_site  # matplotlib loads only when drawing
 
-    out = render_site(site, args.png, dpi=args.dpi)
+    try:
+        out = render_site(site, args.png, dpi=args.dpi)
+    except OSError as exc:
+        print(f"cannot write {args.png}: {exc}", file=sys.stderr)
+        return 1
     print(f"wrote {out} (site {site.name})")
     return 0
 
@@ -97,7 +107,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     show = sub.add_parser("show", help="draw a site top-down into a PNG")
     show.add_argument("file", help="site file (TOML)")
     show.add_argument("--png", required=True, metavar="OUT", help="PNG file to write")
-    show.add_argument("--dpi", type=int, default=150, help="resolution (default 150)")
+    show.add_argument("--dpi", type=int, default=150, help=f"resolution, {MIN_DPI} to {MAX_DPI} (default 150)")
     show.set_defaults(func=cmd_show)
 
     gen = sub.add_parser("generate", help="write a generated office-like site (deterministic for a seed)")

@@ -170,15 +170,22 @@ def _place_objects(site: Site, n_robots: int, per_robot: int, rng: random.Random
     return objects
 
 
+# Bounds that keep generation to seconds (it grows about with the square of the robots: 500 take ~5 s).
+MAX_ROBOTS = 500
+MAX_OBJECTS_PER_ROBOT = 100
+
+
 def generate_site(robots: int, objects_per_robot: int = 3, seed: int = 0, **options: Any) -> str:
     """TOML text of a valid office-like site with ``robots`` robots and ``objects_per_robot`` objects each.
 
     Deterministic for the same arguments; see the module docstring for the layout and options.
     Raises ``ValueError``/``TypeError`` for impossible or unknown options.
     """
-    for label, value, low in (("robots", robots, 1), ("objects_per_robot", objects_per_robot, 0)):
+    for label, value, low, high in (("robots", robots, 1, MAX_ROBOTS), ("objects_per_robot", objects_per_robot, 0, MAX_OBJECTS_PER_ROBOT)):
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise ValueError(f"generate_site: {label} must be an integer >= {low}, got {value!r}")
+        if value > high:
+            raise ValueError(f"generate_site: {label} must be at most {high}, got {value!r}")
     if isinstance(seed, bool) or not isinstance(seed, int):
         raise ValueError(f"generate_site: seed must be an integer, got {seed!r}")
     layout, params = _split_options(options)

@@ -59,11 +59,14 @@ def _run_service(args: argparse.Namespace) -> int:
 
     from .project import Intrinsics
     from .service import ArService
+    from .snapshots import OverlaySnapshots
     from .sources import parse_source
 
     def build() -> ArService:
         site = _load_site(args.site)
         spec = parse_source(args.source)
+        count = {} if args.snapshot_count is None else {"count": args.snapshot_count}
+        snapshots = OverlaySnapshots(args.snapshots, **count) if args.snapshots else None
         return ArService(
             site=site,
             namespace=args.namespace or site.name,
@@ -74,6 +77,7 @@ def _run_service(args: argparse.Namespace) -> int:
             record=args.record,
             detector=args.detector,
             feedback=not args.no_feedback,
+            snapshots=snapshots,
             clock=make_clock(args.clock),
         )
 
@@ -147,10 +151,15 @@ def _render(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- arroch tags sheet
 
 
+MAX_SHEET_DPI = 600  # 33 pages at 600 dpi already take a minute and gigabytes
+
+
 def _tags_sheet(args: argparse.Namespace) -> int:
     from .tags_sheet import write_sheet
 
     try:
+        if not 50 <= args.dpi <= MAX_SHEET_DPI:
+            raise ValueError(f"--dpi must be within [50, {MAX_SHEET_DPI}], got {args.dpi}")
         site = _load_site(args.site)
         files = write_sheet(site, args.out, dpi=args.dpi)
     except (ValueError, FileNotFoundError) as exc:
@@ -186,6 +195,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     ar.add_argument("--intrinsics", metavar="fx,fy,cx,cy,w,h", help="calibration for video/device/images sources (images: or DIR/intrinsics.json)")
     ar.add_argument("--record", metavar="OUT.mp4", help="also write the annotated frames to this video file")
     ar.add_argument("--no-feedback", action="store_true", help="no feedback buttons")
+    ar.add_argument("--snapshots", metavar="DIR", help="keep a few annotated frames there, spread over the run, as PNG (+ the Overlay "
+                                                   "as JSON): frames with a pose, a robot and an intent drawn, whose drawing matches the image")
+    ar.add_argument("--snapshot-count", type=int, metavar="N", help="frames kept with --snapshots (default 5)")
     _add_detector(ar)
     ar.set_defaults(func=_run_service)
     ar_sub = ar.add_subparsers(dest="ar_command", metavar="{localize,render}")

@@ -28,7 +28,7 @@ from protocol.frames import CameraPose
 from .localize import Localization, Localizer
 from .overlay import OverlayBuilder, status_primitives
 from .project import Intrinsics, Projector
-from .world import WorldView
+from .world import WorldSnapshot, WorldView
 
 #: Guided second pass: at most this many crops per frame, for predicted tags at least this big.
 MAX_GUIDED_CROPS = 4
@@ -85,6 +85,7 @@ class Pipeline:
         self.guided = guided
         self.timings = Timings()
         self.last_localization: Localization | None = None
+        self.last_world: WorldSnapshot | None = None  # what the last frame's overlay was drawn from
         self.last_detections: list[TagDetection] = []
         # Landmark geometry as arrays, for predicting which tags a pose should see.
         lms = site.landmarks
@@ -206,6 +207,7 @@ class Pipeline:
 
         t_proj = time.perf_counter()
         world = self.world.snapshot(timestamp if now is None else now)
+        self.last_world = world
         prims = []
         if loc.ok and loc.pose is not None:
             prims = self.builder.world_primitives(Projector(loc.pose, intrinsics), world)

@@ -7,7 +7,9 @@ I/O (keys under ``arroch/<namespace>/``):
 - with ``--source sim``, subscribes to ``camera/<cid>/frame`` (latest only: a slow frame never queues
   up stale ones); other sources are read on the worker at their frame rate;
 - publishes one ``Overlay`` per processed frame on ``ar/<cid>/overlay`` (when lost, with an extra
-  ``reason`` field); optionally records the annotated frames to an MP4 file;
+  ``reason`` field; always with ``pose_stamps``, the stamp of each robot's RobotPose it was drawn
+  from, so a viewer or a benchmark can tell how old the positions shown are); optionally records
+  the annotated frames to an MP4 file, and keeps a few of them as pictures (:mod:`.snapshots`);
 - feedback presses (from :attr:`ArService.panel`) go to the restrictor over Zenoh on their own thread.
 
 A frame that cannot be decoded, or whose intrinsics are unusable, is counted (``bad_frames``),
@@ -24,7 +26,7 @@ import cv2
 import numpy as np
 
 from protocol.clock import SimClock, WallClock
-from protocol.messages import CameraFrame, ConstraintSet
+from protocol.messages import CameraFrame, ConstraintSet, Overlay
 from protocol.service import Service
 from protocol.transport import ZenohOptions
 
@@ -32,6 +34,7 @@ from .detect import TagDetector
 from .feedback import FeedbackPanel, restrictor_sender
 from .pipeline import BadFrame, Pipeline
 from .project import Intrinsics
+from .snapshots import OverlaySnapshots
 from .sources import SourceSpec, open_source
 from .world import WorldView
 
@@ -53,6 +56,7 @@ class ArService(Service):
         record: str | None = None,
         detector: str = "opencv",
         feedback: bool = True,
+        snapshots: OverlaySnapshots | None = None,
         clock: WallClock | SimClock | None = None,
         instance: str | None = None,
     ) -> None:
@@ -74,9 +78,10 @@ class ArService(Service):
             clock=self.clock.now,
         )
         self.record_path = record
+        self.snapshots = snapshots
         self._writer: cv2.VideoWriter | None = None
         self._writer_size: tuple[int, int] | None = None
-        self._last_bad_log = -BAD_FRAME_LOG_INTERVAL
+        self._last_bad_frame_log = -BAD_FRAME_LOG_INTERVAL  # not _last_bad_log: the Service base keeps its per-sender table there
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -102,6 +107,8 @@ class ArService(Service):
         if self._writer is not None:
             self._writer.release()
             self.log.info("recorded %d frames to %s", self.counters.get("recorded", 0), self.record_path)
+        if self.snapshots is not None:
+            self.log.info("kept %d overlay frame(s) in %s", len(self.snapshots.kept), self.snapshots.directory)
 
     def _fetch_constraints(self) -> None:
         try:
@@ -143,8 +150,10 @@ class ArService(Service):
                 # A frame stamped on another clock (or not at all): time it on ours instead.
                 self.count("restamped_frames")
                 stamp = now
+        # Drawing costs time: only when recording, or when a kept frame may be due.
+        annotate = self.record_path is not None or (self.snapshots is not None and self.snapshots.wanted(now))
         try:
-            overlay, annotated = self.pipeline.process(frame, K, stamp, frame_seq=seq, annotate=self.record_path is not None, now=now)
+            overlay, annotated = self.pipeline.process(frame, K, stamp, frame_seq=seq, annotate=annotate, now=now)
         except BadFrame as exc:
             self._bad_frame(str(exc))
             return
@@ -152,16 +161,31 @@ class ArService(Service):
         if not overlay.ok:
             self.count("lost")
         loc = self.pipeline.last_localization
-        extra = {"reason": loc.reason} if loc is not None and not loc.ok else None
+        extra: dict[str, object] = {"reason": loc.reason} if loc is not None and not loc.ok else {}
+        world = self.pipeline.last_world
+        extra["pose_stamps"] = {rid: state.stamp for rid, state in world.robots.items()} if world is not None else {}
         self.publish(self.keys.overlay(self.camera), overlay, extra=extra)
-        if annotated is not None:
+        if annotated is not None and self.record_path is not None:
             self._record(annotated)
+        if annotated is not None and self.snapshots is not None:
+            self._keep(overlay, annotated, now)
+
+    def _keep(self, overlay: Overlay, annotated: np.ndarray, now: float) -> None:
+        try:
+            path = self.snapshots.offer(overlay, annotated, now)
+        except OSError as exc:
+            self.log.error("%s; no more overlay frames are kept", exc)
+            self.snapshots = None
+            return
+        if path is not None:
+            self.count("snapshots")
+            self.log.info("kept overlay frame %s", path)
 
     def _bad_frame(self, why: str) -> None:
         self.count("bad_frames")
         now = time.monotonic()
-        if now - self._last_bad_log >= BAD_FRAME_LOG_INTERVAL:
-            self._last_bad_log = now
+        if now - self._last_bad_frame_log >= BAD_FRAME_LOG_INTERVAL:
+            self._last_bad_frame_log = now
             self.log.warning("dropped a bad frame: %s (further ones counted, logged once a minute)", why)
 
     def _record(self, image: np.ndarray) -> None:

@@ -49,6 +49,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _planning_arguments(parser: argparse.ArgumentParser, *, default_limit: float) -> None:
     parser.add_argument("--method", choices=("iidp", "joint"), default="iidp", help="IIDP (default) or the joint program (small teams)")
     parser.add_argument("--time-limit", type=float, default=default_limit, metavar="S", help=f"solver time for one plan (default {default_limit:g} s); past it the best plan so far is used")
+    parser.add_argument("--solve-limit", type=float, default=2.0, metavar="S", help="solver time for one robot's program inside IIDP (default 2 s; 5x that for the rare larger programs)")
     parser.add_argument("--routes", type=int, default=1, metavar="K", help="candidate routes per leg (default 1; 2 when constraints mention rooms)")
 
 
@@ -57,9 +58,11 @@ def _settings(args: argparse.Namespace):
 
     if args.time_limit <= 0:
         raise ValueError("--time-limit must be positive")
+    if args.solve_limit <= 0:
+        raise ValueError("--solve-limit must be positive")
     if args.routes < 1:
         raise ValueError("--routes must be at least 1")
-    return PlannerSettings(time_limit=args.time_limit, joint_time_limit=args.time_limit, routes_per_leg=args.routes)
+    return PlannerSettings(time_limit=args.time_limit, solve_limit=args.solve_limit, joint_time_limit=args.time_limit, routes_per_leg=args.routes)
 
 
 def _run_service(args: argparse.Namespace) -> int:

@@ -11,26 +11,43 @@ or closes; and on every new ``world_version`` - every one is answered with a Tea
 nothing changed, because the simulator's lockstep mode waits for that answer. Triggers arriving
 together (a clock tick, a status and an event for one action) are answered by one replan.
 
+A burst that only brings robots' actions ending when the plan said (within CONTINUE_TOLERANCE) keeps
+the plan being executed, moved past them, without running the task planner (:meth:`continued`).
 Replanning starts from the plan being executed (IIDP warm start). When the constraints leave a
 robot no plan, the service publishes ``plan_conflict`` naming the constraints that conflict, keeps
 planning with the last constraint set that worked (so the plan it keeps is the last valid one,
 brought up to date), and keeps running.
+
+A planner (re)started while a mission is under way knows nothing of it: it plans only once every
+robot's pose and status have arrived (the simulator repeats them once a wall second, also while
+lockstep time stands still), with the live ConstraintSet it fetched at start, so its first plan
+starts from where the robots are and what they carry and have delivered. The actions robots are
+executing (their statuses name them) are taken over as the ones sent: a plan that keeps them lets
+them run on, with the same action ids, instead of starting them again. When nothing has been heard
+of any robot after START_GRACE, no mission is running yet and the plan starts from the site's start.
+
+A TeamPlan lost on its way (the router restarting, a link down) would leave a lockstep simulator
+waiting for it forever: nothing changes, so nothing triggers a new one. While the simulator's clock
+says it is paused at a world version the current plan answers, the plan is published again (same
+``plan_id``) every REPEAT_AFTER wall seconds. Lost commands are sent again from the robots'
+statuses (see :meth:`PlannerService._resend`).
 """
 
 from __future__ import annotations
 
+import logging
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from protocol.clock import SimClock, WallClock
-from protocol.messages import ConstraintSet, DoorState, Event, PlannedOpening, PlanStep, RobotPose, RobotStatus, TeamPlan
+from protocol.messages import Clock, ConstraintSet, DoorState, Event, PlannedOpening, PlanStep, RobotPose, RobotStatus, TeamPlan
 from protocol.service import Service
 from protocol.site import Site
 from protocol.transport import ZenohOptions
 
 from .constraints import ConstraintProgram, from_constraint_set
-from .dispatcher import FINISHED_STATES, Dispatcher
+from .dispatcher import FINISHED_STATES, Dispatched, Dispatcher
 from .motion import polyline_distance
 from .plan import TeamResult
 from .planner import PlannerSettings, TaskPlanner
@@ -40,7 +57,13 @@ SETTLE = 0.03  # s without a new trigger before replanning (one replan for a bur
 MAX_DELAY = 0.25  # s: replan at the latest this long after the first trigger
 OFF_TRACK = 1.0  # m from the commanded trajectory that counts as "far off"
 OFF_TRACK_COOLDOWN = 2.0  # s between two off-track replans for one robot
+CONTINUE_TOLERANCE = 2.0  # s: an action that ends this close to its planned end keeps the plan (no re-solve)
+ROUTINE_STATES = ("moving", "done", "loading", "unloading")  # states a plan being followed goes through
+LOCKSTEP_TRIGGERS = ("world_version", "constraints", "start")  # news a lockstep simulator waits for a plan about
 RESEND_INTERVAL = 1.0  # wall s after sending a command before it is sent again (robot reports no such id)
+START_GRACE = 1.5  # wall s to hear a mission under way (statuses come once a second) before planning from the site's start
+STATE_WAIT = 5.0  # wall s to wait for the last robots' poses and statuses before planning without them
+REPEAT_AFTER = 2.0  # wall s the simulator may stay paused at a version the plan answers before the plan is sent again
 
 
 @dataclass
@@ -81,10 +104,17 @@ class PlannerService(Service):
         self._dirty: set[str] = set()
         self._first_trigger = 0.0
         self._last_trigger = 0.0
+        self._held = False  # pending news waits for the next world version (lockstep)
         self._finished: set[str] = set()
         self._force: set[str] = set()
         self._off_track_at: dict[str, float] = {}
         self._sent_at: dict[str, float] = {}
+        self._started_at = time.monotonic()
+        self._state_wait_since: float | None = None  # when planning started to wait for the robots' state
+        self._state_wait_reported = False
+        # (world version, sim time) the simulator is paused at, and since when (wall); None while it runs
+        self._paused: tuple[tuple[int, float], float] | None = None
+        self._repeated_at = 0.0
 
     # ------------------------------------------------------------------ wiring
 
@@ -95,6 +125,7 @@ class PlannerService(Service):
         self.subscribe(k.door_state("*"), DoorState, self.on_door)
         self.subscribe(k.constraints(), ConstraintSet, self.on_constraints)
         self.subscribe(k.event(), Event, self.on_event)
+        self.subscribe(k.clock(), Clock, self.on_clock, inline=True)
         self.serve(k.plan(), lambda _query: self.message)
         self.every(0.02, self.tick)
         try:  # a restarted planner picks up the active constraints at once
@@ -106,10 +137,23 @@ class PlannerService(Service):
 
     def trigger(self, reason: str) -> None:
         now = time.monotonic()
-        if not self._dirty:
-            self._first_trigger = now
+        if not self._dirty or (self._held and reason.partition(":")[0] in LOCKSTEP_TRIGGERS):
+            self._first_trigger = now  # a burst starts (held news joins the one a new version starts)
+            self._held = False
         self._last_trigger = now
         self._dirty.add(reason)
+
+    def _hold_for_world_version(self) -> bool:
+        """In lockstep, whether the pending news waits for the next world version.
+
+        The simulator waits only for plans that answer a world version (or a constraints version),
+        so those reach it at a fixed site time. A plan made between two versions - on a robot
+        acknowledging its command, or starting to wait at a door - would reach it at a moment that
+        depends on the machine's load, and the same seed would not give the same mission. Such news
+        is kept and planned for with the next version."""
+        if not (isinstance(self.clock, SimClock) and self.clock.mode == "lockstep"):
+            return False
+        return not any(reason.partition(":")[0] in LOCKSTEP_TRIGGERS for reason in self._dirty)
 
     # ------------------------------------------------------------------ inputs
 
@@ -117,6 +161,16 @@ class PlannerService(Service):
         if version > self.world_version:
             self.world_version = version
             self.trigger("world_version")
+
+    def on_clock(self, msg: Clock, _key: str) -> None:
+        """Zenoh's thread: when the simulator stands still, and at which version (see _repeat_plan)."""
+        if not msg.paused:
+            self._paused = None
+            return
+        where = (msg.world_version, msg.time)
+        paused = self._paused
+        if paused is None or paused[0] != where:
+            self._paused = (where, time.monotonic())
 
     def on_pose(self, msg: RobotPose, _key: str) -> None:
         if msg.robot not in self.site.robots:
@@ -142,6 +196,7 @@ class PlannerService(Service):
         before = self.statuses.get(msg.robot)
         self.statuses[msg.robot] = msg
         self.dispatcher.note_reported_id(msg.robot, msg.action_id)
+        self._adopt(msg)
         self._note_version(msg.world_version)
         sent = self.dispatcher.current.get(msg.robot)
         changed = before is None or (before.state, before.action_id, tuple(before.carrying), tuple(before.delivered)) != (
@@ -152,6 +207,18 @@ class PlannerService(Service):
             self._resend(msg.robot)
         if changed:
             self.trigger(f"status:{msg.robot}:{msg.state}")
+
+    def _adopt(self, msg: RobotStatus) -> None:
+        """Take a robot's running action as the one sent, when this planner sent it nothing (a
+        restart): a plan whose front is that action then leaves it running (same id, not sent
+        again), and a load or unload under way counts as in progress."""
+        if msg.robot in self.dispatcher.current or msg.action_id <= 0 or msg.state in FINISHED_STATES:
+            return
+        if msg.action in ("", "stop"):
+            return
+        self.dispatcher.current[msg.robot] = Dispatched(msg.action, tuple(msg.args), msg.action_id, msg.plan_id, [])
+        self.counters["actions_adopted"] += 1
+        self.log.info("%s is executing action %d (%s %s) of an earlier plan: taken over", msg.robot, msg.action_id, msg.action, " ".join(msg.args))
 
     def _resend(self, robot: str) -> None:
         """Send the robot's current command again (same id) when its status shows an older action.
@@ -214,13 +281,62 @@ class PlannerService(Service):
         if isinstance(self.clock, SimClock):
             self._note_version(self.clock.world_version)
         if not self._dirty:
+            self._repeat_plan()
             return
         now = time.monotonic()
         if now - self._last_trigger < SETTLE and now - self._first_trigger < MAX_DELAY:
             return
+        if not self._world_heard(now):
+            return  # the triggers stay pending
+        if self._hold_for_world_version():
+            self._held = True
+            self._repeat_plan()
+            return
         reasons = sorted(self._dirty)
         self._dirty.clear()
         self.replan(reasons)
+
+    def _repeat_plan(self) -> None:
+        """Publish the current plan again while the simulator stays paused at a world version it
+        answers: the simulator may never have got it (module docstring)."""
+        paused, message = self._paused, self.message
+        if paused is None or message is None:
+            return
+        (version, _), since = paused
+        now = time.monotonic()
+        if message.world_version < version or now - max(since, self._repeated_at) < REPEAT_AFTER:
+            return
+        first = self._repeated_at < since  # the first repeat in this pause is worth a line; later ones are not
+        self._repeated_at = now
+        self.counters["plans_repeated"] += 1
+        self.log.log(logging.INFO if first else logging.DEBUG, "the simulator has been paused at world v%d for %.0f s: "
+                     "publishing plan %d again (in case it was lost)", version, now - since, message.plan_id)
+        self.publish(self.keys.plan(), message)
+
+    def _world_heard(self, now: float) -> bool:
+        """Whether the planner knows enough of the robots to plan (see the module docstring)."""
+        missing = [rid for rid in self.site.robots if rid not in self.poses or rid not in self.statuses]
+        if not missing:
+            if self._state_wait_since is not None:
+                self.log.info("every robot's pose and status in after %.1f s: planning", now - self._state_wait_since)
+                self._state_wait_since = None
+            return True
+        clock_version = getattr(self.clock, "world_version", 0)
+        if not self.statuses and not clock_version:
+            # Nothing from any robot: a fresh mission plans from the site's start, once a running
+            # one has had the time to be heard.
+            return now - self._started_at >= START_GRACE
+        if self._state_wait_since is None:
+            self._state_wait_since = now
+            self._state_wait_reported = False
+            self.log.info("a mission is under way (world v%d): waiting for the pose and status of %s before planning",
+                          max(self.world_version, clock_version), ", ".join(missing))
+        if now - self._state_wait_since < STATE_WAIT:
+            return False
+        if not self._state_wait_reported:
+            self._state_wait_reported = True
+            self.log.warning("planning without the pose or status of %s (nothing from them in %.0f s)", ", ".join(missing), STATE_WAIT)
+        return True
 
     def world(self) -> World:
         now = self.clock.now()
@@ -276,6 +392,14 @@ class PlannerService(Service):
 
     def replan(self, reasons: list[str]) -> None:
         world = self.world()
+        continued = self.continued(reasons, world)
+        if continued is not None:
+            self.log.debug("plan followed at %.1f (world v%d): %s", world.now, self.world_version, ", ".join(reasons))
+            self.result = continued
+            self.counters["plans"] += 1
+            self.counters["plans_continued"] += 1
+            self.publish_plan(world, continued, "")
+            return
         self.log.debug("replanning at %.1f (world v%d): %s", world.now, self.world_version, ", ".join(reasons))
         result = self.planner.plan(world, self.constraints, self.settings.method, warm=self.result)
         if result.status == "conflict":
@@ -293,6 +417,58 @@ class PlannerService(Service):
             self.counters["planning_failures"] += 1
             self.log.warning("no new plan (%s): %s", result.status, result.diagnostic)
         self.publish_plan(world, result if result.status in ("ok", "timeout") else None, result.diagnostic)
+
+    def continued(self, reasons: list[str], world: World) -> TeamResult | None:
+        """The plan being executed, moved past the actions that just ended, when that is all that
+        happened; None when the task planner must run.
+
+        Most triggers are a robot ending its front action. When it ends within CONTINUE_TOLERANCE
+        of the plan's time for it, re-solving retimes every robot's plan by less than that and the
+        IIDP rounds start from the same team, so the plan is kept as it is (Algorithm 1's P^t call
+        on an unchanged problem). Anything else - constraints, a door opening or closing, a failure,
+        a robot waiting at a door or off its trajectory, an action ending early or late - is solved
+        anew."""
+        kept = self.result
+        if kept is None or kept.status not in ("ok", "timeout") or kept.conflicts:
+            return None
+        ended: set[str] = set()
+        for reason in reasons:
+            kind, _, rest = reason.partition(":")
+            if kind == "world_version":
+                continue
+            if kind == "status" and rest.rpartition(":")[2] in ROUTINE_STATES:
+                continue
+            if kind == "action_done":
+                ended.add(rest)
+                continue
+            return None
+        if not ended or not ended <= self._finished or self._force:
+            return None
+        plans = dict(kept.plans)
+        for rid in sorted(self._finished):
+            sent = self.dispatcher.current.get(rid)
+            index = self.dispatcher.front_index.get(rid)
+            plan = plans.get(rid)
+            if sent is None or index is None or plan is None or index >= len(plan.steps):
+                return None
+            step = plan.steps[index]
+            if (step.action, step.args) != (sent.action, sent.args):
+                return None
+            if abs(world.now - kept.absolute(step.end)) > CONTINUE_TOLERANCE:
+                return None
+            plans[rid] = replace(plan, steps=plan.steps[index + 1:])
+        base = int(math.floor(world.now))
+        delta = kept.base - base
+        return replace(
+            kept,
+            base=base,
+            plans={rid: plan.shifted(delta) for rid, plan in plans.items()},
+            existing=frozenset(self.planner.existing_windows(world, base)),
+            iterations=0,
+            solve_time=0.0,
+            solves=0,
+            diagnostic="",
+        )
 
     def publish_plan(self, world: World, result: TeamResult | None, diagnostic: str) -> None:
         """Publish the TeamPlan (the new one, or the kept one re-stamped) and the commands."""
@@ -314,7 +490,8 @@ class PlannerService(Service):
             self.publish(self.keys.robot_command(cmd.robot), cmd)
             self._sent_at[cmd.robot] = time.monotonic()
         for intent in self.dispatcher.intents(self.plan_id):
-            if intent.robot in kept.plans and not kept.plans[intent.robot].empty:
+            # (an action taken over from before a restart has no trajectory to show)
+            if intent.robot in kept.plans and not kept.plans[intent.robot].empty and intent.trajectory:
                 self.publish(self.keys.intent(intent.robot), intent)
         self.message = to_message(kept, self.plan_id, self.world_version, cs_version, front, diagnostic, self.dispatcher.front_index)
         self.publish(self.keys.plan(), self.message)

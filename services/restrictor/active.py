@@ -30,6 +30,7 @@ log = logging.getLogger("arroch.restrictor")
 
 DEFAULT_MAX_ACTIVE = 200  # a human gives a handful; this bounds the planner's work if a client misbehaves
 _MAX_REASON = 1000  # FeedbackAck.reason allows 1024
+CLOCK_UNKNOWN = "the site clock is not known yet (no clock messages from the simulator); try again shortly"
 
 
 @dataclass
@@ -82,10 +83,13 @@ class ActiveSet:
             if previous.fingerprint == digest:
                 return Outcome(ack=self._ack_message(previous), duplicate=True)
             log.warning("sender %s reused seq %d for different feedback: handling it as new", quote(feedback.src), feedback.seq)
-        expired = self.expire(now) if now is not None else []
+        if now is None:
+            # Not remembered: the same feedback sent again once the clock is known must be applied,
+            # not answered with this refusal as a duplicate.
+            record = self._record(feedback, digest, False, CLOCK_UNKNOWN)
+            return Outcome(ack=self._ack_message(record))
+        expired = self.expire(now)
         try:
-            if now is None:
-                raise Refusal("the site clock is not known yet (no clock messages from the simulator); try again shortly")
             record = self._apply(feedback, digest, now)
             changed = True
         except Refusal as refusal:

@@ -191,7 +191,10 @@ def _constraints_show(args: argparse.Namespace) -> int:
         namespace = args.namespace or _load_site(args.site).name
     except (ValueError, FileNotFoundError) as exc:
         return _config_error(exc)
-    client = _client(args, namespace, "constraints-cli")
+    try:
+        client = _client(args, namespace, "constraints-cli")
+    except ValueError as exc:  # e.g. a namespace that cannot be a key chunk
+        return _config_error(exc)
     try:
         _open(client)
         current = fetch_constraints(client, timeout=args.timeout)

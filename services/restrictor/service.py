@@ -13,11 +13,18 @@ I/O (keys under ``arroch/<namespace>/``):
 
 All state changes run on the service's worker thread: query callbacks only hand the query over
 (Zenoh's thread must stay quick), and the worker replies once the feedback is applied.
+
+Windows start at the site clock, so with ``--clock sim`` feedback needs the simulator's time. A
+restrictor restarted mid-mission has not heard it yet when the first (re-sent) feedback arrives:
+feedback then waits up to CLOCK_WAIT wall seconds for the first clock message (it comes twice a
+second even while lockstep time stands still) before it is refused for want of a clock.
 """
 
 from __future__ import annotations
 
+import collections
 import queue
+import time
 from pathlib import Path
 
 import zenoh
@@ -37,6 +44,7 @@ from .validate import quote
 EXPIRY_PERIOD = 0.2  # wall seconds between expiry checks
 QUERY_POLL = 0.02  # wall seconds between looks at pending feedback queries
 MAX_PENDING_QUERIES = 1000
+CLOCK_WAIT = 2.0  # wall seconds feedback may wait for the site clock before it is refused
 
 
 class RestrictorService(Service):
@@ -65,6 +73,8 @@ class RestrictorService(Service):
             raise
         self._current: ConstraintSet | None = None
         self._queries: queue.Queue[zenoh.Query] = queue.Queue(maxsize=MAX_PENDING_QUERIES)
+        # Feedback waiting for the site clock, in arrival order: (arrival, feedback, its query if any)
+        self._held: collections.deque[tuple[float, Feedback, zenoh.Query | None]] = collections.deque()
         self.log.info("state %s: %d active constraint(s), version %d", self.store.where,
                       len(self.active.constraints), self.active.version)
 
@@ -82,6 +92,10 @@ class RestrictorService(Service):
                 self._queries.get_nowait().drop()
             except queue.Empty:
                 break
+        for _, _, query in self._held:
+            if query is not None:
+                query.drop()
+        self._held.clear()
         self.store.close()
 
     # ------------------------------------------------------------------ feedback
@@ -90,7 +104,36 @@ class RestrictorService(Service):
         return self.clock.now() if self.clock.synced else None
 
     def _on_feedback(self, feedback: Feedback, _key: str) -> None:
-        self._respond(feedback)
+        self._take(feedback, None)
+
+    def _take(self, feedback: Feedback, query: zenoh.Query | None) -> None:
+        """Answer now, or hold the feedback (behind any already held) until the clock is known (at
+        most MAX_PENDING_QUERIES of them: beyond that, feedback is answered at once, refused)."""
+        if (self._held or self._now() is None) and len(self._held) < MAX_PENDING_QUERIES:
+            if not self._held:
+                self.log.info("feedback waits for the site clock (no clock message yet)")
+            self._held.append((time.monotonic(), feedback, query))
+            self.count("feedback_held")
+            return
+        self._answer(feedback, query)
+
+    def _release_held(self) -> None:
+        """Answer held feedback once the clock is known, or once it has waited CLOCK_WAIT (refused then)."""
+        while self._held:
+            arrived, feedback, query = self._held[0]
+            if self._now() is None and time.monotonic() - arrived < CLOCK_WAIT:
+                return
+            self._held.popleft()
+            self._answer(feedback, query)
+
+    def _answer(self, feedback: Feedback, query: zenoh.Query | None) -> None:
+        try:
+            ack = self._respond(feedback)
+            if query is not None:
+                self._reply(query, ack)
+        finally:
+            if query is not None:
+                query.drop()  # ends the query for the querier, replied or not
 
     def _take_feedback_query(self, query: zenoh.Query) -> None:
         """Zenoh's thread: keep the query for the worker (no reply yet)."""
@@ -104,17 +147,16 @@ class RestrictorService(Service):
         return None
 
     def _answer_queries(self) -> None:
+        self._release_held()
         while True:
             try:
                 query = self._queries.get_nowait()
             except queue.Empty:
                 return
-            try:
-                self._answer_query(query)
-            finally:
-                query.drop()
+            self._answer_query(query)
 
     def _answer_query(self, query: zenoh.Query) -> None:
+        """Reply to a query (ending it), or hand its feedback to :meth:`_take`, which ends it later."""
         payload = query.payload.to_bytes()
         try:
             feedback = decode(payload, Feedback)
@@ -122,10 +164,13 @@ class RestrictorService(Service):
             self.note_bad_message(self.keys.feedback(), payload, exc)
             # The querier is waiting: tell it what is wrong rather than let it time out.
             ack = FeedbackAck(to="", feedback_seq=0, accepted=False, reason=f"not a valid Feedback: {exc}"[:1000])
-            self._reply(query, self.stamp(ack))
+            try:
+                self._reply(query, self.stamp(ack))
+            finally:
+                query.drop()
             return
         self.count("received")
-        self._reply(query, self._respond(feedback))
+        self._take(feedback, query)
 
     def _reply(self, query: zenoh.Query, ack: FeedbackAck) -> None:
         query.reply(self.keys.feedback(), encode(ack), encoding=zenoh.Encoding(ENCODING))

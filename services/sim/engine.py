@@ -27,6 +27,7 @@ from protocol.messages import RobotCommand
 from protocol.site.model import Site
 
 from .controller import ControllerConfig
+from .crossings import ClosedDoorWatch
 from .doors import DoorChange, DoorConfig, Doors
 from .human import Declare, HumanConfig, HumanModel, OpenDoor, TaskDone
 from .metrics import MetricsRecorder
@@ -121,6 +122,7 @@ class Engine:
             ),
         )
         self.robots: dict[str, Robot] = {rid: Robot(rid, *spec.start) for rid, spec in sorted(site.robots.items())}
+        self.closed_doors = ClosedDoorWatch(self.doors, p.robot_radius)  # safety invariant, checked every tick
         her_room = site.human.room
         self.human_doors = sorted(d.id for d in site.doors.values() if d.human_operated and her_room in d.rooms)
         self.human = HumanModel(
@@ -179,6 +181,10 @@ class Engine:
         t1 = self.time
         for change in self.doors.step(now, dt, positions):
             self._door_change(change, t1)
+        for crossing in self.closed_doors.check(self.robots.values()):
+            self.metrics.closed_door_crossings += 1
+            self._emit("closed_door_crossing", robot=crossing.robot, door=crossing.door,
+                       data={"depth": crossing.depth, "fraction": crossing.fraction, "pose": list(crossing.pose)})
         self._track_waiting(t1)
         waiting: dict[str, dict[str, float]] = {d: {} for d in self.human_doors}
         for rid, (door, since) in self._waiting_since.items():

@@ -5,6 +5,8 @@
   with none), the human's when her own task was done;
 - door openings by the human (her a1 actions), and door openings of every kind per door;
 - feedback sent, accepted, refused and unanswered (a2 declarations, ARROCH only);
+- safety: robots that entered the doorway of a closed door (:mod:`services.sim.crossings`; 0 in
+  every correct run);
 plus what explains them (robots' waiting time at doors, the human's time away and focus intervals,
 world versions) and every parameter of the run, so a metrics file is self-describing.
 """
@@ -28,6 +30,7 @@ class MetricsRecorder:
     feedback_unanswered: int = 0
     actions_done: int = 0
     actions_failed: int = 0
+    closed_door_crossings: int = 0
 
     def opened(self, door: str, by: str) -> None:
         self.door_openings[(door, "human" if by == "human" else "robot")] += 1
@@ -70,6 +73,7 @@ class MetricsRecorder:
                 "unanswered": self.feedback_unanswered,
             },
             "actions": {"done": self.actions_done, "failed": self.actions_failed},
+            "closed_door_crossings": self.closed_door_crossings,
             "world_versions": world_versions,
             "robots": robots,
             "human": human,

@@ -15,7 +15,9 @@ Publishing rates:
   time would flood the network), and always at a new world version, when the planner needs them;
 - the clock with every pose batch, at every new world version, and twice a wall second while
   time stands still (paused in lockstep, or the mission over);
-- statuses and door states when they change, and all of them once a wall second for late joiners;
+- statuses and door states when they change, and all of them once a wall second for late joiners
+  (with every pose: while lockstep time stands still no pose batch is due, and a planner restarted
+  then must still learn where the robots are);
 - events as they happen.
 
 Everything runs on the service's worker thread (the Service base's loop); the only other thread
@@ -182,6 +184,7 @@ class SimService(Service):
             self._camera.maybe_render(self, wall)
         if wall - self._last_heartbeat >= HEARTBEAT:
             self._last_heartbeat = wall
+            self._publish_poses()
             self._publish_states(everything=True)
 
     def _run_lockstep(self, wall: float) -> None:

@@ -4,7 +4,9 @@ A new service slots in with one :data:`SERVICES` entry: its ``arroch`` sub-comma
 ``up``'s options it takes (each option's flags are spelled once, in :data:`OPTION_FLAGS`).
 Every service also gets the common options of :func:`protocol.runner.add_common_arguments`
 (``--namespace``, ``--site``, ``--clock``, ``--log-level``) and its Zenoh settings: ``--connect`` to
-the supervisor's router, or ``--zenoh-config DIR/<name>.json5`` from ``arroch deploy render``.
+the supervisor's router, or ``--zenoh-config DIR/<role>.json5`` from ``arroch deploy render`` (the
+access-control role it runs as: its own name, unless its entry names another, as the tablet page
+runs as ``ar``).
 
 Extra children (``--child NAME=COMMAND``) are arbitrary commands; ``{python}``, ``{connect}``,
 ``{namespace}`` and ``{site}`` in them are replaced, and they find the router through the
@@ -32,6 +34,7 @@ class MissionOptions:
     mode: str | None = None  # sim clock mode: realtime, rate or lockstep
     rate: float | None = None
     seed: int | None = None
+    camera: str | None = None  # the sim's virtual camera ('tablet' or X,Y,Z,YAW,PITCH); None: no camera
 
 
 # How each option is spelled on a service's command line (the services' own flags).
@@ -43,7 +46,15 @@ OPTION_FLAGS: dict[str, Callable[["Launch"], list[str]]] = {
     # Persisted state of this run only: a new run must not inherit the last run's constraints,
     # while a restarted service within the run must find its own.
     "state": lambda l: ["--state-dir", str(l.run_dir / "state")] if l.run_dir else [],
+    # The sim renders the camera; the AR client (default source: that camera) and the tablet page
+    # (viewer mode on it) show it. Without a camera the page uses each browser's own camera.
+    "camera": lambda l: ["--camera", l.mission.camera] if l.mission.camera else [],
+    "camera_source": lambda l: ["--camera-source", f"sim:{SIM_CAMERA_ID}"] if l.mission.camera else [],
+    # A few overlay frames spread over the run, kept with its other records.
+    "snapshots": lambda l: ["--snapshots", str(l.run_dir / OVERLAY_FOLDER)] if l.run_dir else [],
 }
+SIM_CAMERA_ID = "tablet"  # the sim's default --camera-id, which is also the AR client's default --camera
+OVERLAY_FOLDER = "overlays"
 
 
 @dataclass(frozen=True)
@@ -56,6 +67,12 @@ class ServiceSpec:
     help: str = ""
     # Services (of the same run) whose liveliness token must be seen before this one starts.
     after: tuple[str, ...] = ()
+    # The access-control identity it runs as (its rendered config is <role>.json5); default: its name.
+    role: str = ""
+
+    @property
+    def identity(self) -> str:
+        return self.role or self.name
 
 
 SERVICES: dict[str, ServiceSpec] = {
@@ -65,10 +82,14 @@ SERVICES: dict[str, ServiceSpec] = {
         # simulated human only. The planner's own --method (iidp or joint) is a different option.
         ServiceSpec("planner", ("planner",), (), "task and motion planner, dispatcher"),
         ServiceSpec("restrictor", ("restrictor",), ("state",), "feedback -> constraints"),
-        # The sim starts the mission clock: the planner and restrictor must be listening by then.
-        ServiceSpec("sim", ("sim",), ("method", "mode", "rate", "seed"), "simulated robots, doors, human, tablet camera",
-                    after=("planner", "restrictor")),
-        ServiceSpec("ar", ("ar",), (), "AR client and tablet page"),
+        # The sim starts the mission clock: the planner and restrictor must be listening by then, and
+        # the AR client (when this run has one) watching, so its overlays cover the whole mission.
+        ServiceSpec("sim", ("sim",), ("method", "mode", "rate", "seed", "camera"), "simulated robots, doors, human, tablet camera",
+                    after=("planner", "restrictor", "ar")),
+        ServiceSpec("ar", ("ar",), ("snapshots",), "AR client: overlays of the camera frames"),
+        # Any free port: the printed URL carries it with the run's token. Its identity is the AR role's.
+        ServiceSpec("tablet", ("tablet", "--port", "0", "--no-qr"), ("camera_source",), "tablet page (HTTPS; URL and token printed)",
+                    role="ar"),
         ServiceSpec("ping", ("ping", "serve"), (), "echo server for link checks (arroch ping send)"),
     )
 }
@@ -135,7 +156,7 @@ def parse_services(text: str | None) -> list[ServiceSpec]:
 
 def service_argv(spec: ServiceSpec, launch: Launch) -> list[str]:
     """``arroch <service> --namespace ... --connect ... <mission flags>``."""
-    argv = [*ARROCH, *spec.command, *launch.common_args(), *launch.zenoh_args(spec.name)]
+    argv = [*ARROCH, *spec.command, *launch.common_args(), *launch.zenoh_args(spec.identity)]
     for option in spec.takes:
         argv += OPTION_FLAGS[option](launch)
     return argv

@@ -15,6 +15,7 @@ Examples:
   arroch up --services planner,sim --method arroch --rate 10
   arroch up --services ping --child 'pinger={python} -m services.cli ping send --count 50'
   arroch up --no-router --zenoh-config-dir /etc/arroch/zenoh --services sim   # one host of several
+  arroch up --services planner,restrictor,sim,ar,tablet --camera tablet --until-done   # what `arroch demo` runs
 """
 
 from __future__ import annotations
@@ -37,6 +38,9 @@ log = logging.getLogger("arroch.up")
 
 def _namespace(args: argparse.Namespace) -> str:
     if args.namespace:
+        from protocol.keys import Keys
+
+        Keys(args.namespace)  # ValueError (exit 2) for a name that cannot be a key chunk
         return args.namespace
     from protocol.runner import namespace_from  # loads the site file: only when the name is needed
 
@@ -70,7 +74,7 @@ def build_config(args: argparse.Namespace) -> tuple[UpConfig, ZenohOptions]:
     services = parse_services(args.services)
     config_dir = Path(args.zenoh_config_dir).resolve() if args.zenoh_config_dir else None
     if config_dir is not None:
-        needed = [s.name for s in services] + [SUPERVISOR_ROLE] + (["router"] if args.router else [])
+        needed = list(dict.fromkeys(s.identity for s in services)) + [SUPERVISOR_ROLE] + (["router"] if args.router else [])
         missing = [f"{config_dir / name}.json5" for name in needed if not (config_dir / f"{name}.json5").is_file()]
         if missing:
             raise ValueError(f"missing Zenoh configs {', '.join(missing)} (arroch deploy render --out-dir {config_dir})")
@@ -94,7 +98,7 @@ def build_config(args: argparse.Namespace) -> tuple[UpConfig, ZenohOptions]:
     launch = Launch(
         namespace=_namespace(args), connect=connect, zenoh_config_dir=config_dir, site=args.site,
         clock=args.clock if args.clock != "sim" else None, log_level=args.log_level,
-        mission=MissionOptions(method=args.method, mode=args.mode, rate=args.rate, seed=args.seed),
+        mission=MissionOptions(method=args.method, mode=args.mode, rate=args.rate, seed=args.seed, camera=args.camera),
     )
     extra = [parse_child(entry, launch) for entry in args.child or []]
     names = [s.name for s in services] + [name for name, _ in extra]
@@ -149,6 +153,8 @@ def add_up_arguments(parser: argparse.ArgumentParser) -> None:
                          help="simulation clock: realtime, rate (with --rate) or lockstep (time advances only when every request is answered)")
     mission.add_argument("--rate", type=float, metavar="K", help="simulate at K times real time")
     mission.add_argument("--seed", type=int, metavar="N", help="random seed of the simulation")
+    mission.add_argument("--camera", metavar="SPEC", help="the sim's virtual camera: 'tablet' (the human's tablet) or X,Y,Z,YAW,PITCH; "
+                                                         "the ar client and the tablet page (viewer mode) show it")
     run = parser.add_argument_group("supervision")
     run.add_argument("--until-done", action="store_true", help="stop when the mission_done event arrives and print its metrics")
     run.add_argument("--timeout", type=float, metavar="S", help="give up (exit 1) after S seconds")

@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 
 from protocol.messages import Event, RobotStatus
+from services.supervisor.catalog import SERVICES, Launch, MissionOptions, service_argv
 from tests.procs import Proc, arroch
 
 CRASH = "{python} -c 'import sys; sys.exit(3)'"
@@ -182,11 +183,14 @@ def test_a_supervisor_killed_outright_takes_its_children_with_it(spawn, namespac
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--services", "planner,bogus,ar"], "unknown service 'bogus' (known: planner, restrictor, sim, ar, ping)"),
+    (["--services", "planner,bogus,ar"], "unknown service 'bogus' (known: planner, restrictor, sim, ar, tablet, ping)"),
     (["--child", "ping=sleep 1"], "'ping' is taken"),
     (["--child", "nocommand"], "expected NAME=COMMAND"),
     (["--no-router", "--services", ""], "nothing to run"),
     (["--zenoh-config-dir", "/nonexistent", "--services", "sim"], "missing Zenoh configs /nonexistent/sim.json5"),
+    # The tablet page runs as the AR identity: its config is ar.json5, asked for once.
+    (["--zenoh-config-dir", "/nonexistent", "--services", "ar,tablet", "--no-router", "--camera", "tablet"],
+     "missing Zenoh configs /nonexistent/ar.json5, /nonexistent/supervisor.json5 ("),
 ])
 def test_up_refuses_bad_options_clearly(args, message, tmp_path):
     result = subprocess.run(arroch("up", "--namespace", "t", "--run-dir", str(tmp_path), *args),
@@ -194,6 +198,20 @@ def test_up_refuses_bad_options_clearly(args, message, tmp_path):
     assert result.returncode == 2, result.stdout + result.stderr
     assert message in result.stdout, result.stdout
     assert not list(tmp_path.iterdir()), "a refused run must not leave a run folder"
+
+
+def test_the_camera_option_reaches_the_sim_and_the_tablet_page_and_overlays_go_to_the_run_folder(tmp_path):
+    run = tmp_path / "20260101-000000"
+    launch = Launch(namespace="n", zenoh_config_dir=tmp_path, mission=MissionOptions(camera="tablet", mode="lockstep"), run_dir=run)
+    sim, ar, tablet = (service_argv(SERVICES[name], launch) for name in ("sim", "ar", "tablet"))
+    assert sim[sim.index("--camera") + 1] == "tablet" and sim[sim.index("--mode") + 1] == "lockstep"
+    assert ar[ar.index("--snapshots") + 1] == str(run / "overlays") and "--camera" not in ar
+    assert tablet[tablet.index("--camera-source") + 1] == "sim:tablet" and tablet[tablet.index("--port") + 1] == "0"
+    assert tablet[tablet.index("--zenoh-config") + 1] == str(tmp_path / "ar.json5")  # the AR identity
+    assert "ar" in SERVICES["sim"].after  # the AR client watches from the mission's first frame
+    # Without a camera the page takes each browser's own camera, and the sim renders nothing.
+    plain = Launch(namespace="n", connect=["tcp/127.0.0.1:1"])
+    assert "--camera-source" not in service_argv(SERVICES["tablet"], plain) and "--camera" not in service_argv(SERVICES["sim"], plain)
 
 
 def test_the_sim_starts_only_once_the_restrictor_is_up(spawn, namespace, tmp_path):

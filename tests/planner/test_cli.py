@@ -55,6 +55,8 @@ def test_bad_arguments_exit_2():
     assert run("plan", "--unavailable", "nodoor").returncode == 2
     assert run("plan", "--site", "/nonexistent.toml").returncode == 2
     assert run("plan", "--time-limit", "0").returncode == 2
+    bad = run("plan", "--solve-limit", "-1")
+    assert bad.returncode == 2 and "--solve-limit must be positive" in bad.stderr
 
 
 def test_planner_help():

@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from protocol.codec import decode, encode
+from protocol.codec import decode, encode, validator_for
 from protocol.errors import ProtocolError
 from protocol.messages import ALL_MESSAGES, CameraTruth, Event, Intent, RobotPose, RobotStatus, TeamPlan
 from protocol.schema import plan_for
@@ -23,9 +23,14 @@ ENVELOPE = ("v", "type", "src", "seq", "stamp")
 
 
 def refused(payload: object, cls: type | None = None) -> ProtocolError:
-    """Decode, expecting a refusal; returns the error for the caller's checks."""
+    """Decode, expecting a refusal; returns the error for the caller's checks. With a class, the
+    class's check alone (what a relay runs) must refuse it with the very same error."""
     with pytest.raises(ProtocolError) as info:
         decode(payload, cls)  # type: ignore[arg-type]
+    if cls is not None:
+        with pytest.raises(ProtocolError) as checked:
+            validator_for(cls)(payload)
+        assert (checked.value.field, str(checked.value)) == (info.value.field, str(info.value))
     return info.value
 
 

@@ -3,6 +3,7 @@ from the message declarations themselves)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import msgpack
@@ -10,7 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from protocol.codec import decode, decoder_for, encode, encoder_for
+from protocol.codec import decode, decoder_for, encode, encoder_for, validator_for
 from protocol.messages import ALL_MESSAGES, BY_TYPE, Intent, RobotPose
 from protocol.schema import plan_for, record_to_wire
 from tests.protocol.strategies import fields_of, minimal_wire, pack, sample_message, strategy_for
@@ -25,6 +26,7 @@ def test_every_message_round_trips(cls, data):
     msg = data.draw(strategy_for(cls))
     payload = encode(msg)
     assert decode(payload, cls) == msg
+    validator_for(cls)(payload)  # what decodes also passes the check alone (it raises otherwise)
     # Without an expected type the payload's own `type` picks the class.
     untyped = decode(payload)
     assert type(untyped) is cls and untyped == msg
@@ -51,6 +53,17 @@ def test_generated_paths_agree_with_the_generic_ones(cls):
     wire = record_to_wire(msg)
     assert msgpack.unpackb(encoder_for(cls)(msg)) == {**wire, "v": cls.VERSION, "type": cls.TYPE}
     assert decoder_for(cls)(pack(minimal_wire(cls))) == msg
+
+
+def test_whole_record_fast_path_and_field_by_field_path_agree():
+    """A plain pose passes the all-at-once check; a value needing conversion (an int in a float
+    field) or a field left out to its default misses it and goes field by field: all agree."""
+    base = minimal_wire(RobotPose) | {"x": 1.5, "vel": 0.5, "omega": -0.25}
+    fast = decode(pack(base), RobotPose)
+    assert (fast.x, fast.vel, fast.omega) == (1.5, 0.5, -0.25)
+    assert decode(pack(base | {"x": 2}), RobotPose) == dataclasses.replace(fast, x=2.0)
+    assert decode(pack({k: v for k, v in base.items() if k != "omega"}), RobotPose) == dataclasses.replace(fast, omega=0.0)
+    assert decode(pack(base | {"unknown": [1, 2]}), RobotPose) == fast
 
 
 def test_int_in_a_float_field_decodes_as_float():

@@ -15,7 +15,7 @@ import zenoh
 from protocol import service as service_module
 from protocol.codec import ENCODING, encode
 from protocol.messages import Event, RobotPose, RobotStatus
-from protocol.service import BAD_LOG_INTERVAL, MAX_BAD_SENDERS, Service
+from protocol.service import BAD_LOG_INTERVAL, MAX_BAD_SENDERS, Service, publisher_options
 from tests.protocol.conftest import Running, eventually
 
 pytestmark = pytest.mark.integration
@@ -164,6 +164,50 @@ def test_inline_handlers_run_on_zenohs_thread_without_the_worker(make_service, p
     assert (msg.robot, msg.seq, key) == ("r3", 4, peer.keys.robot_pose("r3"))
     assert ident != threading.get_ident()
     assert probe.counters["received"] == 1
+
+
+@pytest.mark.parametrize("inline", [False, True], ids=["worker", "inline"])
+def test_sample_key_off_hands_handlers_the_subscription_key(make_service, peer, inline):
+    pattern = peer.keys.robot_pose("*")
+    running = make_service(Probe, subscriptions=[{"key": pattern, "inline": inline, "sample_key": False}]).start()
+    pub = publisher_for(peer, peer.keys.robot_pose("r5"))
+    pub.put(good_pose("r5"))
+    pub.put(b"not msgpack")
+    probe = running.service
+    eventually(lambda: len(probe.seen) == 1 and probe.counters["bad_messages"] == 1, what="both payloads")
+    msg, key, _ = probe.seen[0]
+    assert (msg.robot, key) == ("r5", pattern)
+    assert probe.counters[f"bad_messages:{peer.keys.robot_pose('r5')}"] == 1  # still counted per sample key
+    with pytest.raises(ValueError, match="sample_key"):
+        probe.subscribe(pattern, RobotPose, probe.record, latest=True, sample_key=False)
+
+
+def test_relay_passes_valid_payloads_on_byte_for_byte(make_service, peer):
+    class Relay(Service):
+        def setup(self) -> None:
+            self.relay(self.keys.robot_pose("*"), RobotPose, self.keys.ping_reply())
+
+    relay = make_service(Relay, "relay").service
+    got: list[bytes] = []
+    peer._declared.append(peer.session.declare_subscriber(peer.keys.ping_reply(), lambda s: got.append(s.payload.to_bytes())))
+    eventually(lambda: relay._publishers[relay.keys.ping_reply()].matching_status.matching, what="the listener")
+    pub = publisher_for(peer, peer.keys.robot_pose("r0"))
+    padded = encode(RobotPose(robot="r0", x=1.0, y=2.0, theta=0.0, src="peer-1", seq=9, stamp=3.0), {"pad": b"\0" * 40})
+    pub.put(bad_pose("peer-1"))
+    pub.put(padded)
+    eventually(lambda: len(got) == 1 and relay.counters["bad_messages"] == 1, what="the relayed pose")
+    time.sleep(0.2)
+    assert got == [padded]  # the bytes received, unknown field and envelope included; the bad one stopped
+    assert (relay.counters["received"], relay.counters["published"]) == (1, 1)
+
+
+def test_publishers_use_the_shared_options(make_service, peer):
+    probe = make_service(Probe).service
+    publisher = probe.advertise(probe.keys.robot_pose("r0"))
+    options = publisher_options()
+    assert (publisher.congestion_control, publisher.priority, publisher.reliability, str(publisher.encoding)) == (
+        options["congestion_control"], options["priority"], options["reliability"], str(options["encoding"]))
+    assert publisher_options(express=False)["express"] is False
 
 
 def test_inline_and_latest_together_refused(make_service, peer):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import socket
+import threading
 import time
 
 import pytest
@@ -17,6 +18,7 @@ from protocol.transport import (
     build_config,
     free_tcp_port,
     load_config_file,
+    on_zenoh_thread,
     open_session,
     options_from,
 )
@@ -160,3 +162,47 @@ def test_sessions_from_a_json5_file_talk(json5_file):
             talker.close()
     finally:
         listener.close()
+
+
+def test_zenoh_thread_callbacks_keep_their_thread_state():
+    """on_zenoh_thread runs the callback on Zenoh's own thread (not on the caller's, not through
+    zenoh-python's hand-off thread) and that thread keeps its Python state between samples: a
+    thread-local set by one sample is still there for the next one on the same thread."""
+    port = free_tcp_port()
+    listener = open_session(ZenohOptions(mode="peer", listen=[f"tcp/127.0.0.1:{port}"], shared_memory=False))
+    try:
+        talker = open_session(ZenohOptions(mode="peer", connect=[f"tcp/127.0.0.1:{port}"], shared_memory=False))
+        try:
+            local = threading.local()
+            calls: list[tuple[int, bool]] = []  # (thread, whether its thread-local was already set)
+
+            def on_sample(sample: zenoh.Sample) -> None:
+                calls.append((threading.get_ident(), getattr(local, "seen", False)))
+                local.seen = True
+
+            callback = on_zenoh_thread(on_sample)
+            assert callback.indirect is False
+            sub = listener.declare_subscriber("arroch/t/thread", callback)
+            deadline = time.monotonic() + 10
+            while not calls and time.monotonic() < deadline:
+                talker.put("arroch/t/thread", b"first")
+                time.sleep(0.05)
+            assert calls, "no sample arrived"
+            before = len(calls)
+            for _ in range(30):
+                talker.put("arroch/t/thread", b"more")
+            while len(calls) < before + 30 and time.monotonic() < deadline:
+                time.sleep(0.01)
+            sub.undeclare()
+        finally:
+            talker.close()
+    finally:
+        listener.close()
+    assert len(calls) >= before + 30
+    assert threading.get_ident() not in {ident for ident, _ in calls}
+    # Every call after a thread's first found the state its first call left.
+    firsts: set[int] = set()
+    for ident, seen in calls:
+        assert seen == (ident in firsts), (ident, seen)
+        firsts.add(ident)
+    assert len(firsts) < len(calls)  # some thread ran several callbacks, so the check above bit

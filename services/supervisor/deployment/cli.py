@@ -31,7 +31,7 @@ def run_certs(args: argparse.Namespace) -> int:
         hosts = parse_hosts(_split(args.hosts), args.san or [], localhost=not args.no_localhost)
         for line in make_certs(Path(args.out), hosts, days=args.days, force=args.force):
             print(line)
-    except CertError as exc:
+    except (CertError, OSError) as exc:  # OSError: an --out that is a file, a folder we may not write
         log.error("%s", exc)
         return 2
     print(f"keep {Path(args.out) / 'ca.key'} off the robots and tablets: it signs new identities")
@@ -65,18 +65,22 @@ def run_render(args: argparse.Namespace) -> int:
     except (RenderError, ValueError) as exc:
         log.error("%s", exc)
         return 2
-    if args.out_dir:
-        out_dir = Path(args.out_dir)
-        out_dir.mkdir(parents=True, exist_ok=True)
-        for role, text in texts.items():
-            path = out_dir / f"{role}.json5"
-            path.write_text(text)
-            print(f"wrote {path}")
-    elif args.out in (None, "-"):
-        sys.stdout.write(next(iter(texts.values())))
-    else:
-        Path(args.out).write_text(next(iter(texts.values())))
-        print(f"wrote {args.out}")
+    try:
+        if args.out_dir:
+            out_dir = Path(args.out_dir)
+            out_dir.mkdir(parents=True, exist_ok=True)
+            for role, text in texts.items():
+                path = out_dir / f"{role}.json5"
+                path.write_text(text)
+                print(f"wrote {path}")
+        elif args.out in (None, "-"):
+            sys.stdout.write(next(iter(texts.values())))
+        else:
+            Path(args.out).write_text(next(iter(texts.values())))
+            print(f"wrote {args.out}")
+    except OSError as exc:
+        log.error("cannot write: %s", exc)
+        return 2
     return 0
 
 

@@ -1,0 +1,156 @@
+"""``arroch experiment robots|laziness|report``: the paper's simulation experiments (§V-A).
+
+Each trial runs the real planner, restrictor and sim (its human model) as separate processes over
+Zenoh, in lockstep mode, on a site generated from the trial's seed. Trials run ``--jobs`` at a time
+and are recorded in DIR/trials.csv as they end (a crash loses nothing finished); ``--resume``
+continues an interrupted sweep. The same options give the same trials.csv byte for byte. When the
+sweep is complete the report is built (``arroch experiment report DIR`` rebuilds it from the CSV).
+
+Examples:
+  arroch experiment robots --robots 2,3,4,5,6 --objects 3 --trials 30 --seed 0 --out experiments/results/robots
+  arroch experiment laziness --p 0.05,0.1,0.2,0.4,0.6,0.8,1.0 --robots 3 --out experiments/results/laziness
+  arroch experiment robots --robots 2 --objects 1 --trials 2 --methods arroch --out /tmp/tiny
+  arroch experiment report experiments/results/robots
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+from pathlib import Path
+from typing import Any, Callable
+
+from .design import METHODS, SweepSpec, format_p
+
+log = logging.getLogger("arroch.experiment")
+
+
+def _list(kind: Callable[[str], Any], what: str) -> Callable[[str], tuple[Any, ...]]:
+    def parse(text: str) -> tuple[Any, ...]:
+        parts = [part.strip() for part in text.split(",") if part.strip()]
+        if not parts:
+            raise argparse.ArgumentTypeError(f"expected a comma-separated list of {what}")
+        try:
+            return tuple(kind(part) for part in parts)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a comma-separated list of {what}, got {text!r}") from None
+
+    return parse
+
+
+def _methods(text: str) -> tuple[str, ...]:
+    methods = _list(str, "methods")(text)
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:
+        raise argparse.ArgumentTypeError(f"unknown method(s) {', '.join(unknown)} (known: {', '.join(METHODS)})")
+    return methods
+
+
+def _default_p() -> float:
+    """The simulator's own default door-opening probability (the robots sweep does not vary it)."""
+    from services.sim.human import HumanConfig
+
+    return HumanConfig().door_probability
+
+
+def _add_sweep_arguments(parser: argparse.ArgumentParser, kind: str) -> None:
+    sweep = parser.add_argument_group("sweep (decides the results)")
+    if kind == "robots":
+        sweep.add_argument("--robots", type=_list(int, "team sizes"), default=(2, 3, 4, 5, 6), metavar="N,N,...",
+                           help="team sizes (default 2,3,4,5,6)")
+        sweep.add_argument("--p", type=float, default=None, metavar="P",
+                           help=f"the human's door-opening probability (default: the sim's, {format_p(_default_p())})")
+    else:
+        sweep.add_argument("--p", type=_list(float, "probabilities"), default=(0.05, 0.1, 0.2, 0.4, 0.6, 0.8, 1.0),
+                           metavar="P,P,...", help="door-opening probabilities (default 0.05,0.1,0.2,0.4,0.6,0.8,1.0)")
+        sweep.add_argument("--robots", type=int, default=3, metavar="N", help="team size (default 3)")
+    sweep.add_argument("--objects", type=int, default=3, metavar="K", help="objects per robot (default 3, as in the paper)")
+    sweep.add_argument("--trials", type=int, default=30, metavar="T", help="trials per condition (default 30)")
+    sweep.add_argument("--methods", type=_methods, default=METHODS, metavar="M,M,...",
+                       help=f"methods (default {','.join(METHODS)})")
+    sweep.add_argument("--seed", type=int, default=0, help="base seed; every trial's seeds derive from it (default 0)")
+    sweep.add_argument("--human-config", metavar="FILE",
+                       help="the sim's --human-config for every trial (default: the sim's human model, the paper's; "
+                            "for quick checks only: results under another model are not the paper's experiment)")
+    sweep.add_argument("--time-limit", type=float, metavar="S", help="the sim's --time-limit in sim seconds (default: the sim's, 7200)")
+    run = parser.add_argument_group("execution (decides only the speed)")
+    run.add_argument("--out", type=Path, default=None, metavar="DIR", help=f"results folder (default experiments/results/{kind})")
+    run.add_argument("--resume", action="store_true", help="continue the sweep in DIR: finished trials are kept, the others run")
+    run.add_argument("--jobs", type=int, default=os.cpu_count() or 1, metavar="N", help=f"trials at once (default {os.cpu_count()}: the cores)")
+    run.add_argument("--router", choices=("worker", "shared", "trial"), default="worker",
+                     help="Zenoh router per worker (default), one shared by all, or one per trial")
+    run.add_argument("--trial-timeout", type=float, default=900.0, metavar="S",
+                     help="wall seconds before a trial is given up as a timeout (default 900)")
+    run.add_argument("--service-log-level", choices=("DEBUG", "INFO", "WARNING", "ERROR"), default="WARNING",
+                     help="log level of the trials' services (default WARNING; their output is kept for failed trials)")
+    run.add_argument("--progress", choices=("auto", "bar", "line", "off"), default="auto",
+                     help="a bar on a terminal (auto), a line every 30 s, or nothing")
+    run.add_argument("--keep-events", action="store_true",
+                     help="keep every trial's event log in DIR/events/<trial>.jsonl (the sim's --events-out; to compare runs)")
+    run.add_argument("--no-report", dest="report", action="store_false", help="do not build the report at the end")
+    parser.add_argument("--log-level", default=None, choices=("DEBUG", "INFO", "WARNING", "ERROR"),
+                        help="this command's log level (env ARROCH_LOG_LEVEL, default INFO)")
+
+
+def _spec(args: argparse.Namespace) -> SweepSpec:
+    human = None
+    if args.human_config:
+        try:
+            human = Path(args.human_config).read_text(encoding="utf-8")
+        except OSError as exc:
+            raise ValueError(f"--human-config {args.human_config}: {exc.strerror}") from None
+    if args.kind == "robots":
+        robots, ps = args.robots, (args.p if args.p is not None else _default_p(),)
+    else:
+        robots, ps = (args.robots,), args.p
+    return SweepSpec(kind=args.kind, methods=args.methods, robots=tuple(robots), objects=args.objects,
+                     ps=tuple(ps), trials=args.trials, seed=args.seed, human_config=human, time_limit=args.time_limit)
+
+
+def run_sweep(args: argparse.Namespace) -> int:
+    from .runner import RunOptions, Sweep, SweepError
+    from .trial import TrialConfig
+
+    try:
+        spec = _spec(args)
+        options = RunOptions(
+            out=args.out or Path("experiments/results") / args.kind, jobs=args.jobs, router=args.router,
+            resume=args.resume, progress=args.progress, report=args.report,
+            trial=TrialConfig(timeout=args.trial_timeout, log_level=args.service_log_level, events_dir=None),
+            keep_events=args.keep_events,
+        )
+        sweep = Sweep(spec, options)
+        return sweep.run()
+    except (ValueError, SweepError) as exc:
+        log.error("%s", exc)
+        return 2
+
+
+def run_report(args: argparse.Namespace) -> int:
+    from .report import ReportError, build_report
+
+    try:
+        written = build_report(args.dir)
+    except (ReportError, FileNotFoundError) as exc:
+        log.error("%s", exc)
+        return 2
+    for path in written:
+        print(path)
+    return 0
+
+
+def register(subparsers: Any) -> None:
+    parser = subparsers.add_parser("experiment", help="the paper's simulation experiments: sweeps and their report",
+                                   description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.set_defaults(func=lambda _args: parser.print_help() or 2)
+    sub = parser.add_subparsers(dest="experiment", metavar="SWEEP")
+    for kind, text in (("robots", "vary the number of robots (paper: figure 'different number of robots')"),
+                       ("laziness", "vary the human's door-opening probability (paper: figure 'human laziness')")):
+        p = sub.add_parser(kind, help=text, description=f"{text}.\n\n{__doc__}", formatter_class=argparse.RawDescriptionHelpFormatter)
+        _add_sweep_arguments(p, kind)
+        p.set_defaults(func=run_sweep, kind=kind)
+    report = sub.add_parser("report", help="rebuild a results folder's tables, figures, tests and claims from its CSV")
+    report.add_argument("dir", type=Path, metavar="DIR", help="a results folder (with trials.csv)")
+    report.add_argument("--log-level", default=None, choices=("DEBUG", "INFO", "WARNING", "ERROR"))
+    report.set_defaults(func=run_report)

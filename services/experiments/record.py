@@ -1,0 +1,125 @@
+"""A trial's outcome as CSV rows: the results (``trials.csv``) and how long it took (``timing.csv``).
+
+``trials.csv`` holds only what follows from the seeds (a seeded lockstep mission gives the same
+metrics every time), so the same sweep gives the same file byte for byte. Anything measured on the
+wall clock, or depending on how the planner's replan bursts happened to fall, goes to
+``timing.csv`` under the same identity columns. Numbers are written with fixed formats (times to the
+millisecond), never ``repr`` of a float, so the text does not depend on how a value was computed.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from .design import SweepSpec, TrialKey, format_p
+from .trial import TrialOutcome
+
+KEY_FIELDS = ("method", "robots", "objects", "door_probability", "trial")
+
+TRIAL_FIELDS = KEY_FIELDS + (
+    "site_seed",  # protocol.site.generate_site(robots, objects, site_seed)
+    "seed",  # the sim's --seed
+    "status",  # ok, unfinished, timeout, error
+    "reason",
+    "team_completion_time",  # s, the slowest agent, the human included
+    "slowest_robot_time",  # s, the last delivery of the team
+    "human_completion_time",  # s, her own task done
+    "agent_completion_times",  # name=seconds;... each robot, then the human
+    "door_openings",  # doors the human opened (her a1 actions): the paper's figure (a)
+    "human_door_trips",  # walks to a door she began (some turn back when a focus interval starts)
+    "feedback_sent",  # a2(N) feedback the human sent (ARROCH only)
+    "feedback_accepted",
+    "replans",  # plans the lockstep made the planner answer: new world versions + accepted feedback
+    "world_versions",
+    "robot_wait_time",  # s, all robots together, waiting at doors
+    "human_time_away",  # s she spent walking to doors and opening them
+    "actions_failed",
+    "sim_time",  # s of simulated time when the mission ended
+)
+
+TIMING_FIELDS = KEY_FIELDS + (
+    "status",
+    "wall_time",  # s, the whole trial: start-up, mission, shutdown
+    "services_up",  # s until the planner and restrictor showed their liveliness tokens
+    "sim_startup",  # s from starting the sim to its mission start, plus its end and our noticing it
+    "mission_wall_time",  # s, the sim's own measure from mission start to mission end
+    "shutdown",  # s to stop the trial's processes
+    "plans",  # TeamPlans the planner published
+    "planner_solve_time",  # s, the sum of their solve times
+    "realtime_factor",  # sim seconds per wall second during the mission
+    "code",  # fingerprint of the services' sources when the trial started (provenance.py)
+)
+
+DONE = ("ok", "unfinished")  # outcomes of the model: recorded for good, skipped by --resume
+
+
+def _t(value: Any) -> str:
+    """A time (or any real number) to the millisecond; empty when unknown."""
+    return "" if value is None else f"{float(value):.3f}"
+
+
+def _n(value: Any) -> str:
+    return "" if value is None else str(int(value))
+
+
+def key_cells(key: TrialKey) -> dict[str, str]:
+    return {"method": key.method, "robots": str(key.robots), "objects": str(key.objects),
+            "door_probability": format_p(key.p), "trial": str(key.trial)}
+
+
+def key_of(row: dict[str, str]) -> TrialKey:
+    """The identity of a CSV row (raises ValueError on a malformed one)."""
+    return TrialKey(row["method"], int(row["robots"]), int(row["objects"]), float(row["door_probability"]), int(row["trial"]))
+
+
+def trial_row(spec: SweepSpec, outcome: TrialOutcome) -> dict[str, str]:
+    key = outcome.key
+    row = {name: "" for name in TRIAL_FIELDS}
+    row.update(key_cells(key))
+    row.update(site_seed=str(spec.site_seed(key)), seed=str(spec.sim_seed(key)), status=outcome.status,
+               reason=outcome.reason)
+    m = outcome.metrics
+    if m is None:
+        return row
+    agents: dict[str, Any] = m.get("agent_completion_times") or {}
+    robots = {name: t for name, t in agents.items() if name != "human"}
+    robot_times = [t for t in robots.values() if t is not None]
+    human = m.get("human") or {}
+    feedback = m.get("feedback") or {}
+    row.update(
+        team_completion_time=_t(m.get("team_completion_time")),
+        slowest_robot_time=_t(max(robot_times)) if robot_times and len(robot_times) == len(robots) else "",
+        human_completion_time=_t(agents.get("human")),
+        agent_completion_times=";".join(f"{name}={_t(t)}" for name, t in [*sorted(robots.items()), ("human", agents.get("human"))]),
+        door_openings=_n(m.get("human_door_openings")),
+        human_door_trips=_n(human.get("door_trips")),
+        feedback_sent=_n(feedback.get("sent")),
+        feedback_accepted=_n(feedback.get("accepted")),
+        replans=_n(max(0, int(m.get("world_versions") or 0) - 1) + int(feedback.get("accepted") or 0)),
+        world_versions=_n(m.get("world_versions")),
+        robot_wait_time=_t(sum(float(r.get("wait_time") or 0.0) for r in (m.get("robots") or {}).values())),
+        human_time_away=_t(human.get("time_away")),
+        actions_failed=_n((m.get("actions") or {}).get("failed")),
+        sim_time=_t(m.get("time")),
+    )
+    return row
+
+
+def timing_row(outcome: TrialOutcome) -> dict[str, str]:
+    timing = outcome.timing
+    row = {name: "" for name in TIMING_FIELDS}
+    row.update(key_cells(outcome.key))
+    realtime = ((outcome.metrics or {}).get("run") or {}).get("realtime_factor")
+    row.update(
+        status=outcome.status,
+        wall_time=_t(timing.get("wall")),
+        services_up=_t(timing.get("services_up")),
+        sim_startup=_t(timing.get("sim_startup")),
+        mission_wall_time=_t(timing.get("mission")),
+        shutdown=_t(timing.get("shutdown")),
+        plans=_n(timing.get("plans")),
+        planner_solve_time=_t(timing.get("solve_time")),
+        realtime_factor=_t(realtime),
+        code=outcome.code,
+    )
+    return row

@@ -1,0 +1,64 @@
+"""A trial's outcome as CSV cells: every figure from the sim's metrics, in fixed formats."""
+
+from __future__ import annotations
+
+from services.experiments.design import SweepSpec, TrialKey
+from services.experiments.record import TIMING_FIELDS, TRIAL_FIELDS, key_of, timing_row, trial_row
+from services.experiments.trial import TrialOutcome
+
+SPEC = SweepSpec(kind="robots", methods=("arroch",), robots=(2,), objects=1, ps=(0.5,), trials=1, seed=0)
+KEY = TrialKey("arroch", 2, 1, 0.5, 0)
+
+# The shape of the sim's metrics (services/sim/metrics.py), with made-up numbers.
+METRICS = {
+    "completed": True, "time": 642.15, "team_completion_time": 642.1,
+    "agent_completion_times": {"r0": 301.25, "r1": 412.0000001, "human": 642.1},
+    "human_door_openings": 3, "door_openings": {"d_storage": {"human": 3}},
+    "feedback": {"sent": 2, "accepted": 1, "refused": 1, "unanswered": 0},
+    "actions": {"done": 20, "failed": 0}, "world_versions": 27,
+    "robots": {"r0": {"wait_time": 12.5}, "r1": {"wait_time": 0.25}},
+    "human": {"door_trips": 4, "time_away": 31.5},
+    "run": {"wall_time": 9.87, "realtime_factor": 65.06},
+}
+
+
+def test_trial_row() -> None:
+    outcome = TrialOutcome(KEY, "ok", "", METRICS, {"wall": 12.3456, "plans": 30, "solve_time": 1.5}, code="abc123")
+    row = trial_row(SPEC, outcome)
+    assert tuple(row) == TRIAL_FIELDS
+    assert key_of(row) == KEY
+    assert row["site_seed"] == str(SPEC.site_seed(KEY)) and row["seed"] == str(SPEC.sim_seed(KEY))
+    assert row["team_completion_time"] == "642.100"
+    assert row["slowest_robot_time"] == "412.000"
+    assert row["agent_completion_times"] == "r0=301.250;r1=412.000;human=642.100"
+    assert (row["door_openings"], row["human_door_trips"]) == ("3", "4")
+    assert (row["feedback_sent"], row["feedback_accepted"]) == ("2", "1")
+    assert row["replans"] == "27"  # 26 new world versions after the start + 1 accepted feedback
+    assert row["robot_wait_time"] == "12.750"
+    # Nothing measured on the wall clock reaches this file.
+    assert "12.346" not in row.values() and "9.870" not in row.values()
+    timing = timing_row(outcome)
+    assert tuple(timing) == TIMING_FIELDS
+    assert (timing["wall_time"], timing["mission_wall_time"], timing["plans"], timing["code"]) == ("12.346", "", "30", "abc123")
+
+
+def test_a_failed_trial_has_no_figures() -> None:
+    row = trial_row(SPEC, TrialOutcome(KEY, "timeout", "no end of mission within 5 s wall (mission running)"))
+    assert row["status"] == "timeout" and row["reason"].startswith("no end")
+    assert row["team_completion_time"] == row["door_openings"] == ""
+
+
+def test_code_fingerprint_follows_the_sources(tmp_path) -> None:  # noqa: ANN001
+    from services.experiments.provenance import code_fingerprint
+
+    (tmp_path / "services" / "planner").mkdir(parents=True)
+    (tmp_path / "protocol").mkdir()
+    source = tmp_path / "services" / "planner" / "rules.lp"
+    source.write_text("a.\n")
+    first = code_fingerprint(tmp_path)
+    assert code_fingerprint(tmp_path) == first and len(first) == 12
+    source.write_text("a. b.\n")
+    second = code_fingerprint(tmp_path)
+    assert second != first
+    (tmp_path / "services" / "planner" / "notes.txt").write_text("not a source")
+    assert code_fingerprint(tmp_path) == second

@@ -1,0 +1,96 @@
+"""``arroch demo`` (what ``make demo`` runs) end to end: the whole mission with the tablet camera, the
+AR client and the tablet page; the page's URL and token printed and the page really served; the run
+folder with the metrics, the event log and a few overlay frames that are real drawings over the
+camera's images."""
+
+from __future__ import annotations
+
+import json
+import re
+import ssl
+import time
+import urllib.request
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from tests.procs import arroch
+
+pytestmark = [pytest.mark.integration, pytest.mark.slow]
+
+TIMEOUT = 150.0  # wall s; the demo takes 20-35 s on two cores
+COLOUR_TOLERANCE = 60.0  # distance in RGB between a drawn pixel and its primitive's colour
+
+
+def drawn_fraction(image: np.ndarray, primitives: list[dict]) -> tuple[int, float]:
+    """(samples, fraction in the primitive's colour) along the solid door and intent lines.
+
+    Neither exists in the camera's image itself (the rendered leaves are blue or brown, the floor
+    has no paths), so only drawing puts those colours there; later primitives and the feedback
+    panel may cover some of them.
+    """
+    h, w = image.shape[:2]
+    hits = total = 0
+    for prim in primitives:
+        if prim["kind"] != "polyline" or prim["style"] != "solid" or not (prim["layer"] == "door" or prim["layer"].startswith("intent:")):
+            continue
+        rgb = np.array(prim["color"][:3], dtype=float)
+        points = np.asarray(prim["points"], dtype=float)
+        for a, b in zip(points[:-1], points[1:]):
+            steps = max(int(np.hypot(*(b - a)) / 3.0), 1)
+            for s in np.linspace(0.0, 1.0, steps + 1):
+                u, v = np.round(a + s * (b - a)).astype(int)
+                if 0 <= u < w and 0 <= v < h:
+                    total += 1
+                    hits += np.linalg.norm(image[v, u, ::-1].astype(float) - rgb) <= COLOUR_TOLERANCE
+    return total, hits / max(total, 1)
+
+
+def test_demo_runs_the_mission_serves_the_tablet_page_and_keeps_overlay_frames(spawn, tmp_path: Path):
+    state = tmp_path / "state"  # the tablet's certificate goes to $XDG_STATE_HOME/arroch/tablet
+    proc = spawn(arroch("demo", "--run-dir", str(tmp_path / "runs")), env={"XDG_STATE_HOME": str(state)}, name="demo")
+
+    # The URL and the token, said clearly while the mission runs, and the page really there.
+    proc.wait_for("==> tablet page", timeout=60)
+    token_line = proc.wait_for("access token:", timeout=10)
+    token = re.search(r"access token: (\S+)", token_line).group(1)
+    url = next(line.strip() for line in proc.output.splitlines() if line.strip().startswith("https://127.0.0.1:"))
+    assert f"?token={token}&mode=viewer" in url, url
+    context = ssl.create_default_context(cafile=str(state / "arroch" / "tablet" / "ca.pem"))
+    with urllib.request.urlopen(url, context=context, timeout=10) as page:
+        assert page.status == 200 and b"<html" in page.read().lower()
+
+    deadline = time.monotonic() + TIMEOUT
+    while proc.alive() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not proc.alive(), f"demo not done within {TIMEOUT} s:\n{proc.output[-4000:]}"
+    assert proc.popen.returncode == 0, proc.output[-4000:]
+    assert "[up] final progress" in proc.output and "delivered 9/9" in proc.output
+
+    (run,) = [p for p in (tmp_path / "runs").iterdir() if p.is_dir()]
+    metrics = json.loads((run / "metrics.json").read_text())
+    assert metrics["completed"] is True
+    assert sorted(o for r in metrics["robots"].values() for o in r["delivered"]) == [f"o{i}" for i in range(9)]
+    kinds = [json.loads(line)["kind"] for line in (run / "events.jsonl").read_text().splitlines()]
+    assert kinds.count("mission_done") == 1 and kinds.count("delivered") == 9
+    assert (run / "site.png").stat().st_size > 0
+
+    frames = sorted((run / "overlays").glob("overlay-*.png"))
+    assert 3 <= len(frames) <= 5, frames
+    assert f"{len(frames)} overlay frame(s)" in proc.output
+    times = []
+    for frame in frames:
+        image = cv2.imread(str(frame))
+        assert image is not None and image.shape == (480, 640, 3), frame
+        assert image.std() > 20, f"{frame.name} is nearly uniform"
+        record = json.loads(frame.with_suffix(".json").read_text())
+        layers = {p["layer"] for p in record["primitives"]}
+        assert record["ok"] and any(l.startswith("robot:") for l in layers) and any(l.startswith("intent:") for l in layers), layers
+        samples, fraction = drawn_fraction(image, record["primitives"])
+        assert samples >= 20 and fraction >= 0.3, f"{frame.name}: {fraction:.0%} of {samples} points along the drawn lines have their colour"
+        times.append(record["time"])
+    # Spread over the mission: from its first minute to the deliveries after the human's first focus
+    # interval (the camera shows little else in between: the robots wait behind her door).
+    assert times[0] < 60.0 and times[-1] - times[0] > 200.0, times

@@ -1,0 +1,1 @@
+"""Reliability tests: faults, loads and bad input against the real services."""

@@ -7,7 +7,8 @@ For each team size (robots x 3 objects, on sites from ``protocol.site.generate_s
 - replans as the service makes them while the mission runs: the world the current plan leads to at
   ``--replans`` evenly spaced times (``services.planner.replay``), each planned with IIDP starting
   from the plan being executed, plus one replan at each of those times after the human declares the
-  storage door unavailable for two minutes (a new ConstraintSet); wall time of each;
+  storage door unavailable for two minutes (a new ConstraintSet); wall time and CPU time of each
+  (CPU time moves less with the machine's load), and the clingo programs each solved;
 - for 2-3 robots, the joint program (all robots in one ASP program) with ``--joint-limit`` seconds:
   makespan, openings, whether optimality was proven, and IIDP/joint ratios.
 
@@ -57,7 +58,7 @@ def summary(values: list[float]) -> dict:
 
 def run_size(robots: int, seeds: int, replans: int, joint_limit: float, time_limit: float, first_limit: float, validate: bool) -> dict:
     cold_times, makespans, openings, rounds = [], [], [], []
-    replan_times, constraint_times = [], []
+    replan_times, constraint_times, cpu_times, solves = [], [], [], []
     invalid = 0
     joint_rows = []
     for seed in range(seeds):
@@ -76,18 +77,22 @@ def run_size(robots: int, seeds: int, replans: int, joint_limit: float, time_lim
         for k in range(1, replans + 1):
             t = first.makespan * k / (replans + 1)
             w = world_at(planner.builder, current_world, current, t)
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             nxt = planner.plan(w, warm=current)
             replan_times.append(time.perf_counter() - t0)
+            cpu_times.append(time.process_time() - c0)
+            solves.append(nxt.solves)
             if validate and validate_result(site, w, nxt):
                 invalid += 1
             # the human says: "I can't open the storage door for two minutes" (restrictor's form)
             start = int(t)
             item = unavailable("d_storage", start, start + 120, "bench")
             program = ConstraintProgram.build([item])
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             constrained = planner.plan(w, program, warm=nxt)
             constraint_times.append(time.perf_counter() - t0)
+            cpu_times.append(time.process_time() - c0)
+            solves.append(constrained.solves)
             if validate and validate_result(site, w, constrained, Windows.from_asp([item.asp])):
                 invalid += 1
             current, current_world = nxt, w
@@ -113,6 +118,8 @@ def run_size(robots: int, seeds: int, replans: int, joint_limit: float, time_lim
         "replan_seconds": summary(all_replans),
         "replan_seconds_after_progress": summary(replan_times),
         "replan_seconds_after_new_constraint": summary(constraint_times),
+        "replan_cpu_seconds": summary(cpu_times),
+        "replan_solves": {"median": statistics.median(solves), "total": sum(solves)} if solves else {},
         "makespan": {"median": statistics.median(makespans), "values": makespans},
         "door_openings": {"median": statistics.median(openings), "values": openings},
         "iidp_rounds": {"median": statistics.median(rounds), "values": rounds},

@@ -7,7 +7,8 @@ Prints one JSON object on stdout (progress goes to stderr):
 - ``latency``: RobotPose round trips between this process and echo processes over loopback TCP:
   - ``protocol``: ``arroch ping serve`` (a Service relaying inline, on Zenoh's thread: each pose is
     validated, then the bytes received go back out), timed by :class:`protocol.ping.PingSender`
-    (stamp and encode → Zenoh → validate → Zenoh → decode and validate);
+    (encode → Zenoh → validate → Zenoh → decode and validate, then the hand-off to the waiting
+    thread; the pose is stamped before the clock starts, as the raw side's bytes are made before);
   - ``protocol_worker``: the same through the Service's worker thread (``ping serve --worker``,
     which decodes, queues, and re-encodes on the worker);
   - ``raw``: a plain zenoh-python echo of the very same payload bytes, no codec and no Service.
@@ -18,7 +19,7 @@ Prints one JSON object on stdout (progress goes to stderr):
   :func:`protocol.transport.on_zenoh_thread`).
 
   The figures come from ``--runs`` runs, each with freshly started echo processes (a process's
-  luck with the machine, worth ±5-10 % here, does not carry over), and within a run from small
+  luck with the machine, worth ±10-15 % here, does not carry over), and within a run from small
   batches of each variant in random order, so that load changes hit every variant alike. Reported:
   the p50/p99 of all round trips of each variant and their ratios; ``*_paired``, the median over all
   rounds of the ratio of two variants' batch medians in that round (the same few milliseconds of
@@ -298,7 +299,9 @@ def one_run(args: argparse.Namespace, index: int, rounds: int) -> tuple[Run, dic
                 batch = batches[name](args.batch)
                 run.samples[name].extend(batch)
                 run.batch_p50[name].append(statistics.median(batch) if batch else float("nan"))
-        info = {"transport": transport, "payload_bytes": len(sender.typical_payload())}
+        # Like for like on the wire: the same payload size (at a typical seq) and key lengths.
+        info = {"transport": transport, "payload_bytes": len(sender.typical_payload()),
+                "raw_payload_bytes": len(raw_payload(1000))}
         return run, info
     finally:
         for pinger in pingers:
@@ -321,7 +324,8 @@ def bench_latency(args: argparse.Namespace) -> dict:
 
     sent = rounds * args.batch * args.runs
     result: dict = {"transport": info["transport"], "endpoint_kind": "router" if args.router else "peer",
-                    "shared_memory": False, "payload_bytes": info["payload_bytes"], "pings_per_variant": sent,
+                    "shared_memory": False, "payload_bytes": info["payload_bytes"],
+                    "raw_payload_bytes": info["raw_payload_bytes"], "pings_per_variant": sent,
                     "batch": args.batch, "runs": args.runs, "rounds_per_run": rounds}
     for name in VARIANTS:
         s = summarize([x for run in runs for x in run.samples[name]], sent)
@@ -366,6 +370,8 @@ def main(argv: list[str] | None = None) -> int:
         if getattr(args, name) < 1:
             parser.error(f"--{name} must be at least 1")
     os.environ.setdefault("RUST_LOG", "error")
+    # SIGTERM (a `timeout`, say) unwinds like an exception, so each run's echo processes are stopped.
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
 
     started = time.monotonic()
     load_before = os.getloadavg()

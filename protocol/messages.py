@@ -25,6 +25,7 @@ MAX_TRAJECTORY = 20_000
 ROBOT_STATES = ("idle", "moving", "waiting_at_door", "loading", "unloading", "done", "failed")
 PRIMITIVE_KINDS = ("line", "polyline", "polygon", "circle", "text", "arrow")
 LINE_STYLES = ("solid", "xray", "dashed")
+AWAITING = ("", "plan", "feedback", "command", "camera")  # what a paused lockstep simulator waits for (Clock)
 
 
 @dataclass(kw_only=True, slots=True)
@@ -102,6 +103,13 @@ class Clock(Message):
     rate: float = spec(1.0, lo=0.0, hi=1e6)
     world_version: int = spec(0, lo=0, hi=2**63 - 1)
     paused: bool = False
+    # Lockstep, while paused: what the simulator waits for - "plan" (one answering world_version and
+    # at least constraints_version), "feedback" (the ack of the human's feedback), "command" (a
+    # robot's command of the plan it has), "camera" (the overlay of a frame it holds); "" otherwise.
+    # The planner plans the moment the simulator waits for a plan, and holds while it waits for a
+    # feedback's ack (a new constraint set follows).
+    awaiting: str = spec("", choices=AWAITING)
+    constraints_version: int = spec(0, lo=0, hi=2**63 - 1)
 
 
 @dataclass(kw_only=True, slots=True)

@@ -131,7 +131,8 @@ class PingSender(Service):
         self._echoes: queue.SimpleQueue[tuple[int, int]] = queue.SimpleQueue()
 
     def setup(self) -> None:
-        self.advertise(self.pose_key)
+        # Stamped by ping_once, before the clock starts: the raw baseline has its bytes ready too.
+        self._send = self.sender(self.pose_key, RobotPose, stamp=False)
         self.subscribe(self.keys.ping_reply(), RobotPose, self._on_echo, inline=True)
 
     def _on_echo(self, msg: RobotPose, key: str) -> None:
@@ -146,18 +147,20 @@ class PingSender(Service):
     def ping_once(self, n: int, timeout: float, pad: bytes | None = None) -> float | None:
         """One round trip; its time in µs, or None if no echo came within ``timeout`` seconds."""
         msg = self.stamp(self.make_pose(n))
-        extra = {PAD_FIELD: pad} if pad else None
         sent_at = time.perf_counter_ns()
-        self.publish(self.pose_key, msg, stamp=False, extra=extra)
+        if pad:
+            self.publish(self.pose_key, msg, stamp=False, extra={PAD_FIELD: pad})
+        else:
+            self._send(msg)
+        # Until the echo is in, this thread only waits: each slice is a blocking get, so that the
+        # echo, on another thread, never waits for this one (the stop request is seen between slices).
         deadline = time.monotonic() + timeout
-        while not self.stopping:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                return None
+        while (remaining := deadline - time.monotonic()) > 0:
             try:
-                # Waits in short slices so a signal's stop request is seen promptly.
                 seq, received_at = self._echoes.get(timeout=min(remaining, 0.1))
             except queue.Empty:
+                if self.stopping:
+                    return None
                 continue
             if seq == msg.seq:
                 return (received_at - sent_at) / 1000.0

@@ -38,7 +38,10 @@ MAX_LIST = 100_000
 MAX_BYTES = 8 * 1024 * 1024
 MAX_JSON_DEPTH = 6
 
-ID_PATTERN = re.compile(r"^[A-Za-z][A-Za-z0-9_\-]{0,63}$")
+# An identifier: a letter, then letters, digits, "_" or "-", 64 characters at most. The two character
+# classes are also what the codec's canonical-payload patterns match identifiers with.
+ID_FIRST, ID_REST, MAX_ID = "[A-Za-z]", r"[A-Za-z0-9_\-]", 64
+ID_PATTERN = re.compile(f"^{ID_FIRST}{ID_REST}{{0,{MAX_ID - 1}}}$")
 
 Scalar = bool | int | float | str
 

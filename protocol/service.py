@@ -23,6 +23,8 @@ What it takes care of, so services don't:
   good one); other subscriptions queue up to ``inbox_size`` and count what overflowed;
 - bounded counters: per-key counts (bad, superseded, dropped) for at most ``MAX_KEYED_COUNTERS``
   keys; payloads on further keys are counted under their subscription's key expression;
+- cheap counting on the hot path: ``received``, ``published`` and ``seq`` are lock-free tallies
+  (``itertools.count``), folded into :attr:`Service.counters` when they are read;
 - a liveliness token ``arroch/<site>/@liveliness/<service>/<id>`` and a ``stats/<service>/<id>``
   queryable answering with the counters (also to wildcard queries such as ``stats/**``, each service
   replying on its own key so replies are not merged);
@@ -32,6 +34,7 @@ What it takes care of, so services don't:
 from __future__ import annotations
 
 import collections
+import itertools
 import logging
 import os
 import queue
@@ -70,6 +73,28 @@ MAX_BAD_SENDERS = 1024  # senders remembered for log rate limiting; older ones a
 # wildcard subscription (robot/<anything>/pose) must not grow the counters, and the stats reply with
 # them, without bound.
 MAX_KEYED_COUNTERS = 256
+# Counters bumped for every message, kept as lock-free tallies (see _Tally) rather than under the lock.
+TALLIED = ("received", "published")
+
+
+class _Tally:
+    """A count any thread may add one to without a lock.
+
+    ``add()`` is an ``itertools.count``'s ``__next__``: one C call, which the GIL makes atomic. On the
+    cold caches a message callback runs on, that costs a fraction of taking a lock and updating a
+    Counter. ``take()`` returns what was added since the previous ``take()`` (each take consumes one
+    value of the count itself); takes must not run concurrently (the Service holds its lock)."""
+
+    __slots__ = ("add", "_last")
+
+    def __init__(self) -> None:
+        self.add: Callable[[], int] = itertools.count().__next__
+        self._last = -1  # what the previous take()'s own add() returned
+
+    def take(self) -> int:
+        now = self.add()
+        added, self._last = now - self._last - 1, now
+        return added
 
 
 # eq=False: subscriptions are compared and hashed by identity, so they can key the latest-slots.
@@ -105,8 +130,8 @@ class Service:
         self._session: zenoh.Session | None = None
         self._declared: list[Any] = []
         self._publishers: dict[str, zenoh.Publisher] = {}
-        self._seq = 0
-        self._seq_lock = threading.Lock()
+        # Per-sender message counter: itertools.count's next() is atomic under the GIL (no lock).
+        self.next_seq: Callable[[], int] = itertools.count(1).__next__
         self._inbox: queue.Queue = queue.Queue(maxsize=inbox_size)
         # Newest waiting payload per (subscription, key): two latest-subscriptions matching the same
         # key each get their own slot, so neither steals the other's sample.
@@ -117,7 +142,8 @@ class Service:
         self._stop = threading.Event()
         self._last_bad_log: dict[str, float] = {}  # sender -> monotonic time of its last log line
         self._counters_lock = threading.Lock()
-        self.counters: collections.Counter[str] = collections.Counter()
+        self._counters: collections.Counter[str] = collections.Counter()
+        self._tallies = {name: _Tally() for name in TALLIED}
         self._keyed_counters = 0  # distinct "<counter>:<key>" entries in counters
         self._inbox_max = 0  # the deepest the inbox has been (stats: inbox_depth_max)
         self.close_timed_out = False  # set when zenoh's close() overran CLOSE_TIMEOUT
@@ -236,28 +262,47 @@ class Service:
 
     # ------------------------------------------------------------------ counters
 
+    @property
+    def counters(self) -> collections.Counter[str]:
+        """The service's counters, up to date (``received``, ``published``, ``bad_messages``... and
+        whatever the service counts). From threads other than the worker, add with :meth:`count`."""
+        with self._counters_lock:
+            self._fold_tallies()
+            return self._counters
+
+    def _fold_tallies(self) -> None:
+        """Add what the tallies counted since the last fold to the counters (lock held)."""
+        for name, tally in self._tallies.items():
+            added = tally.take()
+            if added:
+                self._counters[name] += added
+
     def count(self, name: str, n: int = 1) -> None:
         """Add ``n`` to counter ``name``. Safe from any thread (Zenoh callbacks, inline handlers,
         the worker): ``counter[k] += 1`` alone is a read and a write, and loses counts under races."""
+        tally = self._tallies.get(name)
+        if tally is not None and n == 1:
+            tally.add()
+            return
         with self._counters_lock:
-            self.counters[name] += n
+            self._counters[name] += n
 
     def count_keyed(self, name: str, key: str, subscription: str | None = None) -> None:
         """Add one to counter ``name`` and to its per-key counter ``name:key`` (bounded: see
         :data:`MAX_KEYED_COUNTERS`)."""
         with self._counters_lock:
-            self.counters[name] += 1
-            self.counters[self._keyed_name(name, key, subscription)] += 1
+            self._counters[name] += 1
+            self._counters[self._keyed_name(name, key, subscription)] += 1
 
     def _keyed_name(self, name: str, key: str, subscription: str | None) -> str:
         """``name:key``, or once :data:`MAX_KEYED_COUNTERS` are in use and the key is new,
         ``name:<subscription>`` (``name:(other keys)`` without one). Called with the counters lock held."""
         keyed = f"{name}:{key}"
-        if keyed in self.counters:
+        if keyed in self._counters:
             return keyed
         if self._keyed_counters >= MAX_KEYED_COUNTERS:
             keyed = f"{name}:{subscription or '(other keys)'}"
-            if keyed in self.counters:
+            if keyed in self._counters:
                 return keyed
         self._keyed_counters += 1
         return keyed
@@ -265,7 +310,8 @@ class Service:
     def counters_snapshot(self) -> dict[str, int]:
         """A consistent copy of the counters."""
         with self._counters_lock:
-            return dict(self.counters)
+            self._fold_tallies()
+            return dict(self._counters)
 
     # ------------------------------------------------------------------ subscribing
 
@@ -278,6 +324,7 @@ class Service:
         latest: bool = False,
         inline: bool = False,
         sample_key: bool = True,
+        ordered: bool = False,
     ) -> None:
         """Call ``handler(message, key)`` on the worker for each valid message on ``key``.
 
@@ -291,40 +338,37 @@ class Service:
         ``sample_key=False`` hands the handler this subscription's ``key`` itself rather than each
         sample's own key, for handlers that do not look at it: with a wildcard, asking Zenoh for the
         sample's key costs two calls into it per message. (Bad payloads are still counted per key.)
+
+        ``ordered=True`` decodes and queues each message on Zenoh's receive thread. Otherwise
+        zenoh-python hands every subscription's samples to a Python thread of that subscription's
+        own, so messages on different keys may reach the worker in another order than they came in.
+        Ordered subscriptions of one service queue in the order their messages arrived over the link:
+        a sender's status, event and clock, published in that order, are handled in that order.
+        (Decoding then holds up the link: for small messages.)
         """
         if latest and inline:
             raise ValueError("a subscription is either latest (queued on the worker) or inline, not both")
         if latest and not sample_key:
             raise ValueError("a latest subscription keeps the newest message per key: it needs sample_key")
         sub = _Subscription(key, msg_type, handler, latest, inline)
-        put_kind = zenoh.SampleKind.PUT
-        counters = self.counters
-        # The lock's own methods, bound once: a with-block looks up and calls __enter__/__exit__,
-        # measurably more on a cold cache; try/finally releases just as surely.
-        lock, unlock = self._counters_lock.acquire, self._counters_lock.release
         decode_msg = decoder_for(msg_type)
+        refuse = self._refuser(key)
         # A key without wildcards is the key of every sample it receives: no need to ask Zenoh.
-        fixed_key = key if "*" not in key and "$" not in key else None
-        given_key = fixed_key if fixed_key is not None or sample_key else key  # the key handlers get, if known
+        given_key = key if _is_concrete(key) or not sample_key else None  # the key handlers get, if known
         # Each path is one flat function, asking Zenoh (each attribute is a call into Rust) only
         # what it needs: on a round trip the handler runs on a cold cache, where every extra frame
         # and call costs several times what a micro-benchmark says.
         if inline:
+            add_received = self._tallies["received"].add
 
             def on_sample(sample: zenoh.Sample) -> None:
                 payload = sample.payload.to_bytes()
                 try:
                     message = decode_msg(payload)
                 except ProtocolError as exc:
-                    # Checked only now: a DELETE (no payload) never decodes, so PUTs skip the call.
-                    if sample.kind == put_kind:
-                        self.note_bad_message(fixed_key or str(sample.key_expr), payload, exc, subscription=key)
+                    refuse(sample, payload, exc)
                     return
-                lock()
-                try:
-                    counters["received"] += 1
-                finally:
-                    unlock()
+                add_received()
                 try:
                     handler(message, given_key or str(sample.key_expr))
                 except Exception:
@@ -335,19 +379,15 @@ class Service:
             # takes no room in the inbox (valid messages are never dropped for it) and, on a latest
             # subscription, never displaces a good message from its slot.
             def on_sample(sample: zenoh.Sample) -> None:
-                if sample.kind != put_kind:
-                    return
                 payload = sample.payload.to_bytes()
-                try:
-                    message = decode_msg(payload)
+                try:  # (only the decoding raises ProtocolError)
+                    self._enqueue(sub, given_key or str(sample.key_expr), decode_msg(payload))
                 except ProtocolError as exc:
-                    self.note_bad_message(fixed_key or str(sample.key_expr), payload, exc, subscription=key)
-                    return
-                self._enqueue(sub, given_key or str(sample.key_expr), message)
+                    refuse(sample, payload, exc)
 
         # Inline: on Zenoh's receive thread itself, not on the Python thread zenoh-python would
         # hand the sample to (one thread wake-up less per message).
-        self._declared.append(self.session.declare_subscriber(key, on_zenoh_thread(on_sample) if inline else on_sample))
+        self._declared.append(self.session.declare_subscriber(key, on_zenoh_thread(on_sample) if inline or ordered else on_sample))
 
     def relay(self, key: str, msg_type: type[Message], to_key: str) -> None:
         """Republish every valid ``msg_type`` payload heard on ``key`` on ``to_key``, as it came.
@@ -356,12 +396,10 @@ class Service:
         counted and dropped, never passed on; a valid one counts as received and as published), and
         then the very bytes received go out again: nothing is re-encoded, so the envelope (``src``,
         ``seq``, ``stamp``) and any fields unknown to ``msg_type`` travel on unchanged."""
-        publisher = self.advertise(to_key)  # declared now: never inside a Zenoh callback
-        put_kind = zenoh.SampleKind.PUT
-        counters = self.counters
-        lock, unlock = self._counters_lock.acquire, self._counters_lock.release  # see subscribe()
+        put = self.advertise(to_key).put  # declared now: never inside a Zenoh callback
         check = validator_for(msg_type)  # decoding's checks, without building a message
-        fixed_key = key if "*" not in key and "$" not in key else None
+        refuse = self._refuser(key)
+        add_received, add_published = self._tallies["received"].add, self._tallies["published"].add
 
         def on_sample(sample: zenoh.Sample) -> None:
             received = sample.payload  # put back as it is: no copy, no encoding
@@ -369,18 +407,25 @@ class Service:
             try:
                 check(payload)
             except ProtocolError as exc:
-                if sample.kind == put_kind:
-                    self.note_bad_message(fixed_key or str(sample.key_expr), payload, exc, subscription=key)
-                return
-            lock()
-            try:
-                counters["received"] += 1
-                counters["published"] += 1
-            finally:
-                unlock()
-            publisher.put(received)
+                return refuse(sample, payload, exc)
+            put(received)  # first: the echo's latency is what a relay is for
+            add_received()
+            add_published()
 
         self._declared.append(self.session.declare_subscriber(key, on_zenoh_thread(on_sample)))
+
+    def _refuser(self, key: str) -> Callable[[zenoh.Sample, bytes, ProtocolError], None]:
+        """What a subscription on ``key`` does with a payload its check refused: count it and log it
+        (:meth:`note_bad_message`), unless the sample is a DELETE, which has no payload to check.
+        (The kind is asked only then: a valid PUT never pays for that call into Zenoh.)"""
+        put_kind = zenoh.SampleKind.PUT
+        fixed_key = key if _is_concrete(key) else None
+
+        def refuse(sample: zenoh.Sample, payload: bytes, exc: ProtocolError) -> None:
+            if sample.kind == put_kind:
+                self.note_bad_message(fixed_key or str(sample.key_expr), payload, exc, subscription=key)
+
+        return refuse
 
     def _enqueue(self, sub: _Subscription, key: str, message: Message) -> None:
         """Queue a decoded message for the worker (a latest-subscription: put it in its slot)."""
@@ -436,8 +481,8 @@ class Service:
         sender = _guess_sender(payload)
         now = time.monotonic()
         with self._counters_lock:
-            self.counters["bad_messages"] += 1
-            self.counters[self._keyed_name("bad_messages", key, subscription)] += 1
+            self._counters["bad_messages"] += 1
+            self._counters[self._keyed_name("bad_messages", key, subscription)] += 1
             last = self._last_bad_log.get(sender)
             should_log = last is None or now - last >= BAD_LOG_INTERVAL
             if should_log:
@@ -452,11 +497,6 @@ class Service:
             self.log.warning("dropped bad message on %s from %s: %s (further ones from it counted, logged once a minute)", key, sender, exc)
 
     # ------------------------------------------------------------------ publishing
-
-    def next_seq(self) -> int:
-        with self._seq_lock:
-            self._seq += 1
-            return self._seq
 
     def stamp(self, msg: M) -> M:
         msg.src = self.src
@@ -480,6 +520,25 @@ class Service:
                     self._declared.append(publisher)
         return publisher
 
+    def sender(self, key: str, msg_type: type[M], *, stamp: bool = True, express: bool = EXPRESS) -> Callable[[M], None]:
+        """A function publishing ``msg_type`` messages on ``key``: ``send(msg)`` does what
+        ``publish(key, msg, stamp=stamp)`` does, with the publisher declared, the encoder and the
+        counter looked up once, here. For a stream published often (on a cold cache, publish()'s
+        lookups cost about as much as encoding a pose). Not to be called after :meth:`close`."""
+        put = self.advertise(key, express=express).put
+        encode_msg = encoder_for(msg_type)
+        add_published = self._tallies["published"].add
+        stamp_msg = self.stamp
+
+        def send(msg: M) -> None:
+            if stamp:
+                stamp_msg(msg)
+            payload = encode_msg(msg)
+            put(payload)
+            add_published()  # once put: a put that raised is not counted, as in publish()
+
+        return send
+
     def publish(self, key: str, msg: Message, *, stamp: bool = True, extra: Mapping[str, Any] | None = None) -> None:
         """Stamp (unless told not to) and publish; publishers are declared once per key.
 
@@ -488,15 +547,8 @@ class Service:
         if stamp:
             self.stamp(msg)
         payload = encode(msg, extra) if extra else (_ENCODERS.get(type(msg)) or encoder_for(type(msg)))(msg)
-        # Counted before the put, which is the last thing done: after it, an inline handler should
-        # return at once so Zenoh's thread moves on. (try/finally rather than a with-block: see subscribe().)
-        lock = self._counters_lock
-        lock.acquire()
-        try:
-            self.counters["published"] += 1
-        finally:
-            lock.release()
         publisher.put(payload)
+        self._tallies["published"].add()  # once put (a put that raised is not counted); one C call
 
     # ------------------------------------------------------------------ queries
 
@@ -506,7 +558,7 @@ class Service:
         ``None`` means nothing to say (the querier gets no reply)."""
 
         # A concrete key answers on itself; a wildcard queryable answers on the key it was asked.
-        concrete = "*" not in key and "$" not in key
+        concrete = _is_concrete(key)
 
         def on_query(query: zenoh.Query) -> None:
             try:
@@ -553,6 +605,11 @@ def publisher_options(*, express: bool = EXPRESS) -> dict[str, Any]:
 
 _instances_lock = threading.Lock()
 _instances_made: collections.Counter[str] = collections.Counter()
+
+
+def _is_concrete(key: str) -> bool:
+    """True when ``key`` has no wildcard, so it is the key of every sample it matches."""
+    return "*" not in key and "$" not in key
 
 
 def _default_instance(name: str) -> str:

@@ -175,7 +175,7 @@ def keep_thread_state() -> None:
     the ensure had just made. Every callback then builds a thread state anew (and, on its first frame,
     a fresh frame stack) and finds every ``threading.local`` empty: 15-30 µs per
     sample measured on a busy 2-core machine. One ensure that is never released keeps the state
-    (and thread-locals such as the codec's msgpack packer) for the thread's lifetime; the state is
+    (and its thread-locals) for the thread's lifetime; the state is
     reclaimed with the interpreter. Idempotent per thread; call it with the GIL held."""
     ident = threading.get_ident()
     if ident not in _kept_threads:

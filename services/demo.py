@@ -8,11 +8,15 @@ overlay, and a map), whose URL and access token are printed as soon as it serves
 in lockstep, so it takes seconds of wall time instead of the ~12 minutes it lasts on the site clock.
 
 Lockstep and the camera: site time only advances while the sim is not waiting for the planner, and
-then many times faster than wall time, while the camera renders two frames per *wall* second and
-the AR client always takes the latest one. So the overlays (and the tablet page) show the mission in
-jumps, and the AR client keeps as pictures only frames whose drawing matches the image (captured
-while the sim waited for a plan; see ``services/ar_client/snapshots.py``). ``arroch up ... --mode
-realtime`` shows it at its own pace.
+then many times faster than wall time, so a frame taken at a wall instant would be drawn over robots
+that have moved on. In lockstep the sim therefore takes the tablet camera's frames on the *site*
+clock: one every 30 site seconds (``arroch sim --camera-hold``), with time held still until the AR
+client's overlay of that frame has come back (at most 1.5 wall seconds: ``--camera-hold-timeout``).
+Every frame is then drawn over the world it shows; the overlays and the tablet page show the mission
+in 30 s steps (about two per wall second), and the AR client keeps 5 of these frames as pictures, at
+the same site times for the same mission (``services/ar_client/snapshots.py``). The ~24 holds
+(a render and the AR client's turn each) replace the ~15 wall-rate frames and cost the demo about 3
+wall seconds. ``arroch up ... --mode realtime`` shows the mission at its own pace.
 
 The supervisor prints progress and the final metrics and leaves a run folder (metrics.json,
 events.jsonl, the merged log, ``overlays/`` with a few overlay frames); the site picture goes there

@@ -13,9 +13,14 @@ good frame at least ``min_gap`` site seconds after the last one kept; past ``cou
 run's first and last good frames are there, and the others fill the largest gaps between them.
 
 Lockstep: site time advances only while the sim is not waiting for the planner, and then many times
-faster than wall time, while frames come at a wall rate; a frame drawn a wall instant after its
-capture can show robots seconds further on. The frames captured while the sim waits for a plan
-(after every world change) pass the latency check, and they are the ones kept.
+faster than wall time, so a frame taken at a wall instant would be drawn over robots seconds further
+on. The sim therefore takes its frames on the site clock instead: one every ``--camera-hold`` site
+seconds (30), once the plan answering that instant is in, with time held still until this client's
+Overlay of it comes back (:class:`services.sim.camfeed.FrameHold`). Every frame is then drawn at its
+capture instant and passes the latency check, whatever the machine's load; which frames show the
+world depends only on the mission, and so does the kept set: two runs of the same mission keep
+frames at the same site times. (Two demo runs do not always give the same mission: the planner's
+answers can differ from run to run, and then so do the robots the tablet sees.)
 """
 
 from __future__ import annotations

@@ -80,8 +80,8 @@ def _add_sweep_arguments(parser: argparse.ArgumentParser, kind: str) -> None:
     run.add_argument("--jobs", type=int, default=os.cpu_count() or 1, metavar="N", help=f"trials at once (default {os.cpu_count()}: the cores)")
     run.add_argument("--router", choices=("worker", "shared", "trial"), default="worker",
                      help="Zenoh router per worker (default), one shared by all, or one per trial")
-    run.add_argument("--trial-timeout", type=float, default=900.0, metavar="S",
-                     help="wall seconds before a trial is given up as a timeout (default 900)")
+    run.add_argument("--trial-timeout", type=float, default=300.0, metavar="S",
+                     help="wall seconds before a trial is given up as a timeout (default 300: a 6-robot trial takes ~10-50 s)")
     run.add_argument("--service-log-level", choices=("DEBUG", "INFO", "WARNING", "ERROR"), default="WARNING",
                      help="log level of the trials' services (default WARNING; their output is kept for failed trials)")
     run.add_argument("--progress", choices=("auto", "bar", "line", "off"), default="auto",

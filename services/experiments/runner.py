@@ -9,7 +9,8 @@ The results folder (``--out``):
 - ``metrics.jsonl``: each finished trial's full metrics from the sim;
 - ``params.json``: the model the results come from (:mod:`.params`);
 - ``runs.json``: one entry per session (start, wall time, jobs, routers, trials run, how it ended);
-- ``logs/<trial>.log``: the services' output of each trial that failed (timeout or error);
+- ``logs/<trial>.log``: the services' output of each trial that failed (timeout or error) or whose
+  mission did not end (unfinished);
 - ``events/<trial>.jsonl``: every trial's event log, with ``--keep-events`` (to compare two runs);
 - the report (:mod:`.report`), unless ``--no-report``.
 
@@ -144,10 +145,11 @@ class Sweep:
             if outcome.metrics is not None:
                 self.metrics.append({"key": key_cells(outcome.key), "metrics": outcome.metrics})
             log_path = self.out / LOGS_DIR / f"{outcome.key.ident()}.log"
-            if ok:
-                log_path.unlink(missing_ok=True)  # an old failure of this trial, now run again
-            else:
+            if not ok:
                 self.failed += 1
+            if outcome.status == "ok":
+                log_path.unlink(missing_ok=True)  # an old failure of this trial, now run again
+            else:  # a failure, or a mission that did not end: worth reading
                 log_path.write_text("\n".join([f"status: {outcome.status}", f"reason: {outcome.reason}", "",
                                                *outcome.output]) + "\n", encoding="utf-8")
                 log.warning("%s: %s: %s (services' output in %s)", outcome.key.ident(), outcome.status, outcome.reason, log_path)

@@ -53,7 +53,7 @@ _LOG_PREFIX = re.compile(r"^\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d+ ")  # LOG_FORMAT'
 class TrialConfig:
     """How trials are run (their speed and robustness, never their results)."""
 
-    timeout: float = 900.0  # wall s for one trial, start-up included
+    timeout: float = 300.0  # wall s for one trial, start-up included (a 6-robot trial takes ~10-50 s)
     start_timeout: float = 60.0  # wall s for the planner and restrictor to come up
     stop_timeout: float = 5.0  # wall s a service gets after SIGTERM
     log_level: str = "WARNING"  # the services' log level (their output is kept only for failures)

@@ -2,12 +2,13 @@
 
 The model says, per robot, which stop comes at each position (``at/3``), which leg leads there
 (``use/3``), when it is beside each opening (``arr/5``), when it goes through (``go/5``) and when
-each stop is done (``done/3``); together with the leg facts from :mod:`.problem` that fixes every
-action and its times. Openings (``opens/2``) are matched to the passes they cover here.
+each stop is done (``done/4``); together with the leg facts from :mod:`.problem` that fixes every
+action and its times. Openings (``opens/3``) are matched to the passes they cover here.
 """
 
 from __future__ import annotations
 
+import re
 from typing import Iterable
 
 import clingo
@@ -16,8 +17,8 @@ from .plan import Pass, RobotPlan, Step
 from .problem import RobotProblem
 
 
-def _num(sym: clingo.Symbol) -> int:
-    return sym.number
+# a comma between the arguments of an atom, not inside a term such as l(r0,2) or ld(o3)
+_TOP_COMMA = re.compile(r",(?![^(]*\))")
 
 
 def decode(
@@ -35,23 +36,26 @@ def decode(
     opens: set[tuple[str, int]] = set()
     unoffered: set[tuple[str, int]] = set()
     for a in atoms:
-        name, args = a.name, a.arguments
+        # one call into clingo per atom (its text) instead of one per argument: decoding runs for
+        # every program solved
+        name, _, rest = str(a).partition("(")
+        args = _TOP_COMMA.split(rest[:-1])
         if name == "at":
-            at[(args[0].name, _num(args[1]))] = str(args[2])
+            at[(args[0], int(args[1]))] = args[2]
         elif name == "use":
-            use[(args[0].name, _num(args[1]))] = str(args[2])
+            use[(args[0], int(args[1]))] = args[2]
         elif name == "arr":
-            arr[(args[0].name, _num(args[1]), _num(args[3]))] = _num(args[4])
+            arr[(args[0], int(args[1]), int(args[3]))] = int(args[4])
         elif name == "go":
-            go[(args[0].name, _num(args[1]), _num(args[3]))] = _num(args[4])
+            go[(args[0], int(args[1]), int(args[3]))] = int(args[4])
         elif name == "done":
-            done[(args[0].name, _num(args[1]))] = _num(args[3])
+            done[(args[0], int(args[1]))] = int(args[3])
         elif name == "fin":
-            fin[args[0].name] = _num(args[1])
-        elif name == "opens":
-            opens.add((args[0].name, _num(args[1])))
+            fin[args[0]] = int(args[1])
+        elif name == "opens":  # opens(Q,D,T): Q is the group the robot was planned in
+            opens.add((args[1], int(args[2])))
         elif name == "unoffered":
-            unoffered.add((args[0].name, _num(args[1])))
+            unoffered.add((args[1], int(args[2])))
     given_windows = set(given)
     windows = opens | given_windows
     plans: dict[str, RobotPlan] = {}

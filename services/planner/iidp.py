@@ -25,7 +25,10 @@ Work saved without changing the result:
   robots are solved in order of that bound, so a round often stops after a few;
 - a robot in no conflict can only improve the team without delaying it, so its program is bounded
   by the team's completion time (the horizon), which keeps it small;
-- results are cached per robot, legs and context.
+- results are cached per robot, legs and context;
+- programs solved side by side - every robot alone, every robot's retiming, every candidate's
+  response in a round - are grounded together (:meth:`.single.SingleRobotSolver.prefetch`): one
+  grounding instead of one per robot, each robot still optimised on its own.
 
 Waits for other robots are bounded (see ``domain.lp``); when that leaves a robot that must have a
 plan without one, it is solved again with looser bounds.
@@ -33,8 +36,11 @@ plan without one, it is solved again with looser bounds.
 Replanning while a mission runs starts from the plan being executed (``warm``): step 1 is skipped;
 every robot's current plan is retimed to the world as it is (its order of stops kept, against the
 others' current plans: a small program, and an unchanged world gives the plan back); robots left
-without a plan or in a conflict are then placed in turn against the rest; the rounds polish. If the time limit cuts the rounds short while conflicts remain, robots in conflict
-are replanned one after the other against all others (each such plan is conflict-free).
+without a plan or in a conflict are then placed in turn against the rest, each keeping its order of
+stops with waits bounded only by the plan (it may queue at a crowded door as long as it takes),
+then with every order if that fails; the rounds polish. If the time limit cuts the rounds short
+while conflicts remain, robots in conflict are replanned one after the other against all others
+(each such plan is conflict-free).
 """
 
 from __future__ import annotations
@@ -140,10 +146,11 @@ def iidp(
     # Robots with nothing left to do only finish what they are in the middle of.
     fixed = {rid: single.solve(problems[rid], single.context(problems[rid], {}))[0] for rid in robots if problems[rid].done}
 
+    def alone_context(rid: str):
+        return single.context(problems[rid], {o: p for o, p in fixed.items() if o != rid and p is not None})
+
     def plan_alone(rid: str) -> RobotPlan:
-        prob = problems[rid]
-        others = {o: p for o, p in fixed.items() if o != rid and p is not None}
-        plan, out = single.solve(prob, single.context(prob, others), time_limit=remaining())
+        plan, out = single.solve(problems[rid], alone_context(rid), time_limit=remaining())
         if plan is None:
             raise NoPlan(rid, out)
         return plan
@@ -154,6 +161,7 @@ def iidp(
         plans = _warm_start(single, problems, warm, plan_alone, hold, existing)
     else:
         # 1. each robot alone (others' actions in progress are part of the world, so they count)
+        single.prefetch([(problems[rid], alone_context(rid)) for rid in robots], time_limit=remaining())
         alone = {rid: plan_alone(rid) for rid in robots}
         finish_bound = {rid: max(finish_bound[rid], alone[rid].finish) for rid in robots}
         plans = shared(alone, hold, existing)
@@ -179,6 +187,7 @@ def iidp(
             else:
                 candidates.append((bound, rid))
         candidates.sort()
+        single.prefetch([_response_request(single, problems[rid], plans, current, hold)[:2] for _, rid in candidates])
         best: tuple[tuple, str, dict[str, RobotPlan]] | None = None
         timed_out = False
         for bound, rid in candidates:
@@ -242,12 +251,19 @@ def _respond(single: SingleRobotSolver, prob: RobotProblem, others: dict[str, Ro
     return None
 
 
-def _response(single: SingleRobotSolver, prob: RobotProblem, plans: dict[str, RobotPlan], current: tuple, hold: int) -> RobotPlan | None:
-    """The robot's best response to the others' current plans, over every order of its stops."""
+def _response_request(single: SingleRobotSolver, prob: RobotProblem, plans: dict[str, RobotPlan], current: tuple, hold: int):
+    """The program of the robot's best response (its problem and context), the others' plans and
+    whether it is in a conflict."""
     others = {o: p for o, p in plans.items() if o != prob.robot}
     involved = current[0] > count_conflicts(others.values(), hold)
     # In no conflict, a plan that finishes after the team does is no improvement.
-    return _respond(single, prob, others, None if involved else current[1], relax=involved)
+    return prob, single.context(prob, others, None if involved else current[1]), others, involved
+
+
+def _response(single: SingleRobotSolver, prob: RobotProblem, plans: dict[str, RobotPlan], current: tuple, hold: int) -> RobotPlan | None:
+    """The robot's best response to the others' current plans, over every order of its stops."""
+    _, ctx, others, involved = _response_request(single, prob, plans, current, hold)
+    return _respond(single, prob, others, ctx.horizon, relax=involved)
 
 
 def _in_progress(prob: RobotProblem) -> RobotPlan:
@@ -267,7 +283,7 @@ def _in_turn(
 ) -> dict[str, RobotPlan]:
     """Plan the robots in ``order`` one after the other, each against the ``kept`` plans, those
     already placed, and what the rest are in the middle of; in a warm start each first in its current
-    order of stops (a small program: only timing and openings change). The rest's current plans are
+    order of stops (a small program: only timing and openings change), then with every order. The rest's current plans are
     left out on purpose: made before the world changed, they may overlap the new ones, and a crowded
     door would then leave the robot only very long waits."""
     placed: dict[str, RobotPlan] = {}
@@ -282,11 +298,11 @@ def _in_turn(
         previous = warm.get(rid) if warm else None
         skeleton = prob.following(previous.order, previous.routes) if previous is not None else None
         if skeleton is not None:
-            plan = _respond(single, skeleton, context, None, relax=False)
-            if plan is None:
-                # At a crowded door the robot may have to wait long; with its order of stops fixed
-                # the program stays small even with waits bounded only by the plan itself.
-                plan, _ = single.solve(skeleton, single.context(skeleton, context, None, relaxed=True), time_limit=single.solve_limit * RELAXED_TIME)
+            # A robot placed again keeps its order of stops and routes, so only timing and openings
+            # change and the program stays small even with waits bounded only by the plan itself:
+            # the robot can queue at a crowded door as long as it takes.
+            relaxed = single.context(skeleton, context, None, relaxed=True)
+            plan, _ = single.solve(skeleton, relaxed, time_limit=single.solve_limit * RELAXED_TIME)
         if plan is None:
             plan = _respond(single, prob, context, None, relax=False)
         if plan is None:
@@ -303,14 +319,17 @@ def _warm_start(single: SingleRobotSolver, problems: dict[str, RobotProblem], wa
     its current order of stops against the others' current plans (an unchanged world gives the plan
     back); the robots this leaves without a plan or in a conflict are then placed in turn, the one
     finishing last first, against the rest."""
-    plans: dict[str, RobotPlan] = {}
+    retime: dict[str, tuple] = {}
     for rid in sorted(problems):
         previous = warm.get(rid)
         skeleton = problems[rid].following(previous.order, previous.routes) if previous is not None else None
-        if skeleton is None:
-            continue
-        others = {o: p for o, p in warm.items() if o != rid and o in problems}
-        plan, _ = single.solve(skeleton, single.context(skeleton, others))
+        if skeleton is not None:
+            others = {o: p for o, p in warm.items() if o != rid and o in problems}
+            retime[rid] = (skeleton, single.context(skeleton, others))
+    single.prefetch(list(retime.values()))
+    plans: dict[str, RobotPlan] = {}
+    for rid, (skeleton, ctx) in retime.items():
+        plan, _ = single.solve(skeleton, ctx)
         if plan is not None:
             plans[rid] = plan
     plans = shared(plans, hold, existing)

@@ -14,10 +14,12 @@ from __future__ import annotations
 
 from .constraints import ConstraintProgram
 from .decode import decode
-from .facts import Busy, Context, context_facts, robot_facts
+from .facts import Busy, Context, context_facts, door_facts, robot_facts, throughs
 from .plan import RobotPlan
 from .problem import RobotProblem
 from .solver import Outcome, parts_for, solve
+
+TEAM = "team"  # the one group every robot is in: one context, openings shared (joint.lp)
 
 
 def hint_facts(hints: dict[str, RobotPlan]) -> str:
@@ -46,7 +48,8 @@ def joint(
 ) -> tuple[dict[str, RobotPlan] | None, Outcome]:
     busy = tuple(Busy(p.opening, p.start, p.end, rid) for rid, prob in sorted(problems.items()) for p in prob.prefix if p.opening)
     ctx = Context(given_open=tuple(sorted(existing)), busy=busy, horizon=horizon)
-    text = site_facts + "".join(robot_facts(problems[r]) for r in sorted(problems)) + context_facts(ctx)
+    team = "".join(robot_facts(problems[r]) + f"grp({r},{TEAM}).\n" for r in sorted(problems))
+    text = site_facts + team + context_facts(ctx, TEAM) + door_facts(ctx, TEAM, throughs(problems.values()), hold)
     if hints:
         text += hint_facts(hints)
     out = solve(

@@ -60,11 +60,12 @@ class RobotPlan:
 
     def shifted(self, delta: int) -> "RobotPlan":
         """The same plan with times moved by ``delta`` (to re-express it against a new base);
-        windows and passes that then lie in the past are dropped (they happened or they won't)."""
+        windows and passes that then lie in the past are dropped (they happened or they won't), and
+        a finish in the past is now (the robot is done: nothing finishes before the base)."""
         return replace(
             self,
             steps=tuple(Step(s.action, s.args, s.start + delta, s.end + delta) for s in self.steps),
-            finish=self.finish + delta,
+            finish=max(self.finish + delta, 0),
             passes=tuple(replace(p, start=p.start + delta, end=p.end + delta) for p in self.passes if p.end + delta > 0),
             uses=frozenset((d, t + delta) for d, t in self.uses if t + delta >= 0),
             unoffered=frozenset((d, t + delta) for d, t in self.unoffered if t + delta >= 0),

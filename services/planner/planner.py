@@ -1,8 +1,10 @@
 """The task planner P^t as one call: world + constraints -> a timed plan for every robot.
 
 Builds each robot's problem (:mod:`.problem`), then runs IIDP (:mod:`.iidp`) or the joint program
-(:mod:`.joint`, which first runs IIDP for its horizon and hints). When the constraints leave a robot
-no plan at all, the result says which constraints conflict (status ``conflict``) instead of a plan.
+(:mod:`.joint`, which first runs IIDP for its horizon and hints). A plan from scratch runs IIDP
+twice, breaking ties between a robot's equally good plans two ways, and keeps the better team. When
+the constraints leave a robot no plan at all, the result says which constraints conflict (status
+``conflict``) instead of a plan.
 """
 
 from __future__ import annotations
@@ -10,7 +12,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from protocol.site import Site
 
@@ -82,10 +84,14 @@ class TaskPlanner:
             common += "".join(f"watched({room}).\n" for room in sorted(constraints.watched_rooms(self.site.rooms)))
         single = SingleRobotSolver(common, self.hold, constraints, self.settings.solve_limit, existing, base=base)
         limit = self.settings.time_limit if time_limit is None else time_limit
+        warm_plans = self._warm(warm, base)
         try:
-            plans, stats = iidp(single, problems, time_limit=limit, max_rounds=self.settings.max_rounds, warm=self._warm(warm, base))
+            plans, stats = iidp(single, problems, time_limit=limit, max_rounds=self.settings.max_rounds, warm=warm_plans)
         except NoPlan as exc:
             return self._no_plan(result, single, problems, exc, t0)
+        solves = single.calls
+        if warm_plans is None:
+            plans, stats, solves = self._other_ties(single, problems, plans, stats, limit - (time.perf_counter() - t0))
         result.plans, result.iterations = plans, stats.rounds
         cap = self.settings.max_rounds if self.settings.max_rounds is not None else 2 * len(problems)
         result.status = "ok" if stats.converged or stats.rounds >= cap else "timeout"
@@ -106,8 +112,28 @@ class TaskPlanner:
         result.solve_time = time.perf_counter() - t0
         log.debug("%s plan: makespan %d, openings %d, %d rounds, %d solves (%d cached), %.3f s",
                   method, result.makespan, result.door_openings, result.iterations, single.calls, single.cache_hits, result.solve_time)
-        result.solves = single.calls
+        result.solves = solves
         return result
+
+    def _other_ties(self, single: SingleRobotSolver, problems: dict[str, RobotProblem], plans, stats, remaining: float):
+        """A plan from scratch, made again with ties between a robot's equally good plans broken the
+        other way (every gothrough as early as it can be, objective.lp); the better team is kept
+        (the first on a tie). Each robot placed depends on how those before it broke their ties, so
+        either way can be the better one by a whole opening or more; planning twice from scratch is
+        cheap next to a mission's replans. Returns plans, IIDP figures and the programs solved."""
+        if remaining <= 0:
+            return plans, stats, single.calls
+        other = replace(single, site_facts=single.site_facts + "early.\n", _cache={}, _facts={}, calls=0, cache_hits=0, solve_seconds=0.0)
+        try:
+            plans2, stats2 = iidp(other, problems, time_limit=remaining, max_rounds=self.settings.max_rounds)
+        except NoPlan:
+            return plans, stats, single.calls + other.calls
+        existing = frozenset(single.existing)
+        first = TeamResult("iidp", 0, self.hold, plans, existing=existing).cost()
+        second = TeamResult("iidp", 0, self.hold, plans2, existing=existing).cost()
+        if second < first:
+            return plans2, stats2, single.calls + other.calls
+        return plans, stats, single.calls + other.calls
 
     @staticmethod
     def _warm(previous: TeamResult | None, base: int) -> dict | None:

@@ -9,10 +9,20 @@ When it replans: at start; on a new ConstraintSet; when a robot's action ends, f
 reports a new state for it; when a robot is far off its trajectory; when a human-operated door opens
 or closes; and on every new ``world_version`` - every one is answered with a TeamPlan, even if
 nothing changed, because the simulator's lockstep mode waits for that answer. Triggers arriving
-together (a clock tick, a status and an event for one action) are answered by one replan.
+together (a clock tick, a status and an event for one action) are answered by one replan: the
+planner waits until SETTLE has passed without news - except in lockstep, where the simulator says
+when it has stopped and what for (the Clock's ``awaiting``). When it waits for a plan newer than the
+last one published, everything of that world version has arrived (it was published before the
+clock), so the plan is made at once (:meth:`_plan_if_awaited`); while it waits for the ack of the
+human's feedback, the planner holds (up to FEEDBACK_HOLD), since a new ConstraintSet follows and the
+plan must answer it. Planning at those fixed points, not after wall-clock delays, is what makes a
+lockstep mission the same on a busy machine as on an idle one, and fast: a mission has a world
+version every few site seconds.
 
-A burst that only brings robots' actions ending when the plan said (within CONTINUE_TOLERANCE) keeps
-the plan being executed, moved past them, without running the task planner (:meth:`continued`).
+A burst that only brings robots' actions ending when the plan said or earlier (at most
+CONTINUE_TOLERANCE late), or a new world version the plan need not answer (a robot-operated door
+opening), keeps the plan being executed, moved past those actions, without running the task planner
+(:meth:`continued`).
 Replanning starts from the plan being executed (IIDP warm start). When the constraints leave a
 robot no plan, the service publishes ``plan_conflict`` naming the constraints that conflict, keeps
 planning with the last constraint set that worked (so the plan it keeps is the last valid one,
@@ -57,13 +67,14 @@ SETTLE = 0.03  # s without a new trigger before replanning (one replan for a bur
 MAX_DELAY = 0.25  # s: replan at the latest this long after the first trigger
 OFF_TRACK = 1.0  # m from the commanded trajectory that counts as "far off"
 OFF_TRACK_COOLDOWN = 2.0  # s between two off-track replans for one robot
-CONTINUE_TOLERANCE = 2.0  # s: an action that ends this close to its planned end keeps the plan (no re-solve)
+CONTINUE_TOLERANCE = 2.0  # s: an action that ends at most this late keeps the plan (no re-solve)
 ROUTINE_STATES = ("moving", "done", "loading", "unloading")  # states a plan being followed goes through
 LOCKSTEP_TRIGGERS = ("world_version", "constraints", "start")  # news a lockstep simulator waits for a plan about
 RESEND_INTERVAL = 1.0  # wall s after sending a command before it is sent again (robot reports no such id)
 START_GRACE = 1.5  # wall s to hear a mission under way (statuses come once a second) before planning from the site's start
 STATE_WAIT = 5.0  # wall s to wait for the last robots' poses and statuses before planning without them
 REPEAT_AFTER = 2.0  # wall s the simulator may stay paused at a version the plan answers before the plan is sent again
+FEEDBACK_HOLD = 1.0  # wall s to hold planning while a lockstep simulator waits for the ack of a feedback
 
 
 @dataclass
@@ -115,17 +126,20 @@ class PlannerService(Service):
         # (world version, sim time) the simulator is paused at, and since when (wall); None while it runs
         self._paused: tuple[tuple[int, float], float] | None = None
         self._repeated_at = 0.0
+        self._sim_clock: Clock | None = None  # the simulator's latest clock message
 
     # ------------------------------------------------------------------ wiring
 
     def setup(self) -> None:
         k = self.keys
-        self.subscribe(k.robot_pose("*"), RobotPose, self.on_pose, latest=True)
-        self.subscribe(k.robot_status("*"), RobotStatus, self.on_status)
-        self.subscribe(k.door_state("*"), DoorState, self.on_door)
-        self.subscribe(k.constraints(), ConstraintSet, self.on_constraints)
-        self.subscribe(k.event(), Event, self.on_event)
-        self.subscribe(k.clock(), Clock, self.on_clock, inline=True)
+        # Ordered: handled in the order they came, so a lockstep simulator's clock, published after
+        # everything of its world version, is handled after all of it (_plan_if_awaited).
+        self.subscribe(k.robot_pose("*"), RobotPose, self.on_pose, latest=True, ordered=True)
+        self.subscribe(k.robot_status("*"), RobotStatus, self.on_status, ordered=True)
+        self.subscribe(k.door_state("*"), DoorState, self.on_door, ordered=True)
+        self.subscribe(k.constraints(), ConstraintSet, self.on_constraints, ordered=True)
+        self.subscribe(k.event(), Event, self.on_event, ordered=True)
+        self.subscribe(k.clock(), Clock, self.on_clock, ordered=True)
         self.serve(k.plan(), lambda _query: self.message)
         self.every(0.02, self.tick)
         try:  # a restarted planner picks up the active constraints at once
@@ -163,7 +177,9 @@ class PlannerService(Service):
             self.trigger("world_version")
 
     def on_clock(self, msg: Clock, _key: str) -> None:
-        """Zenoh's thread: when the simulator stands still, and at which version (see _repeat_plan)."""
+        """When the simulator stands still, at which version (see _repeat_plan) and what for."""
+        self._sim_clock = msg
+        self._note_version(msg.world_version)
         if not msg.paused:
             self._paused = None
             return
@@ -171,6 +187,7 @@ class PlannerService(Service):
         paused = self._paused
         if paused is None or paused[0] != where:
             self._paused = (where, time.monotonic())
+        self._plan_if_awaited()
 
     def on_pose(self, msg: RobotPose, _key: str) -> None:
         if msg.robot not in self.site.robots:
@@ -261,6 +278,7 @@ class PlannerService(Service):
             self.publish_conflict(sorted(program.invalid), "invalid: " + "; ".join(f"{c}: {w}" for c, w in sorted(program.invalid.items())))
         self.constraints = program if program.active else None
         self.trigger(f"constraints:v{msg.version}")
+        self._plan_if_awaited()
 
     def on_event(self, msg: Event, _key: str) -> None:
         if msg.kind in ("action_done", "action_failed") and msg.robot in self.site.robots:
@@ -286,6 +304,35 @@ class PlannerService(Service):
         now = time.monotonic()
         if now - self._last_trigger < SETTLE and now - self._first_trigger < MAX_DELAY:
             return
+        if self._awaiting("feedback") is not None and now - self._first_trigger < FEEDBACK_HOLD:
+            return  # the ack comes with a new ConstraintSet, which the plan must answer
+        self._plan_now(now)
+
+    def _awaiting(self, what: str) -> Clock | None:
+        """The simulator's clock when it is paused in lockstep at the world version known here,
+        waiting for ``what`` (Clock.awaiting); else None."""
+        clock = self._sim_clock
+        if clock is None or clock.mode != "lockstep" or not clock.paused or clock.awaiting != what:
+            return None
+        return clock if clock.world_version == self.world_version else None
+
+    def _plan_if_awaited(self) -> None:
+        """Plan at once when a lockstep simulator waits for a plan newer than the one published and
+        the news it waits on is in: its world version (statuses and events come before the clock)
+        and the constraints version its accepted feedback made."""
+        clock = self._awaiting("plan")
+        if clock is None or not self._dirty:
+            return
+        have = self.constraint_set.version if self.constraint_set is not None else 0
+        if have < clock.constraints_version:
+            return  # on_constraints calls again
+        sent = self.message
+        if sent is not None and sent.world_version >= clock.world_version and sent.constraints_version >= clock.constraints_version:
+            return  # answered already: what is pending now waits for the next version
+        self.counters["plans_on_pause"] += 1
+        self._plan_now(time.monotonic())
+
+    def _plan_now(self, now: float) -> None:
         if not self._world_heard(now):
             return  # the triggers stay pending
         if self._hold_for_world_version():
@@ -294,7 +341,21 @@ class PlannerService(Service):
             return
         reasons = sorted(self._dirty)
         self._dirty.clear()
-        self.replan(reasons)
+        try:
+            self.replan(reasons)
+        except Exception as exc:
+            self._answer_despite(exc)
+
+    def _answer_despite(self, exc: Exception) -> None:
+        """A replan that raised: say so, and still answer the world version with the plan being
+        executed (no new commands) - a lockstep simulator waits for that answer, and the next news
+        is planned afresh."""
+        self.counters["planning_errors"] += 1
+        self.log.exception("planning for world v%d failed: %s", self.world_version, exc)
+        try:
+            self.publish_plan(self.world(), None, f"planning failed: {type(exc).__name__}: {exc}")
+        except Exception:
+            self.log.exception("could not publish the plan being executed either")
 
     def _repeat_plan(self) -> None:
         """Publish the current plan again while the simulator stays paused at a world version it
@@ -422,12 +483,17 @@ class PlannerService(Service):
         """The plan being executed, moved past the actions that just ended, when that is all that
         happened; None when the task planner must run.
 
-        Most triggers are a robot ending its front action. When it ends within CONTINUE_TOLERANCE
-        of the plan's time for it, re-solving retimes every robot's plan by less than that and the
-        IIDP rounds start from the same team, so the plan is kept as it is (Algorithm 1's P^t call
-        on an unchanged problem). Anything else - constraints, a door opening or closing, a failure,
-        a robot waiting at a door or off its trajectory, an action ending early or late - is solved
-        anew."""
+        Most triggers are a robot ending its front action. When it ends no more than
+        CONTINUE_TOLERANCE after the plan's time for it, re-solving would retime the plans by little
+        and start the IIDP rounds from the same team, so the plan is kept as it is (Algorithm 1's P^t
+        call on an unchanged problem). An action often ends well before its planned end: robots
+        start their next action as soon as the last one ends, without the waits the plan allows for
+        (beside a passage another robot was planned to use, say), so they run ahead of the plan; the
+        plan still holds for them - their stops, orders and the openings they use - and what
+        running ahead changes shows as news of its own (a robot waiting at a closed door). A world
+        version with none of this (a robot-operated door opening) changes nothing the planner
+        reads. Anything else - constraints, a human-operated door opening or closing, a failure, a
+        robot waiting at a door or off its trajectory, an action ending late - is solved anew."""
         kept = self.result
         if kept is None or kept.status not in ("ok", "timeout") or kept.conflicts:
             return None
@@ -442,8 +508,8 @@ class PlannerService(Service):
                 ended.add(rest)
                 continue
             return None
-        if not ended or not ended <= self._finished or self._force:
-            return None
+        if not ended <= self._finished or self._force:
+            return None  # an end of an action not the one sent, or a robot to re-command
         plans = dict(kept.plans)
         for rid in sorted(self._finished):
             sent = self.dispatcher.current.get(rid)
@@ -454,8 +520,8 @@ class PlannerService(Service):
             step = plan.steps[index]
             if (step.action, step.args) != (sent.action, sent.args):
                 return None
-            if abs(world.now - kept.absolute(step.end)) > CONTINUE_TOLERANCE:
-                return None
+            if world.now - kept.absolute(step.end) > CONTINUE_TOLERANCE:
+                return None  # late: the others' plans may count on it
             plans[rid] = replace(plan, steps=plan.steps[index + 1:])
         base = int(math.floor(world.now))
         delta = kept.base - base

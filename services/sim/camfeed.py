@@ -9,6 +9,20 @@ Frames are rendered at ``--camera-rate`` frames per *wall* second: a render cost
 640x480 (NOTES.md), and whoever watches the frames (the AR client, a person) lives in wall time,
 so tying frames to sim time would either flood them at high rates or stall the simulation.
 
+Lockstep is the exception (:class:`FrameHold`): there site time runs only between the planner's
+answers, and then far faster than wall time, so a frame taken at a wall instant is drawn over a
+world that has moved on by the time the AR client has localised it. Instead the sim takes a frame
+every ``--camera-hold`` site seconds (30; 0: off): at the first tick at or past each multiple of it,
+once the plan answering that instant is in (so the robots' paths drawn are those of that instant),
+and holds time still until the AR client's Overlay for that frame (``ar/<cid>/overlay``, same
+``frame_seq``) has come back, or ``--camera-hold-timeout`` wall seconds (1.5) have passed. These
+held frames are then the only frames, so every frame the AR client and the tablet page get is drawn
+over the world it shows, at site times that are the same for the same mission. A hold costs a render
+(~0.1 s) and the AR client's turn (~0.05 s); one every 30 site seconds gives about as many frames as
+the wall rate did (the demo's lockstep runs at ~60x). After :data:`MAX_MISSED` holds in a row get no overlay (no
+AR client on this camera, or a dead one), the camera falls back to the wall rate, so such a run
+loses only that many timeouts; the first overlay seen again brings the holds back.
+
 ``--camera tablet``: the human's tablet, at her position, ``--camera-height`` above the floor,
 looking where she faces (toward her door while at her desk, along her walk otherwise), pitched by
 ``--camera-pitch``. ``--camera X,Y,Z,YAW,PITCH``: a fixed camera (degrees; YAW counter-clockwise
@@ -34,6 +48,8 @@ class CameraOptions:
     fov: float = 60.0  # vertical field of view, degrees
     tablet_height: float = 1.3  # m
     tablet_pitch: float = 0.0  # radians
+    hold: float = 30.0  # lockstep: site seconds between held frames (0: wall-rate frames as in the other modes)
+    hold_timeout: float = 1.5  # wall seconds a held frame waits for its overlay
 
 
 def add_camera_arguments(group: Any) -> None:
@@ -44,6 +60,11 @@ def add_camera_arguments(group: Any) -> None:
     group.add_argument("--camera-fov", type=float, default=60.0, metavar="DEG", help="vertical field of view (default 60)")
     group.add_argument("--camera-height", type=float, default=1.3, metavar="M", help="tablet height above the floor (default 1.3)")
     group.add_argument("--camera-pitch", type=float, default=0.0, metavar="DEG", help="tablet pitch, > 0 looks up (default 0)")
+    group.add_argument("--camera-hold", type=float, default=30.0, metavar="S",
+                       help="lockstep: a frame every S site seconds, time held until the AR client's overlay of it comes back "
+                            "(default 30; 0: frames at --camera-rate per wall second instead)")
+    group.add_argument("--camera-hold-timeout", type=float, default=1.5, metavar="S",
+                       help="lockstep: wall seconds a held frame waits for its overlay before time goes on (default 1.5)")
 
 
 def camera_options_from(args: argparse.Namespace) -> CameraOptions | None:
@@ -61,8 +82,13 @@ def camera_options_from(args: argparse.Namespace) -> CameraOptions | None:
         raise ValueError("--camera-fov must be within [1, 170] degrees")
     if not args.camera_rate > 0:
         raise ValueError("--camera-rate must be > 0")
+    if not (math.isfinite(args.camera_hold) and args.camera_hold >= 0):
+        raise ValueError(f"--camera-hold must be >= 0 site seconds (0: no held frames), got {args.camera_hold}")
+    if not (math.isfinite(args.camera_hold_timeout) and args.camera_hold_timeout > 0):
+        raise ValueError(f"--camera-hold-timeout must be > 0 wall seconds, got {args.camera_hold_timeout}")
     common = dict(id=args.camera_id, rate=args.camera_rate, width=width, height=height, fov=args.camera_fov,
-                  tablet_height=args.camera_height, tablet_pitch=math.radians(args.camera_pitch))
+                  tablet_height=args.camera_height, tablet_pitch=math.radians(args.camera_pitch),
+                  hold=args.camera_hold, hold_timeout=args.camera_hold_timeout)
     if spec == "tablet":
         options = CameraOptions(follow_human=True, **common)
     else:
@@ -92,10 +118,101 @@ def camera_spec(options: CameraOptions, human_pose: tuple[float, float, float]) 
     return CameraSpec((x, y, z), yaw, pitch, **size)
 
 
-class CameraFeed:
-    """Renders the engine's scene for one camera at ``options.rate`` frames per wall second."""
+MAX_MISSED = 2  # held frames in a row without an overlay before the camera falls back to the wall rate
+_EPS = 1e-6  # site seconds: a tick landing a rounding error short of a hold instant is at it
 
-    def __init__(self, site: Any, engine: Any, options: CameraOptions) -> None:
+
+class FrameHold:
+    """When lockstep time waits for a camera frame's overlay (pure: site and wall times passed in).
+
+    Hold instants are the multiples of ``every`` site seconds (0 included): one is due at the first
+    tick at or past it. A hold starts (:meth:`begin`), gets its frame's seq (:meth:`framed`) and
+    ends with that frame's overlay (:meth:`overlay`) or after ``timeout`` wall seconds
+    (:meth:`expired`). ``MAX_MISSED`` timeouts in a row suspend the holds until any overlay is seen.
+    """
+
+    def __init__(self, every: float, timeout: float) -> None:
+        if not every > 0:
+            raise ValueError(f"hold interval must be > 0 site seconds, got {every}")
+        if not timeout > 0:
+            raise ValueError(f"hold timeout must be > 0 wall seconds, got {timeout}")
+        self.every = every
+        self.timeout = timeout
+        self.next_at = 0.0  # site time of the next hold instant
+        self.active = False
+        self.seq: int | None = None  # the held frame's seq, once published
+        self.started = 0.0  # wall time the hold began
+        self.missed = 0  # holds in a row that timed out
+        self.held = 0  # holds begun
+        self.released = 0  # ended by their overlay
+        self.timed_out = 0
+        self.render_wall = 0.0  # wall seconds spent rendering held frames
+        self.wait_wall = 0.0  # wall seconds from a held frame's publication to its overlay (or timeout)
+        self._framed_at = 0.0
+
+    @property
+    def suspended(self) -> bool:
+        """Too many holds in a row got no overlay: nobody is drawing this camera's frames."""
+        return self.missed >= MAX_MISSED
+
+    def due(self, t: float) -> bool:
+        return not self.active and t >= self.next_at - _EPS
+
+    def skip(self, t: float) -> None:
+        """Let a due instant pass without holding (suspended)."""
+        self.next_at = self._after(t)
+
+    def begin(self, t: float, wall: float) -> None:
+        self.active, self.seq, self.started = True, None, wall
+        self.next_at = self._after(t)
+        self.held += 1
+
+    def framed(self, seq: int, wall: float) -> None:
+        self.seq = seq
+        self._framed_at = wall
+        self.render_wall += wall - self.started
+
+    def overlay(self, frame_seq: int, wall: float) -> bool:
+        """An overlay of this camera was seen; True when it releases the hold. Any overlay shows
+        that an AR client is drawing the frames, so it also ends a suspension."""
+        self.missed = 0
+        if self.active and self.seq is not None and frame_seq == self.seq:
+            self.active = False
+            self.released += 1
+            self.wait_wall += wall - self._framed_at
+            return True
+        return False
+
+    def expired(self, wall: float) -> bool:
+        """True (and the hold ended) when the held frame waited ``timeout`` wall seconds in vain
+        since its publication (its rendering is the sim's own time, not the AR client's)."""
+        since = self._framed_at if self.seq is not None else self.started
+        if not self.active or wall - since < self.timeout:
+            return False
+        self.active = False
+        self.missed += 1
+        self.timed_out += 1
+        self.wait_wall += wall - since
+        return True
+
+    def summary(self) -> str:
+        return (f"{self.held} held frames ({self.released} released by their overlay, {self.timed_out} timed out), "
+                f"{self.render_wall:.1f} s wall rendering them, {self.wait_wall:.1f} s waiting for overlays")
+
+    def blocker(self) -> str:
+        if not self.active:
+            return ""
+        return f"camera frame {self.seq if self.seq is not None else '(rendering)'} awaiting its overlay"
+
+    def _after(self, t: float) -> float:
+        return (math.floor(t / self.every + _EPS) + 1) * self.every
+
+
+class CameraFeed:
+    """Renders the engine's scene for one camera: at ``options.rate`` frames per wall second, or
+    in lockstep (``lockstep=True`` and ``options.hold`` > 0) at the held instants of :attr:`hold`."""
+
+    def __init__(self, site: Any, engine: Any, options: CameraOptions, *, lockstep: bool = False) -> None:
         from .mirror import WorldMirror
         from .world import World  # pybullet: only when a camera is asked for
 
@@ -103,13 +220,22 @@ class CameraFeed:
         self.engine = engine
         self.world = World(site)
         self.mirror = WorldMirror(self.world, engine)
+        self.hold = FrameHold(options.hold, options.hold_timeout) if lockstep and options.hold > 0 else None
         self._next = 0.0
         self.frames = 0
 
+    @property
+    def at_wall_rate(self) -> bool:
+        """Frames follow the wall clock: no holds, or holds suspended for want of overlays."""
+        return self.hold is None or self.hold.suspended
+
     def maybe_render(self, service: Any, wall: float) -> None:
-        """Render and publish a frame if one is due (CameraFrame, then its CameraTruth)."""
-        if wall < self._next:
-            return
+        """Render and publish a frame if one is due at the wall rate."""
+        if self.at_wall_rate and wall >= self._next:
+            self.render(service, wall)
+
+    def render(self, service: Any, wall: float) -> int:
+        """Render and publish a frame now (CameraFrame, then its CameraTruth); returns its seq."""
         from .camera import frame_message, truth_message
 
         self._next = wall + 1.0 / self.options.rate
@@ -119,6 +245,7 @@ class CameraFeed:
         service.publish(service.keys.camera_frame(self.options.id), frame)
         service.publish(service.keys.camera_truth(self.options.id), truth_message(self.options.id, spec, frame.seq))
         self.frames += 1
+        return frame.seq
 
     def close(self) -> None:
         self.world.close()

@@ -38,7 +38,8 @@ def register(subparsers: Any) -> None:
     run = parser.add_argument_group("simulation")
     run.add_argument("--method", choices=METHODS, default="arroch", help="arroch (default), no-feedback or no-comm (paper §V-A)")
     run.add_argument("--mode", choices=MODES, default=None, help="clock mode: realtime (default), rate (with --rate) or lockstep")
-    run.add_argument("--rate", type=float, metavar="K", help="run K times faster than real time (implies --mode rate)")
+    run.add_argument("--rate", type=float, metavar="K", help="run K times faster than real time (implies --mode rate); with "
+                     "--mode lockstep, at most K times faster (to watch a mission, or hurt it, as it goes)")
     run.add_argument("--seed", type=int, default=0, help="seed of the run's random numbers (default 0)")
     run.add_argument("--until-done", action="store_true", help="exit (code 0) once mission_done is published")
     run.add_argument("--time-limit", type=float, metavar="S", help="end the mission unfinished after S sim seconds (default 7200; 0: never)")
@@ -63,13 +64,18 @@ def register(subparsers: Any) -> None:
 
 
 def _clock_mode(args: argparse.Namespace) -> tuple[str, float]:
+    """The clock mode and its rate: K for rate mode, the cap for lockstep (0: none), 1 for realtime."""
     mode = args.mode or ("rate" if args.rate is not None else "realtime")
+    if args.rate is not None and not args.rate > 0:
+        raise ValueError(f"--rate must be > 0 (got {args.rate:g})")
     if mode == "rate":
-        if args.rate is None or not args.rate > 0:
+        if args.rate is None:
             raise ValueError("--mode rate needs --rate K with K > 0")
         return mode, args.rate
+    if mode == "lockstep":
+        return mode, args.rate or 0.0
     if args.rate is not None:
-        raise ValueError(f"--rate goes with --mode rate, not --mode {mode}")
+        raise ValueError(f"--rate goes with --mode rate or lockstep, not --mode {mode}")
     return mode, 1.0
 
 

@@ -80,13 +80,18 @@ class LockstepGate:
 
     def blocker(self, world_version: int, last_action_ids: dict[str, int]) -> str:
         """Why time may not advance now, or ``""`` when it may."""
+        return self.waits_for(world_version, last_action_ids)[1]
+
+    def waits_for(self, world_version: int, last_action_ids: dict[str, int]) -> tuple[str, str]:
+        """What time waits for - ``"feedback"``, ``"plan"``, ``"command"`` or ``""`` (the Clock's
+        ``awaiting``) - and why, in words."""
         if self.feedback_pending:
-            return "waiting for the ack of the human's feedback"
+            return "feedback", "waiting for the ack of the human's feedback"
         if self.plan_world < world_version:
-            return f"waiting for a plan answering world version {world_version} (latest answers {self.plan_world})"
+            return "plan", f"waiting for a plan answering world version {world_version} (latest answers {self.plan_world})"
         if self.plan_constraints < self.constraints_needed:
-            return f"waiting for a plan answering constraints version {self.constraints_needed}"
+            return "plan", f"waiting for a plan answering constraints version {self.constraints_needed}"
         for rid, action_id in self.fronts.items():
             if rid in last_action_ids and last_action_ids[rid] < action_id:
-                return f"waiting for {rid}'s command {action_id} of plan {self.plan_id}"
-        return ""
+                return "command", f"waiting for {rid}'s command {action_id} of plan {self.plan_id}"
+        return "", ""

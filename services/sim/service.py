@@ -1,9 +1,10 @@
 """The ``arroch sim`` process: the engine on Zenoh, in one of the three clock modes.
 
 Inputs: ``robot/*/command`` (RobotCommand), ``plan`` (TeamPlan, for lockstep), the restrictor's
-acks of the human's feedback (queries on ``feedback``). Outputs: ``clock``, ``robot/<rid>/pose``,
-``robot/<rid>/status``, ``door/<did>/state``, ``event``, and with ``--camera`` the virtual tablet
-camera's ``camera/<cid>/frame`` and ``truth``.
+acks of the human's feedback (queries on ``feedback``), and in lockstep with a camera the AR
+client's ``ar/<cid>/overlay`` (a held frame's overlay lets time go on: :class:`~.camfeed.FrameHold`).
+Outputs: ``clock``, ``robot/<rid>/pose``, ``robot/<rid>/status``, ``door/<did>/state``, ``event``,
+and with ``--camera`` the virtual tablet camera's ``camera/<cid>/frame`` and ``truth``.
 
 Order of publication after a tick that changed the world: poses, then statuses and door states,
 then the events, then the clock. A planner woken by an event (or by the new ``world_version`` on
@@ -33,7 +34,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
-from protocol.messages import Clock, DoorState, Event, RobotCommand, RobotPose, RobotStatus, TeamPlan
+from protocol.messages import Clock, DoorState, Event, Overlay, RobotCommand, RobotPose, RobotStatus, TeamPlan
 from protocol.keys import chunk_at
 from protocol.service import Service
 from protocol.site.model import Site
@@ -42,6 +43,7 @@ from protocol.transport import ZenohOptions
 from .engine import Engine, EngineConfig, FeedbackRequest, SimEvent
 from .feedback import FeedbackSender
 from .human import HumanConfig
+from .camfeed import MAX_MISSED
 from .pacing import LockstepGate, WallPacer
 
 log = logging.getLogger("arroch.sim")
@@ -56,7 +58,7 @@ STALL_WARNING = 10.0  # wall s paused on one reason before lockstep says so at W
 class SimOptions:
     method: str = "arroch"
     mode: str = "lockstep"  # realtime, rate, lockstep
-    rate: float = 1.0  # sim seconds per wall second in rate mode
+    rate: float = 1.0  # sim seconds per wall second in rate mode; in lockstep at most that (0: as fast as it goes)
     seed: int = 0
     pose_rate: float = 20.0  # Hz
     until_done: bool = False
@@ -92,7 +94,11 @@ class SimService(Service):
         self.engine.metrics.params.update(options.as_params())
         clock.engine = self.engine
         self.gate = LockstepGate()
-        self.pacer = WallPacer(options.rate if options.mode == "rate" else 1.0, options.engine.tick) if options.mode != "lockstep" else None
+        if options.mode == "lockstep":
+            # A cap only delays steps, never changes what happens in them: the mission stays the same.
+            self.pacer = WallPacer(options.rate, options.engine.tick) if options.rate > 0 else None
+        else:
+            self.pacer = WallPacer(options.rate if options.mode == "rate" else 1.0, options.engine.tick)
         self._pose_period = 1.0 / options.pose_rate
         self._next_pose_sim = 0.0
         self._last_pose_wall = 0.0
@@ -119,19 +125,22 @@ class SimService(Service):
         if self.options.camera is not None:
             from .camfeed import CameraFeed  # pybullet only when a camera is asked for
 
-            self._camera = CameraFeed(self.site, self.engine, self.options.camera)
+            self._camera = CameraFeed(self.site, self.engine, self.options.camera, lockstep=self.options.mode == "lockstep")
+            if self._camera.hold is not None:
+                self.subscribe(self.keys.overlay(self.options.camera.id), Overlay, self._on_overlay)
         self._started_wall = time.monotonic()
         self.engine.start()
         self._publish_tick(force_poses=True)
         if self.options.mode == "lockstep":
             period = 0.001
         else:
-            period = min(0.01, self.options.engine.tick / (self.pacer.rate if self.pacer else 1.0) / 2.0)
+            assert self.pacer is not None
+            period = min(0.01, self.options.engine.tick / self.pacer.rate / 2.0)
         self.every(period, self._pump, first=0.0)
         log.info(
             "sim %s: method %s, mode %s%s, seed %d, %d robots, %d objects",
             self.site.name, self.options.method, self.options.mode,
-            f" x{self.options.rate:g}" if self.options.mode == "rate" else "", self.options.seed, len(self.engine.robots), len(self.engine.objects.items),
+            f" x{self.options.rate:g}" if self.options.mode == "rate" or self.pacer is not None else "", self.options.seed, len(self.engine.robots), len(self.engine.objects.items),
         )
 
     def teardown(self) -> None:
@@ -161,6 +170,15 @@ class SimService(Service):
         else:
             self.count("plans_stale")
 
+    def _on_overlay(self, overlay: Overlay, key: str) -> None:
+        hold = self._camera.hold if self._camera is not None else None
+        if hold is None:
+            return
+        if hold.suspended:
+            self.log.info("overlays of camera %s come again: frames are held for them again", overlay.camera)
+        if hold.overlay(overlay.frame_seq, time.monotonic()):
+            self.count("camera_holds_released")
+
     # ------------------------------------------------------------------ the loop
 
     def _pump(self) -> None:
@@ -189,7 +207,9 @@ class SimService(Service):
 
     def _run_lockstep(self, wall: float) -> None:
         deadline = wall + LOCKSTEP_BUDGET
+        capped = self.pacer.due(self.engine.time, wall) if self.pacer is not None else -1  # ticks allowed (-1: any)
         while True:
+            self._camera_hold()
             blocker = self._blocked()
             if blocker:
                 if blocker != self._blocker:
@@ -205,6 +225,9 @@ class SimService(Service):
                 return
             self._blocker = ""
             self._stall_reported = False
+            if capped == 0:
+                return
+            capped -= 1
             if not self._tick(time.monotonic()) or time.monotonic() >= deadline:
                 return
 
@@ -285,17 +308,57 @@ class SimService(Service):
             self._events_file.write(json.dumps(event.as_dict(), sort_keys=True) + "\n")
 
     def _blocked(self) -> str:
+        return self._waits_for()[1]
+
+    def _waits_for(self) -> tuple[str, str]:
+        """In lockstep, what time waits for (the Clock's ``awaiting``: the gate's reason first, then
+        the camera's held frame) and why, in words; ``("", "")`` when it may advance."""
         if self.options.mode != "lockstep":
-            return ""
-        return self.gate.blocker(self.engine.world_version, {rid: r.last_action_id for rid, r in self.engine.robots.items()})
+            return "", ""
+        kind, gate = self.gate.waits_for(self.engine.world_version, {rid: r.last_action_id for rid, r in self.engine.robots.items()})
+        hold = self._camera.hold.blocker() if self._camera is not None and self._camera.hold is not None else ""
+        return kind or ("camera" if hold else ""), "; ".join(b for b in (gate, hold) if b)
+
+    def _camera_hold(self) -> None:
+        """Lockstep with a camera: take the held frame when one is due; end a hold that timed out."""
+        hold = self._camera.hold if self._camera is not None else None
+        if hold is None:
+            return
+        wall = time.monotonic()
+        if hold.expired(wall):
+            self.count("camera_holds_timed_out")
+            if hold.timed_out == 1:
+                self.log.warning(
+                    "camera frame %s got no overlay on %s within %.1f s: time goes on without it (is an AR client on "
+                    "camera %s running?); after %d such frames in a row, frames come at the wall rate until an overlay "
+                    "is seen (said once)", hold.seq, self.keys.overlay(self.options.camera.id), hold.timeout,
+                    self.options.camera.id, MAX_MISSED)
+            return
+        t = self.engine.time
+        if not hold.due(t):
+            return
+        if hold.suspended:
+            hold.skip(t)
+            return
+        if self._blocked():  # no hold is active, so this is the gate: first the plan answering this instant
+            return  # (published after its Intents), so the AR client draws the robots' paths of now, every run
+        hold.begin(t, wall)
+        self.count("camera_holds")
+        # The AR client draws the world as of this instant: its poses and the (paused) clock go first.
+        self._publish_poses()
+        self._last_pose_wall = wall
+        self._publish_clock()
+        hold.framed(self._camera.render(self, wall), time.monotonic())
 
     def _publish_clock(self) -> None:
         """The clock; ``paused`` when time stands still (lockstep waiting, or the mission over)."""
         self._last_clock_wall = time.monotonic()
         mode = self.options.mode
         rate = self.options.rate if mode == "rate" else 1.0
-        paused = self.engine.done or bool(self._blocked())
-        self.publish(self.keys.clock(), Clock(time=self.engine.time, mode=mode, rate=rate, world_version=self.engine.world_version, paused=paused))
+        awaiting, blocker = self._waits_for() if not self.engine.done else ("", "")
+        self.publish(self.keys.clock(), Clock(time=self.engine.time, mode=mode, rate=rate, world_version=self.engine.world_version,
+                                              paused=self.engine.done or bool(blocker), awaiting=awaiting,
+                                              constraints_version=self.gate.constraints_needed))
 
     def _paused_heartbeat(self, wall: float) -> None:
         if wall - self._last_clock_wall >= PAUSED_CLOCK:
@@ -337,6 +400,9 @@ class SimService(Service):
             "done" if self.engine.completed else "ended unfinished", self.engine.time,
             summary["team_completion_time"] or float("nan"), wall, self.engine.time / wall if wall > 0 else float("inf"),
         )
+        if self._camera is not None:
+            hold = self._camera.hold
+            self.log.info("camera %s: %d frames%s", self.options.camera.id, self._camera.frames, f"; {hold.summary()}" if hold else "")
         if self.options.metrics_out:
             out = dict(summary)
             out["run"] = {"wall_time": wall, "realtime_factor": self.engine.time / wall if wall > 0 else None, "counters": self.counters_snapshot()}

@@ -80,8 +80,8 @@ def build_config(args: argparse.Namespace) -> tuple[UpConfig, ZenohOptions]:
             raise ValueError(f"missing Zenoh configs {', '.join(missing)} (arroch deploy render --out-dir {config_dir})")
     if args.rate is not None and args.rate <= 0:
         raise ValueError(f"--rate must be positive, got {args.rate}")
-    if args.rate is not None and args.mode not in (None, "rate"):
-        raise ValueError(f"--rate K runs the simulation K times faster; it does not go with --mode {args.mode}")
+    if args.rate is not None and args.mode not in (None, "rate", "lockstep"):
+        raise ValueError(f"--rate K runs the simulation K times faster (at most, in lockstep); it does not go with --mode {args.mode}")
     router_listen = args.router_listen
     if args.router and router_listen is None and config_dir is None:
         router_listen = f"tcp/127.0.0.1:{free_tcp_port()}"
@@ -151,7 +151,7 @@ def add_up_arguments(parser: argparse.ArgumentParser) -> None:
     mission.add_argument("--method", help="planning method / baseline (e.g. arroch, no-feedback, no-comm)")
     mission.add_argument("--mode", choices=("realtime", "rate", "lockstep"),
                          help="simulation clock: realtime, rate (with --rate) or lockstep (time advances only when every request is answered)")
-    mission.add_argument("--rate", type=float, metavar="K", help="simulate at K times real time")
+    mission.add_argument("--rate", type=float, metavar="K", help="simulate at K times real time (with --mode lockstep: at most)")
     mission.add_argument("--seed", type=int, metavar="N", help="random seed of the simulation")
     mission.add_argument("--camera", metavar="SPEC", help="the sim's virtual camera: 'tablet' (the human's tablet) or X,Y,Z,YAW,PITCH; "
                                                          "the ar client and the tablet page (viewer mode) show it")

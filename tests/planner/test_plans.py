@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 
 from services.planner.facts import Context, site_facts
-from services.planner.plan import TeamResult, share_windows
+from services.planner.iidp import iidp
+from services.planner.plan import RobotPlan, Step, TeamResult, share_windows
 from services.planner.planner import PlannerSettings, TaskPlanner
 from services.planner.single import SingleRobotSolver
 from services.planner.validator import validate_result
@@ -95,3 +96,33 @@ def test_joint_plans_are_valid_and_no_worse_than_iidp(name):
     assert joint.status in ("ok", "timeout") and joint.plans
     assert validate_result(site, initial_world(site), joint) == []
     assert joint.cost()[1:3] <= plan(name).cost()[1:3]
+
+
+def test_a_plan_from_scratch_keeps_the_better_of_two_ways_of_breaking_ties():
+    """Robots have equally good plans; how one breaks the tie decides where the next can go. On this
+    site the two ways give different teams, and the planner hands out the better one."""
+    name = "gen2"
+    site = site_named(name)
+    tp = planner_for(name)
+    world = initial_world(site)
+    problems = tp.problems(world, 0)
+
+    def team(extra: str) -> tuple:
+        single = SingleRobotSolver(site_facts(site, 0) + extra, tp.hold, None)
+        plans, _ = iidp(single, problems, time_limit=60.0)
+        return TeamResult("iidp", 0, tp.hold, plans).cost()
+
+    first, early = team(""), team("early.\n")
+    assert first != early, "the ties matter here"
+    assert plan(name).cost() == min(first, early)
+
+
+def test_a_plan_moved_past_its_end_finishes_now_not_before():
+    """Re-expressed against a later base (the service keeps a plan as robots end their actions), a
+    robot done long ago finishes at 0, so the team's makespan is never negative on the wire."""
+    done = RobotPlan("r0", steps=(), finish=40, passes=())
+    going = RobotPlan("r1", steps=(Step("approach", ("d",), 50, 60),), finish=60, passes=())
+    moved = {p.robot: p.shifted(-55) for p in (done, going)}
+    assert moved["r0"].finish == 0 and moved["r1"].finish == 5
+    assert TeamResult("iidp", 0, 20, moved).makespan == 5
+    assert TeamResult("iidp", 0, 20, {"r0": moved["r0"]}).makespan == 0

@@ -174,20 +174,22 @@ def finish_front_action(client: TestClient, cmd: RobotCommand, at: float, versio
     client.publish(client.keys.clock(), Clock(time=at, mode="lockstep", world_version=version))
 
 
-@pytest.mark.parametrize("late", [0.0, 30.0], ids=["on-time", "30-s-late"])
-def test_an_action_ending_on_time_keeps_the_plan_and_a_late_one_is_solved_anew(spawn, router, namespace, client, late: float):
+@pytest.mark.parametrize("late", [0.0, -0.5, 30.0], ids=["on-time", "early", "30-s-late"])
+def test_an_action_ending_on_time_or_early_keeps_the_plan_and_a_late_one_is_solved_anew(spawn, router, namespace, client, late: float):
     plans, commands, first, cmd = start_and_first_command(spawn, router, namespace, client)
     planned = first.robots["r0"]
     before = planner_counters(client)
-    finish_front_action(client, cmd, planned[0].end + late, 2)
+    # early: half-way through the action's planned time (robots run ahead of the plan's waits)
+    at = planned[0].start + (planned[0].end - planned[0].start) / 2 if late < 0 else planned[0].end + late
+    finish_front_action(client, cmd, at, 2)
     later = wait_for_message(plans, lambda p: p.world_version >= 2, timeout=30)
     nxt = wait_for_message(commands, timeout=10)
     after = planner_counters(client)
     continued = after.get("plans_continued", 0) - before.get("plans_continued", 0)
-    if late:
+    if late > 0:
         assert continued == 0, "an action 30 s late must be planned anew"
     else:
-        assert continued == 1, "an action ending when planned keeps the plan without solving"
+        assert continued == 1, "an action ending when planned, or before, keeps the plan without solving"
         assert (nxt.action, nxt.args) == (planned[1].action, planned[1].args)
         # the kept plan is the same sequence, moved on by one action, with the same times
         assert [(s.action, s.args, s.start, s.end) for s in later.robots["r0"]] == [(s.action, s.args, s.start, s.end) for s in planned[1:]]
@@ -261,3 +263,30 @@ def test_a_command_the_robot_never_got_is_sent_again(spawn, router, namespace, c
     while not commands.empty():
         extra, _ = commands.get()
         assert extra.action_id != cmd.action_id, "a command the robot reports was sent again"
+
+
+def test_in_lockstep_the_plan_waits_for_the_feedback_ack_and_answers_the_constraints_it_brought(spawn, router, namespace, client):
+    """A paused lockstep simulator says what it waits for. While it waits for the ack of the human's
+    feedback, the planner holds (a new ConstraintSet follows): the world version is answered by one
+    plan, made with that ConstraintSet, the moment the simulator says it waits for that plan."""
+    every_plan = client.collect(client.keys.plan(), TeamPlan)
+    start_planner(spawn, router, namespace)
+    time.sleep(0.5)
+    publish_world(client, 1, 0.0)
+    wait_for_message(every_plan, lambda p: p.world_version >= 1, timeout=30)
+
+    # version 2: the simulator has sent a feedback and waits for its ack
+    for rid in SITE.robots:
+        client.publish(client.keys.robot_status(rid), RobotStatus(robot=rid, state="idle", world_version=2))
+    client.publish(client.keys.clock(), Clock(time=10.0, mode="lockstep", world_version=2, paused=True, awaiting="feedback"))
+    time.sleep(0.6)  # SETTLE and more: without the hold, version 2 would have been planned by now
+    early = [p for p, _ in iter(lambda: None if every_plan.empty() else every_plan.get(), None)]
+    assert not [p for p in early if p.world_version >= 2], "planned while the simulator waited for the feedback's ack"
+
+    # the ack came: the restrictor's new set, then the simulator waits for a plan answering it
+    client.publish(client.keys.constraints(), unavailable_set(1, *UNAVAILABLE))
+    client.publish(client.keys.clock(), Clock(time=10.0, mode="lockstep", world_version=2, paused=True, awaiting="plan", constraints_version=1))
+    answer = wait_for_message(every_plan, lambda p: p.world_version >= 2, timeout=30)
+    assert (answer.world_version, answer.constraints_version) == (2, 1)
+    time.sleep(0.5)
+    assert every_plan.empty(), "one plan answers the version and its constraints"

@@ -27,6 +27,7 @@ def test_protocol_benchmark_prints_its_json():
     assert report["codec"]["Intent200"]["bytes"] > report["codec"]["RobotPose"]["bytes"]
     latency = report["latency"]
     assert latency["shared_memory"] is False
+    assert latency["raw_payload_bytes"] == latency["payload_bytes"]  # the raw side sends as much
     for variant in ("protocol", "protocol_worker", "raw"):
         figures = latency[variant]
         assert figures["received"] == figures["sent"] == 200

@@ -292,6 +292,21 @@ def test_publish_stamps_the_envelope(make_service, peer):
     assert probe.counters["published"] == 3
 
 
+def test_a_prepared_sender_publishes_like_publish(make_service, peer):
+    probe = make_service(Probe).service
+    q = peer.collect(peer.keys.robot_pose("*"), RobotPose)
+    send = probe.sender(probe.keys.robot_pose("r0"), RobotPose)
+    keep = probe.sender(probe.keys.robot_pose("r1"), RobotPose, stamp=False)
+    eventually(lambda: all(probe._publishers[probe.keys.robot_pose(r)].matching_status.matching for r in ("r0", "r1")),
+               what="the collector")
+    for _ in range(2):
+        send(RobotPose(robot="r0", x=1.0, y=1.0, theta=0.0))
+    keep(RobotPose(robot="r1", x=2.0, y=1.0, theta=0.0, src="elsewhere-1", seq=41, stamp=5.0))
+    got = sorted((q.get(timeout=10)[0] for _ in range(3)), key=lambda m: m.robot)
+    assert [(m.robot, m.src, m.seq) for m in got] == [("r0", probe.src, 1), ("r0", probe.src, 2), ("r1", "elsewhere-1", 41)]
+    assert probe.counters["published"] == 3
+
+
 def test_serve_and_query(make_service, peer):
     probe = make_service(Probe).service
     probe.serve(probe.keys.plan(), lambda query: Event(kind="plan_reply"))

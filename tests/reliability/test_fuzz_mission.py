@@ -43,6 +43,7 @@ from services.restrictor.vocabulary import check_program
 from tests.procs import Proc, arroch
 from tests.reliability.fuzzing import (KEY_TYPES, SUBSCRIPTIONS, FuzzClient, Mutator, bad_frames, counted, hostile_feedback,
                                        is_valid, pattern_of, receivers)
+from tests.reliability.missions import PACE
 from tests.restrictor.test_validate import INJECTIONS, NUMERIC_INJECTIONS
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
@@ -138,7 +139,7 @@ def make_plan(client_src: str) -> Plan:
 
 
 def start_mission(spawn, run_dir: Path, endpoint: str, namespace: str) -> Proc:
-    proc = spawn(arroch("up", "--services", SERVICES, "--mode", "lockstep", "--seed", str(MISSION_SEED), "--until-done",
+    proc = spawn(arroch("up", "--services", SERVICES, "--mode", "lockstep", "--rate", str(PACE), "--seed", str(MISSION_SEED), "--until-done",
                         "--run-dir", str(run_dir), "--progress", "off", "--router-listen", endpoint, "--namespace", namespace,
                         "--timeout", str(MISSION_TIMEOUT)), name="up")
     proc.wait_for("router ready", timeout=30)

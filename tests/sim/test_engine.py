@@ -76,16 +76,17 @@ def plan(plan_id: int, world: int, constraints: int = 0, fronts: dict[str, int] 
 def test_lockstep_gate_waits_for_the_plan_its_commands_and_the_feedback():
     gate = LockstepGate()
     assert gate.blocker(1, {}) != ""  # no plan yet
+    assert gate.waits_for(1, {})[0] == "plan"
     gate.on_plan(plan(1, 1, fronts={"r0": 3}))
-    assert "r0's command 3" in gate.blocker(1, {"r0": 2})
-    assert gate.blocker(1, {"r0": 3}) == ""
-    assert "world version 2" in gate.blocker(2, {"r0": 3})
+    assert "r0's command 3" in gate.blocker(1, {"r0": 2}) and gate.waits_for(1, {"r0": 2})[0] == "command"
+    assert gate.blocker(1, {"r0": 3}) == "" and gate.waits_for(1, {"r0": 3}) == ("", "")
+    assert "world version 2" in gate.blocker(2, {"r0": 3}) and gate.waits_for(2, {"r0": 3})[0] == "plan"
     assert not gate.on_plan(plan(0, 2))  # older plan ignored
     gate.feedback_sent()
     gate.on_plan(plan(2, 2))
-    assert "ack" in gate.blocker(2, {})
+    assert "ack" in gate.blocker(2, {}) and gate.waits_for(2, {})[0] == "feedback"
     gate.feedback_answered(True, 5)
-    assert "constraints version 5" in gate.blocker(2, {})
+    assert "constraints version 5" in gate.blocker(2, {}) and gate.waits_for(2, {})[0] == "plan"
     gate.on_plan(plan(3, 2, constraints=5))
     assert gate.blocker(2, {}) == ""
     gate.feedback_sent()

@@ -79,7 +79,7 @@ def test_two_seeded_lockstep_runs_give_identical_event_logs(router, client, spaw
                 time.sleep(1.0)
                 later = drain(clocks) or [first]
                 assert all(c.time == 0.0 and c.paused and c.mode == "lockstep" for c in [first, *later])
-                assert later[-1].world_version == 1
+                assert later[-1].world_version == 1 and later[-1].awaiting == "plan"  # what the planner answers at once
             with Running(StandInPlanner(site, namespace, router)) as planner:
                 assert sim.popen.wait(60) == 0, sim.output
                 feedback.append([(f.kind, dict(f.params), f.src) for f in planner.feedback])
@@ -190,7 +190,8 @@ def test_rate_mode_runs_k_times_real_time_and_sigint_exits_cleanly(router, clien
     [
         (["--site", "/nonexistent/site.toml"], "site.toml"),
         (["--mode", "rate"], "--mode rate needs --rate"),
-        (["--mode", "lockstep", "--rate", "5"], "--rate goes with --mode rate"),
+        (["--mode", "realtime", "--rate", "5"], "--rate goes with --mode rate or lockstep"),
+        (["--mode", "lockstep", "--rate", "0"], "--rate must be > 0"),
         (["--human-config", "/nonexistent/h.toml"], "h.toml"),
         (["--camera", "somewhere"], "--camera 'somewhere'"),
     ],

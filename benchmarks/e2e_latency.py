@@ -58,6 +58,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from benchmarks.lib import figures  # noqa: E402
+from benchmarks.lib.figures import log  # noqa: E402
+
 from protocol.clock import WallClock  # noqa: E402
 from protocol.codec import decode  # noqa: E402
 from protocol.messages import Overlay, RobotPose, TeamPlan  # noqa: E402
@@ -70,16 +73,9 @@ MISSION = ["--mode", "realtime", "--method", "no-feedback", "--seed", "1", "--ca
 HUB_PORT = 7447
 
 
-def log(*args: object) -> None:
-    print(*args, file=sys.stderr, flush=True)
-
 
 def summary(values: list[float]) -> dict[str, float]:
-    if not values:
-        return {"n": 0}
-    a = np.asarray(values, dtype=float) * 1000.0
-    return {"n": int(a.size), "p50": round(float(np.percentile(a, 50)), 1), "p95": round(float(np.percentile(a, 95)), 1),
-            "mean": round(float(a.mean()), 1), "max": round(float(a.max()), 1)}
+    return figures.summary(values, percentiles=(50, 95), scale=1000.0, digits=1)
 
 
 # --------------------------------------------------------------------------- the probe (one process)

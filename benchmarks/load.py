@@ -50,6 +50,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from benchmarks.lib import figures  # noqa: E402
+from benchmarks.lib.figures import log  # noqa: E402
+
 from protocol.clock import WallClock  # noqa: E402
 from protocol.messages import CameraFrame, Event, RobotPose  # noqa: E402
 from protocol.service import Service  # noqa: E402
@@ -62,16 +65,9 @@ AREA = (6.6, 0.6, 10.4, 2.6)
 SAMPLE_PERIOD = 0.25  # s between two looks at the AR client's counters
 
 
-def log(*args: object) -> None:
-    print(*args, file=sys.stderr, flush=True)
-
 
 def summary(values: list[float]) -> dict[str, float]:
-    if not values:
-        return {"n": 0}
-    a = np.asarray(values, dtype=float)
-    return {"n": int(a.size), "p50": round(float(np.percentile(a, 50)), 2), "p99": round(float(np.percentile(a, 99)), 2),
-            "mean": round(float(a.mean()), 2), "max": round(float(a.max()), 2)}
+    return figures.summary(values, percentiles=(50, 99), scale=1.0, digits=2)
 
 
 def client(name: str, namespace: str, endpoint: str) -> Service:

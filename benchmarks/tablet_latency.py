@@ -37,6 +37,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from benchmarks.lib import figures  # noqa: E402
+from benchmarks.lib.figures import log  # noqa: E402
+
 from protocol.messages import Intent, RobotPose  # noqa: E402
 from protocol.service import Service  # noqa: E402
 from protocol.transport import ZenohOptions, free_tcp_port  # noqa: E402
@@ -45,16 +48,9 @@ from tests.procs import Proc, arroch  # noqa: E402
 from tests.tablet.helpers import ROBOT_XY, fake_camera, snapshots, start_tablet  # noqa: E402
 
 
-def log(*args: object) -> None:
-    print(*args, file=sys.stderr, flush=True)
-
 
 def summary(values: list[float]) -> dict[str, float]:
-    if not values:
-        return {"n": 0}
-    a = np.asarray(values, dtype=float)
-    return {"n": int(a.size), "p50": round(float(np.percentile(a, 50)), 2), "p95": round(float(np.percentile(a, 95)), 2),
-            "mean": round(float(a.mean()), 2), "max": round(float(a.max()), 2)}
+    return figures.summary(values, percentiles=(50, 95), scale=1.0, digits=2)
 
 
 def measure(width: int, height: int, seconds: float, warmup: float, workdir: Path) -> dict:

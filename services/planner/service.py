@@ -296,8 +296,7 @@ class PlannerService(Service):
     # ------------------------------------------------------------------ replanning
 
     def tick(self) -> None:
-        if isinstance(self.clock, SimClock):
-            self._note_version(self.clock.world_version)
+        # (The world version is noted in on_clock, in order with the statuses and events before it.)
         if not self._dirty:
             self._repeat_plan()
             return
@@ -329,22 +328,24 @@ class PlannerService(Service):
         sent = self.message
         if sent is not None and sent.world_version >= clock.world_version and sent.constraints_version >= clock.constraints_version:
             return  # answered already: what is pending now waits for the next version
-        self.counters["plans_on_pause"] += 1
-        self._plan_now(time.monotonic())
+        if self._plan_now(time.monotonic()):
+            self.counters["plans_on_pause"] += 1
 
-    def _plan_now(self, now: float) -> None:
+    def _plan_now(self, now: float) -> bool:
+        """Plan for the pending news unless it must wait; whether it planned."""
         if not self._world_heard(now):
-            return  # the triggers stay pending
+            return False  # the triggers stay pending
         if self._hold_for_world_version():
             self._held = True
             self._repeat_plan()
-            return
+            return False
         reasons = sorted(self._dirty)
         self._dirty.clear()
         try:
             self.replan(reasons)
         except Exception as exc:
             self._answer_despite(exc)
+        return True
 
     def _answer_despite(self, exc: Exception) -> None:
         """A replan that raised: say so, and still answer the world version with the plan being

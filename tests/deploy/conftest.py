@@ -8,7 +8,7 @@ from typing import Callable, Iterator
 import pytest
 
 from protocol.transport import free_tcp_port
-from tests.deploy.secure import RoleClient, make_pki, render_configs
+from tests.deploy.secure import RoleClient, make_pki, render_configs, role_clients
 from tests.procs import Proc, arroch
 
 
@@ -50,14 +50,5 @@ def secure_router(secure_configs: Path) -> Iterator[Proc]:
 @pytest.fixture
 def join(secure_router: Proc, secure_configs: Path, namespace: str) -> Iterator[Callable[[str], RoleClient]]:
     """``join("planner")`` opens a client with that config's identity; all are closed at teardown."""
-    clients: list[RoleClient] = []
-
-    def _join(config: str) -> RoleClient:
-        client = RoleClient(namespace, secure_configs / f"{config}.json5", config)
-        client.open()
-        clients.append(client)
-        return client
-
-    yield _join
-    for client in reversed(clients):
-        client.close()
+    with role_clients(namespace, secure_configs) as join:
+        yield join

@@ -9,9 +9,11 @@ taking a rendered one apart: ``nocert.json5`` (trusts the router but presents no
 
 from __future__ import annotations
 
+import contextlib
 import re
 import uuid
 from pathlib import Path
+from typing import Callable, Iterator
 
 from protocol.clock import WallClock
 from protocol.service import Service
@@ -58,3 +60,22 @@ class RoleClient(TestClient):
         Service.__init__(self, "testclient", namespace, ZenohOptions(config_file=str(config_file)),
                          instance=f"test-{label}-{uuid.uuid4().hex[:6]}", clock=WallClock())
         self.queues = {}
+
+
+@contextlib.contextmanager
+def role_clients(namespace: str, configs: Path) -> Iterator[Callable[[str], RoleClient]]:
+    """``join("planner")`` opens a client with ``configs/planner.json5``'s identity; all are closed
+    on leaving (the ``join`` fixtures of the deploy and reliability tests)."""
+    clients: list[RoleClient] = []
+
+    def join(identity: str) -> RoleClient:
+        client = RoleClient(namespace, configs / f"{identity}.json5", identity)
+        client.open()
+        clients.append(client)
+        return client
+
+    try:
+        yield join
+    finally:
+        for client in reversed(clients):
+            client.close()

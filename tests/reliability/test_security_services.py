@@ -26,7 +26,7 @@ import zenoh
 from protocol.codec import encode
 from protocol.messages import Event, Feedback, RobotCommand
 from protocol.transport import ZenohOptions, free_tcp_port, open_session
-from tests.deploy.secure import INTRUDER, RoleClient, make_pki, render_configs
+from tests.deploy.secure import INTRUDER, RoleClient, make_pki, render_configs, role_clients
 from tests.procs import Proc, arroch
 
 pytestmark = [pytest.mark.integration]
@@ -52,17 +52,8 @@ def secure(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, int
 @pytest.fixture
 def join(secure: tuple[Path, int], namespace: str) -> Iterator[Callable[[str], RoleClient]]:
     configs, _ = secure
-    clients: list[RoleClient] = []
-
-    def _join(identity: str) -> RoleClient:
-        client = RoleClient(namespace, configs / f"{identity}.json5", identity)
-        client.open()
-        clients.append(client)
-        return client
-
-    yield _join
-    for client in reversed(clients):
-        client.close()
+    with role_clients(namespace, configs) as join:
+        yield join
 
 
 def counters(reader: RoleClient, service: str) -> dict:

@@ -67,6 +67,7 @@ from protocol.keys import Keys  # noqa: E402
 from protocol.messages import Intent, RobotPose  # noqa: E402
 from protocol.ping import PingSender, summarize  # noqa: E402
 from protocol.service import publisher_options  # noqa: E402
+from protocol.signals import StopSignals  # noqa: E402
 from protocol.transport import ZenohOptions, build_config, free_tcp_port, on_zenoh_thread, options_from  # noqa: E402
 
 FLOOR_RATIO = 1.3
@@ -121,14 +122,13 @@ def raw_echo(args: argparse.Namespace) -> int:
     keys = Keys(args.namespace)
     # The session options come the way `arroch ping serve` gets them (options and environment).
     opts = options_from(args)
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    signals = StopSignals()
+    signals.install()
     with zenoh.open(build_config(opts)) as session:
         pub = session.declare_publisher(keys.ping_reply(), **publisher_options())
         sub = session.declare_subscriber(keys.robot_pose("*"), on_zenoh_thread(lambda sample: pub.put(sample.payload)))
         print("raw echo ready", flush=True)
-        stop.wait()
+        signals.wait()
         sub.undeclare()
         pub.undeclare()
     return 0

@@ -10,10 +10,10 @@ from __future__ import annotations
 import argparse
 import logging
 import os
-import signal
 import sys
 import threading
 
+from .signals import StopSignals
 from .transport import DEFAULT_ROUTER, add_zenoh_arguments, open_session, options_from
 
 log = logging.getLogger("arroch.router")
@@ -29,12 +29,11 @@ def run_router(args: argparse.Namespace) -> int:
     except Exception as exc:
         log.error("could not start the router: %s", exc)
         return 1
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    signals = StopSignals()
+    signals.install()
     log.info("router %s listening on %s", session.zid(), ", ".join(opts.listen) or "(config file)")
     print(f"router ready on {', '.join(opts.listen) or 'the config file endpoints'}", flush=True)
-    stop.wait()
+    signals.wait()
     closer = threading.Thread(target=session.close, daemon=True)
     closer.start()
     closer.join(1.5)

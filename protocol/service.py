@@ -38,7 +38,6 @@ import itertools
 import logging
 import os
 import queue
-import signal
 import threading
 import time
 from dataclasses import dataclass
@@ -52,6 +51,7 @@ from .errors import ProtocolError
 from .keys import Keys
 from .messages import Clock as ClockMessage
 from .messages import Event, Message
+from .signals import StopSignals
 from .transport import ZenohOptions, on_zenoh_thread, open_session
 
 M = TypeVar("M", bound=Message)
@@ -140,6 +140,7 @@ class Service:
         self._publishers_lock = threading.Lock()
         self._timers: list[list[Any]] = []  # [next_due_monotonic, period, fn]
         self._stop = threading.Event()
+        self.signals = StopSignals()  # set by signal handlers; the worker loop turns it into a stop
         self._last_bad_log: dict[str, float] = {}  # sender -> monotonic time of its last log line
         self._counters_lock = threading.Lock()
         self._counters: collections.Counter[str] = collections.Counter()
@@ -180,20 +181,26 @@ class Service:
 
     @property
     def stopping(self) -> bool:
-        return self._stop.is_set()
+        return self._stop.is_set() or self.signals.received
 
     def install_signal_handlers(self) -> None:
-        def _handle(signum: int, _frame: Any) -> None:
-            self.log.info("received %s, stopping", signal.Signals(signum).name)
-            self.stop()
+        """SIGINT/SIGTERM stop the service. The handlers only note the signal (see
+        :mod:`protocol.signals`); :meth:`run` logs it and stops within 0.1 s."""
+        self.signals.install()
 
-        signal.signal(signal.SIGINT, _handle)
-        signal.signal(signal.SIGTERM, _handle)
+    def on_stop_signal(self) -> None:
+        """Called once on the worker when a stop signal was noted. Override to say more."""
+        self.log.info("received %s, stopping", self.signals.name)
+        self.stop()
 
     def run(self) -> None:
         """Process messages and timers until :meth:`stop` (or a signal), then close."""
         try:
             while not self._stop.is_set():
+                if self.signals.received:
+                    self.on_stop_signal()
+                    self._stop.set()
+                    break
                 timeout = self._run_due_timers()
                 try:
                     item = self._inbox.get(timeout=min(timeout, 0.1))

@@ -32,6 +32,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from protocol.signals import StopSignals, restore
+
 from .design import SweepSpec, TrialKey
 from .params import write_params
 from .provenance import code_fingerprint
@@ -212,16 +214,6 @@ class Sweep:
 
     # ------------------------------------------------------------------ the whole sweep
 
-    def _install_signals(self) -> dict[int, Any]:
-        def handle(signum: int, _frame: Any) -> None:
-            # Only a flag: this runs between two bytecodes of the main thread.
-            self.cancel.set()
-
-        previous = {}
-        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-            previous[sig] = signal.signal(sig, handle)
-        return previous
-
     def run(self) -> int:
         """Run the sweep. Exit code: 0 complete, 1 complete with failed trials or a worker that
         stopped, 130 cancelled (the folder can be resumed)."""
@@ -242,7 +234,9 @@ class Sweep:
             root = logging.getLogger()
             saved_handlers = root.handlers[:]
             root.handlers[:] = [handler]
-        previous = self._install_signals() if threading.current_thread() is threading.main_thread() else {}
+        # The handlers only note the signal (protocol.signals): the loop below turns it into a cancel.
+        signals = StopSignals()
+        previous = signals.install((signal.SIGINT, signal.SIGTERM, signal.SIGHUP)) if threading.current_thread() is threading.main_thread() else {}
         shared: Router | None = None
         try:
             if todo and self.options.router == "shared":
@@ -253,13 +247,16 @@ class Sweep:
             while any(w.is_alive() for w in workers):
                 for worker in workers:
                     worker.join(0.5)
+                    if signals.received:
+                        self.cancel.set()
                 if self.progress is not None:
                     self.progress.tick()
+            if signals.received:  # one that came as the last trial ended
+                self.cancel.set()
         finally:
             if shared is not None:
                 shared.stop()
-            for sig, old in previous.items():
-                signal.signal(sig, old)
+            restore(previous)
             if self.progress is not None:
                 self.progress.close()
                 logging.getLogger().handlers[:] = saved_handlers

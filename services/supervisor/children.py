@@ -164,17 +164,18 @@ class Child:
         self.flush_output()
 
 
-def stop_all(children: list[Child], timeout: float, hurry: threading.Event | None = None) -> list[str]:
+def stop_all(children: list[Child], timeout: float, hurry: Callable[[], bool] | None = None) -> list[str]:
     """SIGTERM every running child at once, wait up to ``timeout`` s, then SIGKILL what is left.
 
-    Returns the names of children that had to be killed. ``hurry`` (a second Ctrl-C) cuts the wait short.
+    Returns the names of children that had to be killed. ``hurry()`` turning true (a second Ctrl-C)
+    cuts the wait short.
     """
     running = [child for child in children if child.running()]
     for child in running:
         child.signal(signal.SIGTERM)
     deadline = time.monotonic() + timeout
     while any(child.running() for child in running) and time.monotonic() < deadline:
-        if hurry is not None and hurry.is_set():
+        if hurry is not None and hurry():
             log.warning("asked again to stop: killing %s now", ", ".join(c.name for c in running if c.running()))
             break
         time.sleep(0.05)

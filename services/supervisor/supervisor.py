@@ -73,7 +73,7 @@ class Supervisor(Service):
         self.children: list[Child] = []  # services and extra children (not the router)
         self.exit_code = 0
         self.stop_reason = ""
-        self._hurry = threading.Event()
+        self._signal_taken = False
         self._started = time.monotonic()
         self._mission_reported = False
         self._waiting: dict[str, tuple[str, ...]] = {}  # child name -> services it still waits for
@@ -85,21 +85,30 @@ class Supervisor(Service):
     def install_signal_handlers(self) -> None:
         """First signal: stop in order. A second one: stop waiting, kill the children now.
 
-        The handler only sets flags: it runs on the main thread between two bytecodes, possibly while
-        that thread holds the output lock, so logging from it could deadlock. The stop is logged later.
+        The handlers only count signals (:mod:`protocol.signals`): they run on the main thread
+        between two bytecodes, possibly while it holds a lock, so what a signal means is worked out
+        on the worker (:meth:`on_stop_signal`, :meth:`_hurried`) and logged there.
         """
+        self.signals.install((signal.SIGINT, signal.SIGTERM, signal.SIGHUP))
 
-        def handle(signum: int, _frame: Any) -> None:
-            if self.stopping:
-                self._hurry.set()
-                return
-            self.stop_reason = f"received {signal.Signals(signum).name}"
-            if self.config.until_done and not self.progress.done:
-                self.exit_code = 128 + signum
-            self.stop()
+    def on_stop_signal(self) -> None:
+        self._take_signal()
 
-        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-            signal.signal(sig, handle)
+    def _take_signal(self) -> None:
+        """A first signal while nothing else stops the run: stop in order, and say why."""
+        if self._signal_taken or not self.signals.received:
+            return
+        self._signal_taken = True
+        if self.stop_reason:  # already stopping (mission done, a failure): the signal only hurries
+            return
+        self.stop_reason = f"received {self.signals.name}"
+        if self.config.until_done and not self.progress.done:
+            self.exit_code = 128 + int(self.signals.first or 0)
+        self.stop()
+
+    def _hurried(self) -> bool:
+        """A second signal, or one that came while stopping for another reason: kill at once."""
+        return self.signals.count >= 2 or (self.signals.received and not self.stop_reason.startswith("received"))
 
     # ------------------------------------------------------------------ service I/O
 
@@ -289,13 +298,14 @@ class Supervisor(Service):
             self._shutdown()
 
     def _shutdown(self) -> None:
+        self._take_signal()  # one that came before the worker loop ran
         if self.stop_reason.startswith("received"):
             log.info("%s: stopping everything (a second signal kills at once)", self.stop_reason)
         self.close()
         # Services first: they may still publish on their way out, through a router that is up.
-        killed = stop_all(self.children, self.config.stop_timeout, self._hurry)
+        killed = stop_all(self.children, self.config.stop_timeout, self._hurried)
         if self.router is not None:
-            killed += stop_all([self.router], self.config.stop_timeout, self._hurry)
+            killed += stop_all([self.router], self.config.stop_timeout, self._hurried)
         if killed:
             log.warning("had to SIGKILL %s after %.0f s", ", ".join(killed), self.config.stop_timeout)
         everyone = ([self.router] if self.router else []) + self.children

@@ -19,8 +19,7 @@ from typing import Any
 
 import zenoh
 
-from protocol.codec import decode, encode
-from protocol.errors import ProtocolError
+from protocol.codec import encode
 from protocol.messages import ConstraintSet, Feedback, FeedbackAck
 from protocol.service import Service
 
@@ -37,17 +36,15 @@ def send_feedback(client: Service, kind: str, params: dict[str, Any], *, timeout
     def mine(ack: FeedbackAck) -> bool:
         return ack.to == feedback.src and ack.feedback_seq == feedback.seq
 
+    ack_key = client.keys.feedback_ack(feedback.src)
+
     def on_ack(sample: zenoh.Sample) -> None:
-        try:
-            ack = decode(sample.payload.to_bytes(), FeedbackAck)
-        except ProtocolError as exc:
-            log.debug("ignored a bad ack: %s", exc)
-            return
-        if mine(ack):
+        ack = client.decode_or_count(sample.payload.to_bytes(), FeedbackAck, ack_key)  # bad: counted, logged
+        if ack is not None and mine(ack):
             acks.put(ack)
 
     # Declared before the first send, so an ack published for it cannot slip past.
-    subscriber = client.session.declare_subscriber(client.keys.feedback_ack(feedback.src), on_ack)
+    subscriber = client.session.declare_subscriber(ack_key, on_ack)
     try:
         deadline = time.monotonic() + timeout
         attempt = 0
@@ -62,10 +59,8 @@ def send_feedback(client: Service, kind: str, params: dict[str, Any], *, timeout
             for reply in client.session.get(client.keys.feedback(), payload=payload, timeout=min(retry, remaining)):
                 if reply.ok is None:
                     continue
-                try:
-                    ack = decode(reply.ok.payload.to_bytes(), FeedbackAck)
-                except ProtocolError as exc:
-                    log.debug("ignored a bad reply: %s", exc)
+                ack = client.decode_or_count(reply.ok.payload.to_bytes(), FeedbackAck, client.keys.feedback())
+                if ack is None:
                     continue
                 if mine(ack) or (ack.to == "" and not ack.accepted):  # "" : the restrictor could not read it
                     return ack

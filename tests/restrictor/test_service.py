@@ -122,6 +122,34 @@ def test_feedback_is_acknowledged_and_the_set_published_and_served(start_restric
     assert "restrictor" in proc.wait_for("stopped", timeout=1)
 
 
+def test_send_feedback_counts_forged_acks_and_keeps_waiting_for_the_real_one(start_restrictor, client, router, namespace) -> None:
+    """A bad payload on the sender's ack key is counted as a bad message (not silently skipped),
+    and the sender still gets the restrictor's real ack once one is up."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from services.restrictor.client import send_feedback
+
+    forger = TestClient(namespace, router).open()
+    try:
+        with ThreadPoolExecutor(1) as pool:
+            pending = pool.submit(send_feedback, client, "door_unavailable", {"door": "d_storage", "minutes": 2},
+                                  timeout=30.0, retry=0.5)
+            time.sleep(1.0)  # its ack subscription is declared and has reached the router
+            for payload in (b"\xc1 not msgpack", encode(ConstraintSet(version=3)), b"\x93\x01"):
+                forger.session.put(forger.keys.feedback_ack(client.src), payload)
+            deadline = time.monotonic() + 5
+            while client.counters["bad_messages"] < 3 and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert client.counters["bad_messages"] == 3 and not pending.done()
+            start_restrictor()  # only now: the forged acks came first
+            ack = pending.result(timeout=30)
+    finally:
+        forger.close()
+    assert ack is not None and ack.accepted and ack.constraint_id == "c1" and ack.to == client.src
+    assert any(key.startswith("bad_messages:") and key.endswith(client.keys.feedback_ack(client.src))
+               for key in client.counters)
+
+
 def test_a_restart_restores_exactly_the_active_set(start_restrictor, spawn, router, namespace, client, tmp_path) -> None:
     first = start_restrictor()
     assert ask(client, "door_unavailable", door="d_storage", minutes=30).accepted

@@ -32,7 +32,6 @@ Prints one JSON document on stdout; progress on stderr.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import os
 import sys
@@ -45,6 +44,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from benchmarks.lib.stdio import c_stdout_to_stderr  # noqa: E402
 from protocol.apriltag import apriltag_corners  # noqa: E402
 from protocol.messages import DoorState, Intent, RobotPose  # noqa: E402
 from protocol.site import load_site  # noqa: E402
@@ -128,19 +128,6 @@ def reference_pose(site, gray: np.ndarray, K: Intrinsics) -> tuple[CameraPose | 
     return CameraPose.from_rvec_tvec(rvec, tvec), sorted(d.tag_id for d in found), time.perf_counter() - t0
 
 
-@contextlib.contextmanager
-def _c_stdout_to_stderr():  # noqa: ANN202
-    """pybullet's C code prints to file descriptor 1; keep stdout for the JSON document."""
-    sys.stdout.flush()
-    saved = os.dup(1)
-    os.dup2(2, 1)
-    try:
-        yield
-    finally:
-        os.dup2(saved, 1)
-        os.close(saved)
-
-
 def sim_frames(site, views, n: int, size: tuple[int, int], supersample: int = 1) -> list[Frame]:  # noqa: ANN001
     """Frames rendered by the simulator's pybullet scene and virtual camera at the first n sampled
     poses (its camera has no roll, so each view keeps its position and viewing direction)."""
@@ -148,7 +135,7 @@ def sim_frames(site, views, n: int, size: tuple[int, int], supersample: int = 1)
     from services.sim.world import World
 
     out: list[Frame] = []
-    with _c_stdout_to_stderr(), World(site) as world:
+    with c_stdout_to_stderr(), World(site) as world:
         for view in views[:n]:
             fwd = view.pose.R_wc[:, 2]
             yaw = float(np.degrees(np.arctan2(fwd[1], fwd[0])))
@@ -166,14 +153,48 @@ def sim_frames(site, views, n: int, size: tuple[int, int], supersample: int = 1)
     return out
 
 
+class Accuracy:
+    """Detection and localisation accuracy over a set of frames, one :meth:`add` per frame."""
+
+    def __init__(self, site) -> None:  # noqa: ANN001
+        self.site = site
+        self.pos: list[float] = []
+        self.rot: list[float] = []
+        self.rel: list[float] = []
+        self.per_frame: list[tuple[float, float] | None] = []
+        self.found = self.in_view = self.localised = 0
+
+    def add(self, frame: Frame, detected: set[int], pose: CameraPose | None, tags: list[int]) -> None:
+        """One frame: the tag ids detected, and the pose estimated from ``tags`` (None: not localised)."""
+        self.found += len(detected & set(frame.in_view))
+        self.in_view += len(frame.in_view)
+        if pose is None:
+            self.per_frame.append(None)
+            return
+        self.localised += 1
+        pe, re = pose_errors(pose, frame.truth)
+        self.pos.append(pe)
+        self.rot.append(re)
+        self.rel.append(pe / distance_to_tags(self.site, frame.truth, tags))
+        self.per_frame.append((pe, re))
+
+    def summary(self) -> dict:
+        return {
+            "detection_rate": self.found / max(self.in_view, 1),
+            "localisation_rate": self.localised / max(len(self.per_frame), 1),
+            "position_error_m": stats(self.pos),
+            "rotation_error_deg": stats(self.rot),
+            "position_error_fraction_of_distance": stats(self.rel),
+            "_per_frame": self.per_frame,
+        }
+
+
 def run_pipeline(site, frames: list[Frame]) -> dict:  # noqa: ANN001
     world = world_for(site)
     pipeline = Pipeline(site, world, panel=FeedbackPanel.for_site(site))
     stages = {k: [] for k in ("decode", "detect", "pose", "project", "draw", "total")}
     cpu: list[float] = []
-    pos, rot, rel = [], [], []
-    found = in_view = localised = 0
-    per_frame = []
+    accuracy = Accuracy(site)
     # Warm-up (caches, first-call allocations) on the first frame, not measured.
     pipeline.process(frames[0].jpeg, frames[0].K, -100.0)
     for i, f in enumerate(frames):
@@ -185,60 +206,26 @@ def run_pipeline(site, frames: list[Frame]) -> dict:  # noqa: ANN001
         for k in ("decode", "detect", "pose", "project", "draw"):
             stages[k].append(getattr(t, k))
         stages["total"].append(t.total)
-        got = {d.tag_id for d in pipeline.last_detections}
-        found += len(got & set(f.in_view))
-        in_view += len(f.in_view)
         loc = pipeline.last_localization
-        if loc is not None and loc.ok:
-            localised += 1
-            pe, re = pose_errors(loc.pose, f.truth)
-            pos.append(pe)
-            rot.append(re)
-            rel.append(pe / distance_to_tags(site, f.truth, loc.tags))
-            per_frame.append((pe, re))
-        else:
-            per_frame.append(None)
+        ok = loc is not None and loc.ok
+        accuracy.add(f, {d.tag_id for d in pipeline.last_detections}, loc.pose if ok else None, loc.tags if ok else [])
     return {
         "stage_ms": {k: stats(v, 1000.0) for k, v in stages.items()},
         "fps": float(1.0 / np.mean(stages["total"])),
         "cpu_ms_per_frame": stats(cpu, 1000.0),
         "fps_cpu": float(1.0 / np.mean(cpu)),
-        "detection_rate": found / max(in_view, 1),
-        "localisation_rate": localised / len(frames),
-        "position_error_m": stats(pos),
-        "rotation_error_deg": stats(rot),
-        "position_error_fraction_of_distance": stats(rel),
-        "_per_frame": per_frame,
+        **accuracy.summary(),
     }
 
 
 def run_reference(site, frames: list[Frame]) -> dict:  # noqa: ANN001
-    pos, rot, rel, times = [], [], [], []
-    found = in_view = localised = 0
-    per_frame = []
+    times: list[float] = []
+    accuracy = Accuracy(site)
     for f in frames:
         pose, tags, dt = reference_pose(site, f.decoded, f.K)
         times.append(dt)
-        found += len(set(tags) & set(f.in_view))
-        in_view += len(f.in_view)
-        if pose is not None:
-            localised += 1
-            pe, re = pose_errors(pose, f.truth)
-            pos.append(pe)
-            rot.append(re)
-            rel.append(pe / distance_to_tags(site, f.truth, tags))
-            per_frame.append((pe, re))
-        else:
-            per_frame.append(None)
-    return {
-        "detect_and_pose_ms": stats(times, 1000.0),
-        "detection_rate": found / max(in_view, 1),
-        "localisation_rate": localised / len(frames),
-        "position_error_m": stats(pos),
-        "rotation_error_deg": stats(rot),
-        "position_error_fraction_of_distance": stats(rel),
-        "_per_frame": per_frame,
-    }
+        accuracy.add(f, set(tags), pose, tags)
+    return {"detect_and_pose_ms": stats(times, 1000.0), **accuracy.summary()}
 
 
 def compare_detectors(site, frames: list[Frame]) -> dict:  # noqa: ANN001

@@ -14,18 +14,17 @@ Prints one JSON document. Usage: ``python benchmarks/sim_camera.py [--frames 12]
 from __future__ import annotations
 
 import argparse
-import ctypes
 import json
 import os
 import statistics
 import sys
 import time
-from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+
+from benchmarks.lib.stdio import c_stdout_to_stderr  # noqa: E402
 
 POSES = (  # x, y, z, yaw°, pitch°
     (8.0, 2.0, 1.3, -70.0, 5.0),
@@ -34,20 +33,6 @@ POSES = (  # x, y, z, yaw°, pitch°
     (2.0, 5.0, 1.6, 0.0, -10.0),
 )
 SIZES = ((640, 480, 1), (1280, 720, 1), (640, 480, 2))
-
-
-@contextmanager
-def stdout_to_stderr() -> Iterator[None]:
-    """pybullet prints banners on the C-level stdout; keep stdout for the JSON document."""
-    sys.stdout.flush()
-    saved = os.dup(1)
-    os.dup2(2, 1)
-    try:
-        yield
-    finally:
-        ctypes.CDLL(None).fflush(None)  # C stdio buffers the banner until exit otherwise
-        os.dup2(saved, 1)
-        os.close(saved)
 
 
 def _stats(ms: list[float]) -> dict[str, float]:
@@ -61,7 +46,7 @@ def _stats(ms: list[float]) -> dict[str, float]:
 
 
 def measure(frames: int) -> dict:
-    with stdout_to_stderr():
+    with c_stdout_to_stderr():
         from protocol.site import load_site
         from services.sim.camera import CameraSpec, frame_message
         from services.sim.world import World

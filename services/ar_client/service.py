@@ -111,13 +111,11 @@ class ArService(Service):
             self.log.info("kept %d overlay frame(s) in %s", len(self.snapshots.kept), self.snapshots.directory)
 
     def _fetch_constraints(self) -> None:
-        try:
-            sets = self.query(self.keys.constraints(), ConstraintSet, timeout=2.0)
-        except Exception as exc:  # the session closed while asking: nothing to do
-            self.log.debug("constraints query failed: %s", exc)
-            return
-        if sets and self.panel is not None:
-            self.panel.on_constraints(max(sets, key=lambda s: s.version))
+        from services.restrictor.client import newest_constraints  # on first use: it loads clingo
+
+        newest = newest_constraints(self)
+        if newest is not None and self.panel is not None:
+            self.panel.on_constraints(newest)
 
     # ------------------------------------------------------------------ frames
 

@@ -78,3 +78,13 @@ def fetch_constraints(client: Service, *, timeout: float = 3.0) -> ConstraintSet
     """The live ConstraintSet from the restrictor's queryable (the newest version if several answer)."""
     sets = client.query(client.keys.constraints(), ConstraintSet, timeout=timeout)
     return max(sets, key=lambda s: s.version) if sets else None
+
+
+def newest_constraints(client: Service, *, timeout: float = 2.0) -> ConstraintSet | None:
+    """:func:`fetch_constraints` for a background thread of a running service: a session closed
+    while asking gives None (logged at debug level), not an error."""
+    try:
+        return fetch_constraints(client, timeout=timeout)
+    except Exception as exc:  # the session closed while asking: nothing to do
+        client.log.debug("constraints query failed: %s", exc)
+        return None

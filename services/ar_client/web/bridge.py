@@ -69,13 +69,11 @@ class TabletBridge(Service):
         self.on_constraints(msg)
 
     def _fetch_constraints(self) -> None:
-        try:
-            sets = self.query(self.keys.constraints(), ConstraintSet, timeout=2.0)
-        except Exception as exc:  # the session closed while asking: nothing to do
-            self.log.debug("constraints query failed: %s", exc)
-            return
-        if sets:
-            self._constraints(max(sets, key=lambda s: s.version))
+        from services.restrictor.client import newest_constraints  # on first use: it loads clingo
+
+        newest = newest_constraints(self)
+        if newest is not None:
+            self._constraints(newest)
 
     def now(self) -> float:
         """Site-clock time for drawing (before the sim's first clock message: wall time)."""

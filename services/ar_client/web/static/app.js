@@ -5,7 +5,7 @@
 // frame (older than STALE_MS: hidden, and the status says so); "LOST" is shown with the age of the
 // last pose and the reason; link latency is the measured round trip of the last frames.
 
-import { drawMap, drawPrimitives, letterbox } from "./draw.js";
+import { clearCanvas, drawMap, drawPrimitives, letterbox } from "./draw.js";
 import { FrameSender, parseViewerFrame } from "./link.js";
 import { FeedbackPanel } from "./panel.js";
 
@@ -184,15 +184,7 @@ function sourceSize() {
 
 function renderOverlay() {
   const canvas = $("overlay");
-  const ctx = canvas.getContext("2d");
-  const dpr = window.devicePixelRatio || 1;
-  const cw = canvas.clientWidth, ch = canvas.clientHeight;
-  if (canvas.width !== Math.round(cw * dpr) || canvas.height !== Math.round(ch * dpr)) {
-    canvas.width = Math.round(cw * dpr);
-    canvas.height = Math.round(ch * dpr);
-  }
-  ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
-  ctx.clearRect(0, 0, cw, ch);
+  const [ctx, cw, ch] = clearCanvas(canvas);
   const o = state.overlay;
   if (!o || state.stale || !o.width) return;
   // The frame was a scaled copy of the picture on screen: map its pixels onto the displayed picture.

@@ -102,8 +102,8 @@ function viewDirection(q) {
   return [2 * (x * z + w * y), 2 * (y * z - w * x)];
 }
 
-// Draw the site top-down with the world state. `tablet` is an overlay with a pose, or null.
-export function drawMap(canvas, site, world, tablet) {
+// A canvas sized to its box in device pixels, cleared, drawing in CSS pixels: [ctx, width, height].
+export function clearCanvas(canvas) {
   const ctx = canvas.getContext("2d");
   const dpr = window.devicePixelRatio || 1;
   const cw = canvas.clientWidth, ch = canvas.clientHeight;
@@ -113,6 +113,12 @@ export function drawMap(canvas, site, world, tablet) {
   }
   ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
   ctx.clearRect(0, 0, cw, ch);
+  return [ctx, cw, ch];
+}
+
+// Draw the site top-down with the world state. `tablet` is an overlay with a pose, or null.
+export function drawMap(canvas, site, world, tablet) {
+  const [ctx, cw, ch] = clearCanvas(canvas);
   if (!site || !cw || !ch) return;
   const [x0, y0, x1, y1] = site.bounds;
   const margin = 16;

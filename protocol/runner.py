@@ -51,14 +51,15 @@ def run_service(build: Callable[[], "object"]) -> int:
         service.close()  # type: ignore[attr-defined]
         return 1
     service.run()  # type: ignore[attr-defined]
+    code = int(getattr(service, "exit_code", 0))  # a service that gave up sets it (e.g. the sim's lockstep abort)
     if getattr(service, "close_timed_out", False):
         # Zenoh's close() overran its budget and still runs on a daemon thread; a normal interpreter
         # exit would wait for the session forever (zenoh-python issue 434). Leave now, output flushed.
         logging.shutdown()
         sys.stdout.flush()
         sys.stderr.flush()
-        os._exit(0)
-    return 0
+        os._exit(code)
+    return code
 
 
 def zenoh_options(args: argparse.Namespace):

@@ -1,40 +1,41 @@
-"""The paper's claims (§V-A) checked against a sweep's numbers.
+"""The paper's claims (§V-A) checked against a sweep's numbers, pair by pair, on Holm-adjusted p-values.
 
-- **Fewest door openings** (figure "different number of robots" (a), and "human laziness" (a)):
-  at every level of the sweep, ARROCH's mean number of door openings is below each baseline's.
-- **Lowest team completion time** (figure "different number of robots" (b)): at every team size,
-  ARROCH's mean team completion time is below each baseline's.
+- **Fewest door openings** (figures "different number of robots" (a) and "human laziness" (a)):
+  at every level of the sweep ARROCH's human opens fewer doors than each baseline's.
+- **Lowest team completion time** (figure "different number of robots" (b)): at every team size
+  ARROCH's team completion time (slowest agent) is below each baseline's.
 - **Laziness crossover** (figure "human laziness" (b)): ARROCH has the lowest team completion time
-  "except for situations where the door opening probability is very low" — as long as the human
-  opens with probability >= 0.1 — while no-comm, whose human walks to the door every minute
-  whatever she sees, is faster when she is very lazy.
+  "as long as" the human opens with probability >= 0.1, while no-comm, whose human walks to the
+  door every minute whatever she sees, is faster when she is very lazy (the sweep's lowest
+  probability, below 0.1).
+- **Lowest sum of times** (the paper's real-world measure, "we sum up the team agents' individual
+  completion times"): at every level ARROCH's sum of all agents' completion times is below each
+  baseline's.
 
-A level counts as *confirmed* when ARROCH's mean is lower than each baseline's and Welch's test
-finds each difference significant at ``ALPHA`` (two-sided); *lower, not significant* when the means
-are lower but a test is not; *not confirmed* otherwise. A claim over all levels is confirmed only if
-every level is; Holm's correction over all the claim's tests is shown as well.
+Each (level, baseline) gets the verdict of :class:`~.comparisons.Test` (primary test: Wilcoxon
+signed-rank for times, the sign-flip permutation test for counts; Holm over the claim's family:
+all levels × baselines of its metric, the same family as ``tests.csv``). A claim is
+
+- *confirmed* when every (level, baseline) is ``lower (significant)``;
+- *partly confirmed* when some are;
+- *not confirmed* when none is (the detail says which are higher, equivalent or not significant);
+- *cannot be checked* when the sweep lacks ARROCH, a baseline, or complete pairs.
+
+The crossover is confirmed when both halves hold (no-comm significantly faster at the lowest
+probability, ARROCH significantly lowest against every baseline from 0.1 on), partly when one half
+or part of the second holds.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
+from .comparisons import (DOOR_OPENINGS, HIGHER, LOWER, NO_DATA, REFERENCE, SUM_OF_TIMES, TEAM_TIME, Metric, Test,
+                          baselines, families)
 from .results import Results
-from .stats import Comparison, compare, holm
 
-ALPHA = 0.05
 COOPERATIVE_P = 0.1  # the paper's caption: ARROCH is best "as long as ... >= 0.1 probability"
-REFERENCE = "arroch"
 BASELINE_FOR_CROSSOVER = "no-comm"
-
-
-@dataclass
-class LevelCheck:
-    level: float
-    verdict: str  # confirmed, lower, not confirmed, no data
-    comparisons: dict[str, Comparison] = field(default_factory=dict)  # baseline -> ARROCH vs it
-    holm_p: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass
@@ -43,123 +44,98 @@ class Claim:
     statement: str
     verdict: str  # confirmed, partly confirmed, not confirmed, cannot be checked
     detail: str
-    levels: list[LevelCheck] = field(default_factory=list)
+    tests: list[Test] = field(default_factory=list)
 
 
-def _fmt_level(results: Results, level: float) -> str:
-    return f"{int(level)} robots" if results.kind == "robots" else f"p = {level:g}"
+def _tally(tests: list[Test]) -> str:
+    counts: dict[str, int] = {}
+    for t in tests:
+        counts[t.verdict] = counts.get(t.verdict, 0) + 1
+    return ", ".join(f"{n} {v}" for v, n in counts.items())
 
 
-def _level_check(results: Results, level: float, metric: str, baselines: list[str]) -> LevelCheck:
-    ref = results.values(REFERENCE, level, metric)
-    check = LevelCheck(level, "no data")
-    for baseline in baselines:
-        other = results.values(baseline, level, metric)
-        if len(ref) < 2 or len(other) < 2:
-            return check
-        check.comparisons[baseline] = compare(ref, other)
-    lower = all(c.mean_a < c.mean_b for c in check.comparisons.values())
-    significant = all(not math.isnan(c.welch_p) and c.welch_p < ALPHA for c in check.comparisons.values())
-    check.verdict = "confirmed" if lower and significant else ("lower" if lower else "not confirmed")
-    return check
+def _by_level(results: Results, tests: list[Test]) -> str:
+    parts = []
+    for level in results.levels:
+        mine = [t for t in tests if t.level == level]
+        if mine:
+            parts.append(f"{results.level_label(level)}: " + "; ".join(t.describe() for t in mine))
+    return ". ".join(parts) + "."
 
 
-def _apply_holm(checks: list[LevelCheck]) -> None:
-    cells = [(check, baseline) for check in checks for baseline in check.comparisons]
-    adjusted = holm([check.comparisons[b].welch_p for check, b in cells])
-    for (check, baseline), p in zip(cells, adjusted):
-        check.holm_p[baseline] = p
-
-
-def lowest_everywhere(results: Results, metric: str, title: str, statement: str) -> Claim:
-    """ARROCH's mean ``metric`` below each baseline's at every level of the sweep."""
-    baselines = [m for m in results.methods if m != REFERENCE]
-    if REFERENCE not in results.methods or not baselines:
+def lowest_everywhere(results: Results, tests: list[Test], metric: Metric, title: str, statement: str) -> Claim:
+    """ARROCH significantly lower than each baseline at every level (module docstring)."""
+    if not baselines(results):
         return Claim(title, statement, "cannot be checked", "the sweep needs ARROCH and at least one baseline")
-    checks = [_level_check(results, level, metric, baselines) for level in results.levels]
-    _apply_holm(checks)
-    verdicts = [c.verdict for c in checks]
-    confirmed = [c for c in checks if c.verdict == "confirmed"]
-    if all(v == "confirmed" for v in verdicts):
-        verdict = "confirmed"
-    elif confirmed or any(v == "lower" for v in verdicts):
-        verdict = "partly confirmed"
-    elif all(v == "no data" for v in verdicts):
+    verdicts = [t.verdict for t in tests]
+    if not verdicts or all(v == NO_DATA for v in verdicts):
         verdict = "cannot be checked"
+    elif all(v == LOWER for v in verdicts):
+        verdict = "confirmed"
+    elif LOWER in verdicts:
+        verdict = "partly confirmed"
     else:
         verdict = "not confirmed"
-    parts = []
-    for check in checks:
-        tests = ", ".join(f"vs {b}: {c.mean_a:.1f} vs {c.mean_b:.1f}, Welch p = {format_p_value(c.welch_p)}, MWU p = {format_p_value(c.mwu_p)}"
-                          for b, c in check.comparisons.items())
-        parts.append(f"{_fmt_level(results, check.level)}: {check.verdict}" + (f" ({tests})" if tests else ""))
-    return Claim(title, statement, verdict, "; ".join(parts) + ".", checks)
+    lower = sum(v == LOWER for v in verdicts)
+    detail = (f"{lower} of {len(verdicts)} (level, baseline) comparisons of the {metric.label} are lower (significant) "
+              f"({_tally(tests)}). {_by_level(results, tests)}")
+    return Claim(title, statement, verdict, detail, tests)
 
 
-def crossover(results: Results) -> Claim:
-    """No-comm faster than ARROCH at the lowest probability; ARROCH fastest from 0.1 on."""
+def _crossing(tests: list[Test]) -> str:
+    """Where ARROCH's mean difference to no-comm turns negative and stays so (descriptive)."""
+    ahead = [(t.level, t.result.mean_diff < 0) for t in sorted(tests, key=lambda t: t.level) if t.result.n >= 2]
+    for i, (level, better) in enumerate(ahead):
+        if better and all(b for _, b in ahead[i:]):
+            return f"ARROCH's mean stays below no-comm's from p = {level:g} on."
+    return "ARROCH's mean never stays below no-comm's."
+
+
+def crossover(results: Results, tests: list[Test]) -> Claim:
+    """No-comm significantly faster than ARROCH at the lowest probability; ARROCH significantly lowest from 0.1 on."""
     title = "Laziness crossover"
     statement = ("ARROCH has the lowest team completion time as long as the human opens the door with probability "
                  f">= {COOPERATIVE_P:g}; at very low probabilities no-comm is faster.")
     if results.kind != "laziness":
         return Claim(title, statement, "cannot be checked", "needs the laziness sweep")
-    methods = results.methods
-    if REFERENCE not in methods or BASELINE_FOR_CROSSOVER not in methods:
+    if REFERENCE not in results.methods or BASELINE_FOR_CROSSOVER not in results.methods:
         return Claim(title, statement, "cannot be checked", "the sweep needs arroch and no-comm")
-    levels = results.levels
-    lowest = min(levels)
-    metric = "team_completion_time"
-    low = results.values(REFERENCE, lowest, metric), results.values(BASELINE_FOR_CROSSOVER, lowest, metric)
-    if len(low[0]) < 2 or len(low[1]) < 2:
-        return Claim(title, statement, "cannot be checked", f"too few completed trials at p = {lowest:g}")
-    at_low = compare(*low)
-    nocomm_faster = at_low.mean_a > at_low.mean_b and at_low.welch_p < ALPHA
-    baselines = [m for m in methods if m != REFERENCE]
-    cooperative = [_level_check(results, level, metric, baselines) for level in levels if level >= COOPERATIVE_P]
-    _apply_holm(cooperative)
-    best_when_cooperative = all(c.verdict in ("confirmed", "lower") for c in cooperative) and bool(cooperative)
-    # Where ARROCH's mean moves below no-comm's and stays there.
-    signs = [(level, results.values(REFERENCE, level, metric), results.values(BASELINE_FOR_CROSSOVER, level, metric))
-             for level in sorted(levels)]
-    ahead = [(level, sum(a) / len(a) < sum(b) / len(b)) for level, a, b in signs if a and b]
-    crossing = None
-    for i, (level, better) in enumerate(ahead):
-        if better and all(b for _, b in ahead[i:]):
-            crossing = level
-            break
-    if nocomm_faster and best_when_cooperative:
+    lowest = min(results.levels)  # type: ignore[type-var]
+    nocomm = [t for t in tests if t.baseline == BASELINE_FOR_CROSSOVER]
+    at_low = next(t for t in nocomm if t.level == lowest)
+    cooperative = [t for t in tests if t.level >= COOPERATIVE_P]  # type: ignore[operator]
+    if lowest >= COOPERATIVE_P or at_low.verdict == NO_DATA:  # type: ignore[operator]
+        return Claim(title, statement, "cannot be checked",
+                     f"needs complete pairs at a probability below {COOPERATIVE_P:g} (lowest: {lowest:g})", tests)
+    nocomm_faster = at_low.verdict == HIGHER
+    lowest_after = [t.verdict == LOWER for t in cooperative]
+    if nocomm_faster and lowest_after and all(lowest_after):
         verdict = "confirmed"
-    elif nocomm_faster or best_when_cooperative:
+    elif nocomm_faster or any(lowest_after):
         verdict = "partly confirmed"
     else:
         verdict = "not confirmed"
-    detail = (f"at p = {lowest:g}: ARROCH {at_low.mean_a:.1f} s vs no-comm {at_low.mean_b:.1f} s "
-              f"(Welch p = {format_p_value(at_low.welch_p)}, MWU p = {format_p_value(at_low.mwu_p)}): "
+    detail = (f"at p = {lowest:g}, ARROCH − baseline {at_low.describe()}: "
               f"{'no-comm significantly faster' if nocomm_faster else 'no-comm not significantly faster'}; "
-              f"from p = {COOPERATIVE_P:g} on: ARROCH "
-              f"{'lowest mean at every level' if best_when_cooperative else 'not the lowest mean at every level'} ("
-              + "; ".join(f"p = {c.level:g}: {c.verdict}" for c in cooperative) + "); "
-              + (f"ARROCH's mean stays below no-comm's from p = {crossing:g} on." if crossing is not None
-                 else "ARROCH's mean never stays below no-comm's."))
-    check_low = LevelCheck(lowest, "no-comm faster" if nocomm_faster else "not confirmed", {BASELINE_FOR_CROSSOVER: at_low})
-    return Claim(title, statement, verdict, detail, [check_low, *cooperative])
+              f"from p = {COOPERATIVE_P:g} on: {sum(lowest_after)} of {len(lowest_after)} (level, baseline) comparisons "
+              f"lower (significant) ({_tally(cooperative)}). {_by_level(results, cooperative)} {_crossing(nocomm)}")
+    return Claim(title, statement, verdict, detail, [at_low, *cooperative])
 
 
-def check_claims(results: Results) -> list[Claim]:
-    """The claims this sweep can speak to, in the paper's order."""
-    where = "at every team size" if results.kind == "robots" else "at every door-opening probability"
-    claims = [lowest_everywhere(results, "door_openings", "Fewest door openings",
+def check_claims(results: Results, tested: dict[str, list[Test]] | None = None) -> list[Claim]:
+    """The claims this sweep can speak to, in the paper's order; ``tested``: :func:`.comparisons.families`
+    already computed for ``results`` (else computed here)."""
+    tested = tested if tested is not None else families(results, (DOOR_OPENINGS, TEAM_TIME, SUM_OF_TIMES))
+    where = {"robots": "at every team size", "laziness": "at every door-opening probability"}.get(
+        results.kind, "in every cell of task length × interruption cost")
+    claims = [lowest_everywhere(results, tested[DOOR_OPENINGS.name], DOOR_OPENINGS, "Fewest door openings",
                                 f"ARROCH needs the fewest door openings by the human {where}.")]
-    if results.kind == "robots":
-        claims.append(lowest_everywhere(results, "team_completion_time", "Lowest team completion time",
-                                        "ARROCH gives the lowest team completion time (slowest agent) at every team size."))
+    if results.kind == "laziness":
+        claims.append(crossover(results, tested[TEAM_TIME.name]))
     else:
-        claims.append(crossover(results))
+        claims.append(lowest_everywhere(results, tested[TEAM_TIME.name], TEAM_TIME, "Lowest team completion time",
+                                        f"ARROCH gives the lowest team completion time (slowest agent) {where}."))
+    claims.append(lowest_everywhere(results, tested[SUM_OF_TIMES.name], SUM_OF_TIMES, "Lowest sum of times",
+                                    f"ARROCH gives the lowest sum of all agents' completion times (the paper's real-world "
+                                    f"measure) {where}."))
     return claims
-
-
-def format_p_value(p: float) -> str:
-    """A p-value for people: two significant digits, scientific below 1e-4, ``n/a`` when undefined."""
-    if math.isnan(p):
-        return "n/a"
-    return f"{p:.2g}" if p >= 1e-4 else f"{p:.1e}"

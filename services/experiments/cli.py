@@ -1,15 +1,20 @@
-"""``arroch experiment robots|laziness|report``: the paper's simulation experiments (§V-A).
+"""``arroch experiment robots|laziness|map|report``: the paper's simulation experiments (§V-A), and a
+map of where feedback pays (the human's task length × the cost of an interruption).
 
 Each trial runs the real planner, restrictor and sim (its human model) as separate processes over
 Zenoh, in lockstep mode, on a site generated from the trial's seed. Trials run ``--jobs`` at a time
 and are recorded in DIR/trials.csv as they end (a crash loses nothing finished); ``--resume``
-continues an interrupted sweep. The same options give the same trials.csv byte for byte. When the
-sweep is complete the report is built (``arroch experiment report DIR`` rebuilds it from the CSV).
+continues an interrupted sweep. The same options give the same trials.csv byte for byte, on a quiet
+machine or a loaded one, locally or on a Dask cluster (``--cluster``). Trials are paired: for one
+trial index every method meets the same site and the same human draws. When the sweep is complete
+the report is built (``arroch experiment report DIR`` rebuilds it from the CSV).
 
 Examples:
   arroch experiment robots --robots 2,3,4,5,6 --objects 3 --trials 30 --seed 0 --out experiments/results/robots
   arroch experiment laziness --p 0.05,0.1,0.2,0.4,0.6,0.8,1.0 --robots 3 --out experiments/results/laziness
+  arroch experiment map --task-means 150,300,600,900 --costs 0,15,60 --trials 20 --out experiments/results/map
   arroch experiment robots --robots 2 --objects 1 --trials 2 --methods arroch --out /tmp/tiny
+  arroch experiment robots --cluster tcp://scheduler:8786 --out /tmp/on-a-cluster
   arroch experiment report experiments/results/robots
 """
 
@@ -18,10 +23,11 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import tomllib
 from pathlib import Path
 from typing import Any, Callable
 
-from .design import METHODS, SweepSpec, format_p
+from .design import DEFAULT_COST, DEFAULT_TASK, FOCUS_READINGS, METHODS, SweepSpec, format_p
 
 log = logging.getLogger("arroch.experiment")
 
@@ -56,7 +62,15 @@ def _default_p() -> float:
 
 def _add_sweep_arguments(parser: argparse.ArgumentParser, kind: str) -> None:
     sweep = parser.add_argument_group("sweep (decides the results)")
-    if kind == "robots":
+    if kind == "map":
+        sweep.add_argument("--task-means", type=_list(float, "task lengths in seconds"), default=(150.0, 300.0, 600.0, 900.0),
+                           metavar="S,S,...", help="the human's mean task length, s (default 150,300,600,900)")
+        sweep.add_argument("--costs", type=_list(float, "interruption costs in seconds"), default=(0.0, 15.0, 60.0),
+                           metavar="S,S,...", help="seconds of her task lost per interruption (default 0,15,60)")
+        sweep.add_argument("--robots", type=int, default=3, metavar="N", help="team size (default 3)")
+        sweep.add_argument("--p", type=float, default=None, metavar="P",
+                           help=f"the human's door-opening probability (default: the sim's, {format_p(_default_p())})")
+    elif kind == "robots":
         sweep.add_argument("--robots", type=_list(int, "team sizes"), default=(2, 3, 4, 5, 6), metavar="N,N,...",
                            help="team sizes (default 2,3,4,5,6)")
         sweep.add_argument("--p", type=float, default=None, metavar="P",
@@ -65,8 +79,18 @@ def _add_sweep_arguments(parser: argparse.ArgumentParser, kind: str) -> None:
         sweep.add_argument("--p", type=_list(float, "probabilities"), default=(0.05, 0.1, 0.2, 0.4, 0.6, 0.8, 1.0),
                            metavar="P,P,...", help="door-opening probabilities (default 0.05,0.1,0.2,0.4,0.6,0.8,1.0)")
         sweep.add_argument("--robots", type=int, default=3, metavar="N", help="team size (default 3)")
+    if kind != "map":
+        sweep.add_argument("--task-mean", type=float, default=None, metavar="S",
+                           help=f"the human's mean task length, s (default: --human-config's, else the sim's, {DEFAULT_TASK:g})")
+        sweep.add_argument("--interruption-cost", type=float, default=None, metavar="S",
+                           help="seconds of her task lost per interruption of a focus interval "
+                                f"(default: --human-config's, else the sim's, {DEFAULT_COST:g})")
+    sweep.add_argument("--focus-reading", choices=FOCUS_READINGS, default=None,
+                       help="faithful (the sim's default): only a declared focus interval keeps her from doors; strict: any does")
     sweep.add_argument("--objects", type=int, default=3, metavar="K", help="objects per robot (default 3, as in the paper)")
-    sweep.add_argument("--trials", type=int, default=30, metavar="T", help="trials per condition (default 30)")
+    trials = 20 if kind == "map" else 30
+    sweep.add_argument("--trials", type=int, default=trials, metavar="T",
+                       help=f"trials per condition (default {trials}" + ("; 36 conditions x 20 fit the 30-minute budget on 2 cores)" if kind == "map" else ")"))
     sweep.add_argument("--methods", type=_methods, default=METHODS, metavar="M,M,...",
                        help=f"methods (default {','.join(METHODS)})")
     sweep.add_argument("--seed", type=int, default=0, help="base seed; every trial's seeds derive from it (default 0)")
@@ -78,6 +102,9 @@ def _add_sweep_arguments(parser: argparse.ArgumentParser, kind: str) -> None:
     run.add_argument("--out", type=Path, default=None, metavar="DIR", help=f"results folder (default experiments/results/{kind})")
     run.add_argument("--resume", action="store_true", help="continue the sweep in DIR: finished trials are kept, the others run")
     run.add_argument("--jobs", type=int, default=os.cpu_count() or 1, metavar="N", help=f"trials at once (default {os.cpu_count()}: the cores)")
+    run.add_argument("--cluster", metavar="tcp://HOST:PORT",
+                     help="run the trials on this Dask distributed scheduler's workers (each trial with its own router there) "
+                          "instead of --jobs local workers; needs pip install 'arroch[cluster]'")
     run.add_argument("--router", choices=("worker", "shared", "trial"), default="worker",
                      help="Zenoh router per worker (default), one shared by all, or one per trial")
     run.add_argument("--trial-timeout", type=float, default=300.0, metavar="S",
@@ -102,10 +129,33 @@ def _spec(args: argparse.Namespace) -> SweepSpec:
             raise ValueError(f"--human-config {args.human_config}: {exc.strerror}") from None
     if args.kind == "robots":
         robots, ps = args.robots, (args.p if args.p is not None else _default_p(),)
+    elif args.kind == "map":
+        robots, ps = (args.robots,), (args.p if args.p is not None else _default_p(),)
     else:
         robots, ps = (args.robots,), args.p
+    if args.kind == "map":
+        tasks, costs = args.task_means, args.costs
+    else:
+        tasks = (args.task_mean if args.task_mean is not None else _from_human(human, "task_mean", DEFAULT_TASK),)
+        costs = (args.interruption_cost if args.interruption_cost is not None else _from_human(human, "interruption_cost", DEFAULT_COST),)
     return SweepSpec(kind=args.kind, methods=args.methods, robots=tuple(robots), objects=args.objects,
-                     ps=tuple(ps), trials=args.trials, seed=args.seed, human_config=human, time_limit=args.time_limit)
+                     ps=tuple(ps), trials=args.trials, seed=args.seed, tasks=tuple(tasks), costs=tuple(costs),
+                     human_config=human, focus_reading=args.focus_reading, time_limit=args.time_limit)
+
+
+def _from_human(text: str | None, name: str, default: float) -> float:
+    """``name`` from a --human-config text (its [human] table or top level), else ``default``: the
+    value the trials' human model has, which the CSV records with every trial."""
+    if text is None:
+        return default
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"--human-config: {exc}") from None
+    value = data.get("human", data).get(name, default)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"--human-config: {name} must be a number")
+    return float(value)
 
 
 def run_sweep(args: argparse.Namespace) -> int:
@@ -118,7 +168,7 @@ def run_sweep(args: argparse.Namespace) -> int:
             out=args.out or Path("experiments/results") / args.kind, jobs=args.jobs, router=args.router,
             resume=args.resume, progress=args.progress, report=args.report,
             trial=TrialConfig(timeout=args.trial_timeout, log_level=args.service_log_level, events_dir=None),
-            keep_events=args.keep_events,
+            keep_events=args.keep_events, cluster=args.cluster,
         )
         sweep = Sweep(spec, options)
         return sweep.run()
@@ -146,7 +196,8 @@ def register(subparsers: Any) -> None:
     parser.set_defaults(func=lambda _args: parser.print_help() or 2)
     sub = parser.add_subparsers(dest="experiment", metavar="SWEEP")
     for kind, text in (("robots", "vary the number of robots (paper: figure 'different number of robots')"),
-                       ("laziness", "vary the human's door-opening probability (paper: figure 'human laziness')")):
+                       ("laziness", "vary the human's door-opening probability (paper: figure 'human laziness')"),
+                       ("map", "where feedback pays: the human's task length x the cost of an interruption, all methods paired")):
         p = sub.add_parser(kind, help=text, description=f"{text}.\n\n{__doc__}", formatter_class=argparse.RawDescriptionHelpFormatter)
         _add_sweep_arguments(p, kind)
         p.set_defaults(func=run_sweep, kind=kind)

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any, Iterable
 
 PER_TRIAL = ("site", "method", "seed", "robots", "objects", "human_doors")  # top-level params of one trial
-VARIED_HUMAN = ("door_probability",)  # the laziness sweep's variable (a CSV column)
+VARIED_HUMAN = ("door_probability", "task_mean", "interruption_cost")  # what the sweeps vary (CSV columns)
 
 
 def _flatten(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:

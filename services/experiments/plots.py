@@ -1,5 +1,7 @@
-"""The report's figures, shaped like the paper's: (a) door openings and (b) team completion time
-against the swept variable, one bar per method at each level, with 95 % confidence intervals.
+"""The report's bar figures of the robots and laziness sweeps, shaped like the paper's: (a) door
+openings and (b) team completion time against the swept variable, plus (c) the sum of all agents'
+completion times (the paper's real-world measure), one bar per method at each level, with 95 %
+confidence intervals. (The map's heatmaps are drawn by :mod:`.maps`.)
 
 One PNG per panel, named after what it shows (``door_openings_vs_robots.png``, ...). Bars are
 means of the completed trials; the whiskers are the t intervals of :func:`.stats.summarize`; a
@@ -24,6 +26,7 @@ LABELS = {"arroch": "ARROCH", "no-feedback": "No-feedback", "no-comm": "No-comm"
 PANELS = (
     ("door_openings", "Door openings by the human", "(a) Human workload"),
     ("team_completion_time", "Team completion time (s)", "(b) Team efficiency (slowest agent)"),
+    ("sum_of_times", "Sum of all agents' completion times (s)", "(c) Team efficiency (sum of times)"),
 )
 
 

@@ -14,7 +14,7 @@ from typing import Any
 from .design import SweepSpec, TrialKey, format_p
 from .trial import TrialOutcome
 
-KEY_FIELDS = ("method", "robots", "objects", "door_probability", "trial")
+KEY_FIELDS = ("method", "robots", "objects", "door_probability", "task_mean", "interruption_cost", "trial")
 
 TRIAL_FIELDS = KEY_FIELDS + (
     "site_seed",  # protocol.site.generate_site(robots, objects, site_seed)
@@ -22,11 +22,16 @@ TRIAL_FIELDS = KEY_FIELDS + (
     "status",  # ok, unfinished, timeout, error
     "reason",
     "team_completion_time",  # s, the slowest agent, the human included
+    "sum_of_times",  # s, every agent's completion time added up (the paper's real-world measure)
     "slowest_robot_time",  # s, the last delivery of the team
     "human_completion_time",  # s, her own task done
     "agent_completion_times",  # name=seconds;... each robot, then the human
     "door_openings",  # doors the human opened (her a1 actions): the paper's figure (a)
     "human_door_trips",  # walks to a door she began (some turn back when a focus interval starts)
+    "human_task_time",  # s of work her own task needed (the Gaussian draw)
+    "human_interruptions",  # walks to a door begun during one of her focus intervals
+    "human_time_lost",  # s of her task lost to those interruptions (resuming it)
+    "focus_declared",  # focus intervals she declared (a2(N), ARROCH only)
     "feedback_sent",  # a2(N) feedback the human sent (ARROCH only)
     "feedback_accepted",
     "replans",  # plans the lockstep made the planner answer: new world versions + accepted feedback
@@ -64,12 +69,14 @@ def _n(value: Any) -> str:
 
 def key_cells(key: TrialKey) -> dict[str, str]:
     return {"method": key.method, "robots": str(key.robots), "objects": str(key.objects),
-            "door_probability": format_p(key.p), "trial": str(key.trial)}
+            "door_probability": format_p(key.p), "task_mean": format_p(key.task), "interruption_cost": format_p(key.cost),
+            "trial": str(key.trial)}
 
 
 def key_of(row: dict[str, str]) -> TrialKey:
     """The identity of a CSV row (raises ValueError on a malformed one)."""
-    return TrialKey(row["method"], int(row["robots"]), int(row["objects"]), float(row["door_probability"]), int(row["trial"]))
+    return TrialKey(row["method"], int(row["robots"]), int(row["objects"]), float(row["door_probability"]),
+                    float(row["task_mean"]), float(row["interruption_cost"]), int(row["trial"]))
 
 
 def trial_row(spec: SweepSpec, outcome: TrialOutcome) -> dict[str, str]:
@@ -86,13 +93,19 @@ def trial_row(spec: SweepSpec, outcome: TrialOutcome) -> dict[str, str]:
     robot_times = [t for t in robots.values() if t is not None]
     human = m.get("human") or {}
     feedback = m.get("feedback") or {}
+    times = [t for t in agents.values() if t is not None]
     row.update(
         team_completion_time=_t(m.get("team_completion_time")),
+        sum_of_times=_t(sum(times)) if times and len(times) == len(agents) else "",
         slowest_robot_time=_t(max(robot_times)) if robot_times and len(robot_times) == len(robots) else "",
         human_completion_time=_t(agents.get("human")),
         agent_completion_times=";".join(f"{name}={_t(t)}" for name, t in [*sorted(robots.items()), ("human", agents.get("human"))]),
         door_openings=_n(m.get("human_door_openings")),
         human_door_trips=_n(human.get("door_trips")),
+        human_task_time=_t(human.get("task_duration")),
+        human_interruptions=_n(human.get("interruptions")),
+        human_time_lost=_t(human.get("time_lost")),
+        focus_declared=_n(human.get("declarations")),
         feedback_sent=_n(feedback.get("sent")),
         feedback_accepted=_n(feedback.get("accepted")),
         replans=_n(max(0, int(m.get("world_versions") or 0) - 1) + int(feedback.get("accepted") or 0)),

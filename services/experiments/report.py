@@ -2,14 +2,19 @@
 
 Writes into DIR:
 
-- ``summary.csv`` / ``summary.md``: per condition, the trials by status and the mean with its 95 %
-  confidence interval of every figure (completed trials only);
-- ``tests.csv``: ARROCH against each baseline per level, for door openings and team completion
-  time: Welch's t-test, Mann–Whitney U, Cohen's d, rank-biserial correlation, Holm-adjusted p;
-- the figures of :mod:`.plots`;
-- ``REPORT.md``: the above, the human model's parameters (``params.json``), the paper's claims
-  checked (:mod:`.claims`), what drives team completion time, the wall time of the sweep and where
-  it went (``timing.csv``, ``runs.json``), and ``discussion.md`` (written by a person, if present).
+- ``summary.csv`` / ``summary.md``: per condition, the trials by status, the share of trials in
+  which the human was the slowest agent, and the mean with its 95 % confidence interval of every
+  figure (completed trials only);
+- ``tests.csv``: ARROCH against each baseline per level, paired trial by trial, for the metrics of
+  :data:`.comparisons.TESTED` (team completion time, sum of times, door openings, the human's
+  time away): mean difference with its CI, paired t, Wilcoxon signed-rank, the sign-flip
+  permutation test (counts), d_z, TOST equivalence, Holm-adjusted p-values and the verdict;
+- the figures: bars (:mod:`.plots`) for the robots and laziness sweeps, heatmaps (:mod:`.maps`)
+  for the map;
+- ``REPORT.md``: the sweep's parameters and the human model's (``params.json``), the design, the
+  above, the paper's claims checked (:mod:`.claims`), the map's reading, what drives team completion
+  time, the wall time of the sweep and where it went (``timing.csv``, ``runs.json``), and
+  ``discussion.md`` (written by a person, if present).
 
 Only the CSV is needed; the side files add their sections when present.
 """
@@ -23,28 +28,46 @@ import math
 from pathlib import Path
 from typing import Any, Iterable
 
-from .claims import Claim, check_claims, format_p_value
+from .claims import Claim, check_claims
+from .comparisons import ALPHA, TESTED, Test, families, format_p_value
+from .design import format_p
 from .params import write_params
-from .results import METRICS, ReportError, Results, load_results, statuses
-from .stats import Summary, compare, holm, summarize
+from .record import key_of
+from .results import COUNTS, METRICS, Level, ReportError, Results, TrialResult, load_results, statuses
+from .stats import EXACT_FLIPS_MAX, PERMUTATION_RESAMPLES, PERMUTATION_SEED, Summary, summarize
 from .store import JsonlStore
 
 log = logging.getLogger("arroch.experiment")
 
-TESTED = (("door_openings", "door openings"), ("team_completion_time", "team completion time (s)"))
-SUMMARY_COLUMNS = (("team_completion_time", "team completion (s)"), ("door_openings", "door openings"),
-                   ("slowest_robot_time", "slowest robot (s)"), ("human_completion_time", "human done (s)"),
-                   ("feedback_sent", "feedback sent"), ("feedback_accepted", "feedback accepted"),
-                   ("replans", "replans"))
+EFFICIENCY_COLUMNS = (("team_completion_time", "team completion (s)"), ("sum_of_times", "sum of times (s)"),
+                      ("slowest_robot_time", "slowest robot (s)"), ("human_completion_time", "human done (s)"))
+HUMAN_COLUMNS = (("door_openings", "door openings"), ("human_time_away", "time away (s)"),
+                 ("human_interruptions", "interruptions"), ("human_time_lost", "time lost (s)"),
+                 ("focus_declared", "focus declared"), ("feedback_sent", "feedback sent"),
+                 ("feedback_accepted", "feedback accepted"), ("replans", "replans"))
 STATUSES = ("ok", "unfinished", "timeout", "error")
+TITLES = {"robots": "Different number of robots", "laziness": "Human laziness (door-opening probability)",
+          "map": "Map of where feedback pays (task length × interruption cost)"}
 
-__all__ = ["ReportError", "build_report"]
+__all__ = ["ReportError", "build_report", "claims_of", "summary_rows", "test_rows"]
 
 
 # ---------------------------------------------------------------------------- formatting
 
-def _num(value: float, digits: int = 3) -> str:
+def _num(value: float | None, digits: int = 3) -> str:
     return "" if value is None or math.isnan(value) else f"{value:.{digits}f}"
+
+
+def _g(value: float) -> str:
+    """A statistic in a CSV cell: six significant digits, empty when undefined."""
+    return "" if math.isnan(value) else f"{value:.6g}"
+
+
+def _value(value: Any) -> str:
+    """A parameter's value for people: numbers compactly, anything else (e.g. ``faithful``) as text."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return ", ".join(_value(v) for v in value) if isinstance(value, (list, tuple)) else str(value)
+    return str(value) if isinstance(value, int) else format_p(value)
 
 
 def _mean_ci(s: Summary, digits: int = 1) -> str:
@@ -53,10 +76,6 @@ def _mean_ci(s: Summary, digits: int = 1) -> str:
     if math.isnan(s.ci_low):
         return f"{s.mean:.{digits}f}"
     return f"{s.mean:.{digits}f} [{s.ci_low:.{digits}f}, {s.ci_high:.{digits}f}]"
-
-
-def _level(results: Results, level: float) -> str:
-    return str(int(level)) if results.kind == "robots" else f"{level:g}"
 
 
 def _table(header: list[str], rows: Iterable[list[str]]) -> list[str]:
@@ -73,17 +92,30 @@ def _write_csv(path: Path, header: list[str], rows: Iterable[list[str]]) -> Path
     return path
 
 
+def _slowest(trials: list[TrialResult]) -> tuple[int, int]:
+    """(trials in which the human was the slowest agent, completed trials where that is known)."""
+    known = [t.human_slowest for t in trials if t.ok and t.human_slowest is not None]
+    return sum(known), len(known)
+
+
+def _share(k: int, n: int) -> str:
+    return f"{k}/{n} ({100 * k / n:.0f} %)" if n else "–"
+
+
 # ---------------------------------------------------------------------------- tables
 
 def summary_rows(results: Results) -> tuple[list[str], list[list[str]]]:
-    header = ["method", "robots", "objects", "door_probability", "trials", *STATUSES]
+    header = ["method", "robots", "objects", "door_probability", "task_mean", "interruption_cost", "trials", *STATUSES,
+              "human_slowest", "human_slowest_share"]
     for metric in METRICS:
         header += [f"{metric}_mean", f"{metric}_ci_low", f"{metric}_ci_high", f"{metric}_n"]
     rows = []
     for level, method, trials in results.conditions():
         counts = statuses(trials)
-        row = [method, str(trials[0].robots), str(trials[0].objects), f"{trials[0].p:g}", str(len(trials)),
-               *(str(counts.get(s, 0)) for s in STATUSES)]
+        first = trials[0]
+        slow, known = _slowest(trials)
+        row = [method, str(first.robots), str(first.objects), format_p(first.p), format_p(first.task), format_p(first.cost),
+               str(len(trials)), *(str(counts.get(s, 0)) for s in STATUSES), str(slow), _num(slow / known if known else None)]
         for metric in METRICS:
             s = summarize(results.values(method, level, metric))
             row += [_num(s.mean), _num(s.ci_low), _num(s.ci_high), str(s.n)]
@@ -91,52 +123,86 @@ def summary_rows(results: Results) -> tuple[list[str], list[list[str]]]:
     return header, rows
 
 
-def test_rows(results: Results) -> tuple[list[str], list[list[str]]]:
-    header = ["metric", "robots" if results.kind == "robots" else "door_probability", "baseline", "n_arroch", "n_baseline",
-              "mean_arroch", "mean_baseline", "difference", "welch_t", "welch_df", "welch_p", "welch_p_holm",
-              "mwu_u", "mwu_p", "mwu_p_holm", "cohen_d", "rank_biserial"]
+def test_rows(results: Results, tested: dict[str, list[Test]] | None = None) -> tuple[list[str], list[list[str]]]:
+    """``tests.csv``: one row per (metric, level, baseline) with complete pairs."""
+    tested = tested if tested is not None else families(results)
+    header = ["metric", *results.level_columns, "baseline", "n_pairs", "n_nonzero", "mean_arroch", "mean_baseline", "mean_diff",
+              "ci_low", "ci_high", "sd_diff", "paired_t", "paired_t_p", "wilcoxon_w", "wilcoxon_p", "perm_p", "primary_test",
+              "primary_p", "primary_p_holm", "tost_margin", "tost_p", "tost_p_holm", "d_z", "verdict"]
     rows = []
-    if "arroch" not in results.methods:
-        return header, rows
-    baselines = [m for m in results.methods if m != "arroch"]
-    for metric, _label in TESTED:
-        family = []
-        for level in results.levels:
-            a = results.values("arroch", level, metric)
-            for baseline in baselines:
-                b = results.values(baseline, level, metric)
-                if len(a) >= 2 and len(b) >= 2:
-                    family.append((level, baseline, compare(a, b)))
-        welch_holm = holm([c.welch_p for _, _, c in family])
-        mwu_holm = holm([c.mwu_p for _, _, c in family])
-        for (level, baseline, c), wh, mh in zip(family, welch_holm, mwu_holm):
-            rows.append([metric, _level(results, level), baseline, str(c.n_a), str(c.n_b), _num(c.mean_a), _num(c.mean_b),
-                         _num(c.diff), _g(c.welch_t), _g(c.welch_df), _g(c.welch_p), _g(wh), _g(c.mwu_u),
-                         _g(c.mwu_p), _g(mh), _g(c.cohen_d), _g(c.rank_biserial)])
+    for metric in TESTED:
+        for t in tested.get(metric.name, []):
+            r = t.result
+            if r.n < 2:
+                continue
+            rows.append([metric.name, *results.level_cells(t.level), t.baseline, str(r.n), str(r.n_nonzero), _num(r.mean_a),
+                         _num(r.mean_b), _num(r.mean_diff), _num(r.ci_low), _num(r.ci_high), _num(r.sd_diff), _g(r.t), _g(r.t_p),
+                         _g(r.wilcoxon.w), _g(r.wilcoxon.p), _g(r.perm_p), metric.primary_test, _g(t.primary_p),
+                         _g(t.primary_p_holm), f"{metric.margin:g}", _g(r.tost_p), _g(t.tost_p_holm), _g(r.d_z), t.verdict])
     return header, rows
-
-
-def _g(value: float) -> str:
-    """A statistic in a CSV cell: six significant digits, empty when undefined."""
-    return "" if math.isnan(value) else f"{value:.6g}"
 
 
 # ---------------------------------------------------------------------------- sections
 
+def _section_design() -> list[str]:
+    margins = ", ".join(f"{m.label} ±{m.margin:g}{m.suffix}" for m in TESTED)
+    resamples = f"{PERMUTATION_RESAMPLES:_}".replace("_", " ")
+    return ["## Design", "",
+            "Paired trials (common random numbers): for one trial index every method meets the same site and the same human "
+            "draws (task time, focus intervals, each decision), so methods are compared trial by trial on the differences "
+            "ARROCH − baseline; a trial that did not complete in one method drops that pair. Per level and baseline: the mean "
+            "difference with its 95 % t interval, the paired t-test, the Wilcoxon signed-rank test (zero differences dropped; "
+            "exact for small samples) — the primary test for times — and for counts a sign-flip permutation test on the "
+            f"differences (exact up to {EXACT_FLIPS_MAX} nonzero differences, otherwise {resamples} random flips "
+            f"with the fixed seed {PERMUTATION_SEED}) — the primary test for counts; d_z = mean / sd of the differences (n/a "
+            f"without spread); equivalence by two one-sided paired t-tests (TOST) against the margins {margins} (chosen before "
+            "the runs: 30 s is 5 % of the 600 s task and half the sd of her task draw; 10 s is about one door trip; half an "
+            "opening is less than one door per trial). Holm's correction over each metric's family (all levels × baselines), "
+            f"separately for the primary and the TOST p-values; every verdict uses the Holm-adjusted values at α = {ALPHA:g}. "
+            "Conventions in detail: `services/experiments/stats.py` and `comparisons.py`.", ""]
+
+
+def _section_sweep(results: Results) -> list[str]:
+    spec = results.spec
+    lines = ["## Sweep", ""]
+    if spec is None:
+        return lines + ["No sweep.json in this folder: the conditions are those trials.csv shows.", ""]
+    rows = [["kind", spec.kind], ["methods", _value(spec.methods)], ["robots", _value(spec.robots)],
+            ["objects per robot", str(spec.objects)], ["door-opening probabilities", _value(spec.ps)],
+            ["mean task lengths (s)", _value(spec.tasks)], ["interruption costs (s)", _value(spec.costs)],
+            ["trials per condition", str(spec.trials)], ["base seed", str(spec.seed)],
+            ["time limit (sim s)", "the simulator's default" if spec.time_limit is None else _value(spec.time_limit)],
+            ["human model", "the simulator's defaults" if spec.human_config is None else "a custom --human-config (text in sweep.json)"]]
+    rows += [[name, _value(value)] for name, value in sorted(spec.extra.items())]
+    return lines + _table(["parameter", "value"], rows) + [""]
+
+
+def _section_params(results: Results) -> list[str]:
+    params = results.params
+    if not params:
+        return ["## Human model", "", "No params.json in this folder (it is written when a sweep completes).", ""]
+    human = params.get("human", {})
+    varied = params.get("varied_per_trial", {})
+    lines = ["## Human model (as the simulator reported it)", "",
+             f"Source: {params.get('source', 'params.json')}."
+             + (" Varied per trial: " + "; ".join(f"{k} ∈ {{{_value(vs)}}}" for k, vs in varied.items()) + "." if varied else ""), ""]
+    lines += _table(["option", "value"], [[k, _value(v)] for k, v in sorted(human.items())])
+    for name in ("site_params", "engine"):
+        if params.get(name):
+            lines += ["", f"{name}: " + ", ".join(f"{k} = {_value(v)}" for k, v in sorted(params[name].items()))]
+    if params.get("mode") is not None:
+        lines += ["", f"clock mode: {params.get('mode')}"]
+    if params.get("differs"):
+        lines += ["", "**Parameters that differ between trials** (the trials are not comparable on these): "
+                  + "; ".join(f"{k}: {_value(v)}" for k, v in params["differs"].items())]
+    return lines + [""]
+
+
 def _section_trials(results: Results) -> list[str]:
     counts = statuses(results.trials)
-    spec = results.spec
-    lines = ["## Trials", ""]
-    if spec is not None:
-        what = (f"team sizes {', '.join(str(n) for n in spec.robots)}, door-opening probability {', '.join(f'{p:g}' for p in spec.ps)}"
-                if results.kind == "robots" else
-                f"door-opening probabilities {', '.join(f'{p:g}' for p in spec.ps)}, {', '.join(str(n) for n in spec.robots)} robots")
-        lines += [f"Methods {', '.join(spec.methods)}; {what}; {spec.objects} object(s) per robot; {spec.trials} trials per "
-                  f"condition; base seed {spec.seed}; human model: "
-                  + ("the simulator's defaults (the paper's model)" if spec.human_config is None else "a custom --human-config (not the paper's model)")
-                  + ".", ""]
-    lines.append(f"{len(results.trials)} trials: " + ", ".join(f"{counts.get(s, 0)} {s}" for s in STATUSES) + ". "
-                 "Statistics use the completed (`ok`) trials only.")
+    lines = ["## Trials", "",
+             f"{len(results.trials)} trials: " + ", ".join(f"{counts.get(s, 0)} {s}" for s in STATUSES) + ". "
+             "Statistics use the completed (`ok`) trials only; the paired tests, the pairs in which both methods completed."]
     codes: dict[str, int] = {}
     for r in results.timing:
         if r.get("code"):
@@ -147,79 +213,73 @@ def _section_trials(results: Results) -> list[str]:
         lines += ["", f"**The trials ran on {len(codes)} versions of the services' code** (the sources changed during the sweep; "
                   "fingerprint: trials): " + ", ".join(f"`{c}`: {n}" for c, n in codes.items())
                   + ". Trials of different versions are not strictly comparable."]
-    failed = [t for t in results.trials if t.status not in ("ok",)]
+    failed = [t for t in results.trials if not t.ok]
     if failed:
         lines += ["", "Trials that did not complete (first 10):", ""]
-        lines += [f"- {t.method}, {t.robots} robots, p = {t.p:g}, trial {t.trial}: {t.status} — {t.reason}" for t in failed[:10]]
+        lines += [f"- {t.method}, {results.level_label(results.level_of(t))}, trial {t.trial}: {t.status} — {t.reason}"
+                  for t in failed[:10]]
     return lines + [""]
 
 
-def _section_params(results: Results) -> list[str]:
-    params = results.params
-    if not params:
-        return ["## Human model", "", "No params.json in this folder (it is written when a sweep completes).", ""]
-    human = params.get("human", {})
-    lines = ["## Human model (as the simulator reported it; not tuned)", "",
-             f"Source: {params.get('source', 'params.json')}. Varied per trial: "
-             + ", ".join(f"{k} ∈ {{{', '.join(f'{v:g}' for v in vs)}}}" for k, vs in params.get("varied_per_trial", {}).items()) + ".", ""]
-    lines += _table(["parameter", "value"], [[k, f"{v:g}" if isinstance(v, float) else str(v)] for k, v in sorted(human.items())])
-    other = {k: v for k, v in params.items() if k in ("site_params", "engine")}
-    for name, values in other.items():
-        lines += ["", f"{name}: " + ", ".join(f"{k} = {v}" for k, v in sorted(values.items()))]
-    if params.get("mode") is not None:
-        lines += ["", f"clock mode: {params.get('mode')}"]
-    if params.get("differs"):
-        lines += ["", "**Parameters that differ between trials** (the trials are not comparable on these): "
-                  + "; ".join(f"{k}: {v}" for k, v in params["differs"].items())]
-    return lines + [""]
+def _summary_table(results: Results, columns: tuple[tuple[str, str], ...], slowest: bool) -> list[str]:
+    head = [*results.level_columns, "method", "ok / n", *(label for _, label in columns)] + (["human slowest"] if slowest else [])
+    rows = []
+    for level, method, trials in results.conditions():
+        row = [*results.level_cells(level), method, f"{sum(t.ok for t in trials)} / {len(trials)}"]
+        for metric, _ in columns:
+            row.append(_mean_ci(summarize(results.values(method, level, metric)), 2 if metric in COUNTS else 1))
+        if slowest:
+            row.append(_share(*_slowest(trials)))
+        rows.append(row)
+    return _table(head, rows)
 
 
 def _section_summary(results: Results) -> list[str]:
-    head = ["robots" if results.kind == "robots" else "p", "method", "ok / n", *(label for _, label in SUMMARY_COLUMNS), "human slowest"]
-    rows = []
-    for level, method, trials in results.conditions():
-        ok = [t for t in trials if t.ok]
-        slowest = [t.human_slowest for t in ok if t.human_slowest is not None]
-        row = [_level(results, level), method, f"{len(ok)} / {len(trials)}"]
-        for metric, _ in SUMMARY_COLUMNS:
-            digits = 1 if metric.endswith("time") else 2
-            row.append(_mean_ci(summarize(results.values(method, level, metric)), digits))
-        row.append(f"{sum(slowest)}/{len(slowest)}" if slowest else "–")
-        rows.append(row)
-    return ["## Summary (mean [95 % CI])", "", *_table(head, rows), "",
-            "*human slowest*: completed trials in which the human's own task ended last, i.e. set the team's time.", ""]
+    return ["## Summary (mean [95 % CI])", "", "### Team efficiency", "",
+            *_summary_table(results, EFFICIENCY_COLUMNS, slowest=True), "",
+            "*sum of times*: every agent's completion time added up (the paper's real-world measure); *human slowest*: "
+            "completed trials in which the human's own task ended last, i.e. set the team's time.", "",
+            "### The human's workload and the communication", "",
+            *_summary_table(results, HUMAN_COLUMNS, slowest=False), "",
+            "*time away*: walking to doors and opening them; *interruptions*: walks to a door begun during one of her focus "
+            "intervals; *time lost*: her task time lost to them (the interruption cost each).", ""]
 
 
-def _section_tests(results: Results) -> list[str]:
-    header, rows = test_rows(results)
-    if not rows:
-        return ["## ARROCH against each baseline", "", "Not available: the sweep needs ARROCH, a baseline and two completed trials per condition.", ""]
-    out = ["## ARROCH against each baseline", "",
-           "Two-sided tests per level; negative difference, d and r mean ARROCH is lower. Holm: over all levels and "
-           "baselines of one metric.", ""]
-    for metric, label in TESTED:
-        mine = [r for r in rows if r[0] == metric]
-        table = [[r[1], r[2], f"{_f(r[5]):.1f} vs {_f(r[6]):.1f}", f"{_f(r[7]):.1f}", f"{_f(r[8]):.2f} ({_f(r[9]):.1f})",
-                  format_p_value(_f(r[10])), format_p_value(_f(r[11])), f"{_f(r[12]):g}", format_p_value(_f(r[13])),
-                  f"{_f(r[15]):.2f}", f"{_f(r[16]):.2f}"] for r in mine]
-        out += [f"### {label}", "", *_table([header[1], "baseline", "mean ARROCH vs baseline", "difference", "Welch t (df)",
-                                              "Welch p", "Holm p", "MWU U", "MWU p", "Cohen's d", "rank-biserial r"], table), ""]
+def _section_tests(results: Results, tested: dict[str, list[Test]]) -> list[str]:
+    if not any(t.result.n >= 2 for tests in tested.values() for t in tests):
+        return ["## ARROCH against each baseline (paired)", "",
+                "Not available: the sweep needs ARROCH, a baseline and two complete pairs per level.", ""]
+    out = ["## ARROCH against each baseline (paired)", "",
+           "Δ = ARROCH − baseline over the pairs (negative: ARROCH lower). Holm: over all levels and baselines of one metric. "
+           "The verdict reads the Holm-adjusted p-values only (Design).", ""]
+    for metric in TESTED:
+        rows = []
+        for t in tested.get(metric.name, []):
+            r, d = t.result, metric.digits
+            if r.n < 2:
+                continue
+            rows.append([*results.level_cells(t.level), t.baseline, str(r.n), f"{r.mean_a:.{d}f} vs {r.mean_b:.{d}f}",
+                         f"{r.mean_diff:+.{d}f} [{r.ci_low:+.{d}f}, {r.ci_high:+.{d}f}]",
+                         "n/a" if math.isnan(r.t) else f"{r.t:.2f} ({format_p_value(r.t_p)})",
+                         f"{r.wilcoxon.w:g} ({format_p_value(r.wilcoxon.p)})",
+                         *([format_p_value(r.perm_p)] if metric.count else []),
+                         format_p_value(t.primary_p_holm), format_p_value(t.tost_p_holm),
+                         "n/a" if math.isnan(r.d_z) else f"{r.d_z:.2f}", t.verdict])
+        head = [*results.level_columns, "baseline", "pairs", "mean ARROCH vs baseline", "Δ [95 % CI]", "paired t (p)",
+                "Wilcoxon W (p)", *(["permutation p"] if metric.count else []), f"{metric.primary_test} Holm p",
+                f"TOST ±{metric.margin:g} Holm p", "d_z", "verdict"]
+        out += [f"### {metric.label}" + (f" ({metric.unit})" if metric.unit else ""), "", *_table(head, rows), ""]
     return out
-
-
-def _f(text: str) -> float:
-    return float(text) if text else float("nan")
 
 
 def _section_claims(claims: list[Claim]) -> list[str]:
     out = ["## The paper's claims", "",
-           "A level is *confirmed* when ARROCH's mean is below each baseline's and Welch's two-sided test gives p < 0.05 "
-           "for each; *lower* when the means are below but a test is not significant.", ""]
+           "Each (level, baseline) is *lower (significant)* when the primary test's Holm-adjusted p < 0.05 and ARROCH's mean "
+           "difference is negative; *higher (significant)* likewise with a positive one; *equivalent* when the Holm-adjusted "
+           "TOST p < 0.05; otherwise *not significant*. A claim is confirmed only when every (level, baseline) is lower "
+           "(significant); partly confirmed when some are.", ""]
     for claim in claims:
         out += [f"### {claim.title}: **{claim.verdict}**", "", f"Claim: {claim.statement}", "", claim.detail, ""]
-        holm_notes = [f"{level.level:g}/{b}: {format_p_value(p)}" for level in claim.levels for b, p in level.holm_p.items()]
-        if holm_notes:
-            out += ["Holm-adjusted Welch p (level/baseline): " + ", ".join(holm_notes) + ".", ""]
     return out
 
 
@@ -233,13 +293,15 @@ def _section_drivers(results: Results) -> list[str]:
         mine = [t for t in ok if t.method == method]
         if not mine:
             continue
-        human = sum(1 for t in mine if t.human_slowest)
-        hs = summarize([t.values["human_completion_time"] for t in mine if t.values["human_completion_time"] is not None])
-        rs = summarize([t.values["slowest_robot_time"] for t in mine if t.values["slowest_robot_time"] is not None])
-        away = summarize([t.values["human_time_away"] for t in mine if t.values["human_time_away"] is not None])
-        lines.append(f"- {method}: the human was the slowest agent in {human} of {len(mine)} completed trials; her task ended at "
-                     f"{_mean_ci(hs)} s on average, the last robot's delivery at {_mean_ci(rs)} s; she spent {_mean_ci(away)} s "
-                     f"away from her task on doors.")
+
+        def mean(metric: str) -> str:
+            return _mean_ci(summarize([t.values[metric] for t in mine if t.values.get(metric) is not None]))
+
+        lines.append(f"- {method}: the human was the slowest agent in {_share(*_slowest(mine))} of the completed trials; her "
+                     f"task ended at {mean('human_completion_time')} s on average (her task needed {mean('human_task_time')} s "
+                     f"of work), the last robot's delivery at {mean('slowest_robot_time')} s; the sum of all agents' times was "
+                     f"{mean('sum_of_times')} s; she spent {mean('human_time_away')} s away from her task on doors and lost "
+                     f"{mean('human_time_lost')} s to {mean('human_interruptions')} interruptions.")
     return lines + [""]
 
 
@@ -255,7 +317,7 @@ def _section_time(results: Results) -> list[str]:
         lines.append("")
     rows = [r for r in results.timing if r.get("wall_time")]
     if rows:
-        versions = {(t.method, t.robots, t.objects, t.p, t.trial): t.values.get("world_versions") for t in results.trials}
+        versions = {t.key: t.values.get("world_versions") for t in results.trials}
 
         def mean(name: str, subset: list[dict[str, str]]) -> str:
             vals = [float(r[name]) for r in subset if r.get(name)]
@@ -263,21 +325,18 @@ def _section_time(results: Results) -> list[str]:
 
         def per_version(subset: list[dict[str, str]]) -> str:
             """Mission wall time per world version: one lockstep round trip (sim → planner → sim)."""
-            pairs = [(float(r["mission_wall_time"]), versions.get((r["method"], int(r["robots"]), int(r["objects"]),
-                                                                   float(r["door_probability"]), int(r["trial"]))))
-                     for r in subset if r.get("mission_wall_time")]
+            pairs = [(float(r["mission_wall_time"]), versions.get(key_of(r))) for r in subset if r.get("mission_wall_time")]
             pairs = [(w, v) for w, v in pairs if v]
             return f"{1000 * sum(w for w, _ in pairs) / sum(v for _, v in pairs):.0f}" if pairs else "–"
 
-        groups: dict[str, list[dict[str, str]]] = {}
+        groups: dict[Level, list[dict[str, str]]] = {}
         for r in rows:
-            level = r["robots"] if results.kind == "robots" else r["door_probability"]
-            groups.setdefault(level, []).append(r)
-        head = ["robots" if results.kind == "robots" else "p", "trials", "wall / trial (s)", "services up (s)", "sim start-up + end (s)",
+            groups.setdefault(results.level_of(key_of(r)), []).append(r)
+        head = [*results.level_columns, "trials", "wall / trial (s)", "services up (s)", "sim start-up + end (s)",
                 "mission (s)", "planner solve (s)", "plans", "ms per world version", "shutdown (s)", "sim s per wall s"]
-        table = [[level, str(len(g)), mean("wall_time", g), mean("services_up", g), mean("sim_startup", g), mean("mission_wall_time", g),
-                  mean("planner_solve_time", g), mean("plans", g), per_version(g), mean("shutdown", g), mean("realtime_factor", g)]
-                 for level, g in groups.items()]
+        table = [[*results.level_cells(level), str(len(g)), mean("wall_time", g), mean("services_up", g), mean("sim_startup", g),
+                  mean("mission_wall_time", g), mean("planner_solve_time", g), mean("plans", g), per_version(g), mean("shutdown", g),
+                  mean("realtime_factor", g)] for level, g in groups.items()]
         lines += ["Per trial, mean (from timing.csv; trials ran in parallel, so the sweep's wall time is about the sum / jobs). "
                   "*ms per world version*: mission wall time over the world versions the planner had to answer, i.e. "
                   "the cost of one lockstep round trip including the replan.", "",
@@ -296,7 +355,8 @@ def _section_discussion(results: Results) -> list[str]:
 
 def build_report(folder: Path) -> list[Path]:
     """Write every report file into ``folder``; returns their paths."""
-    from .plots import plot_all  # matplotlib only here
+    from .maps import map_section, plot_maps  # matplotlib only here
+    from .plots import plot_all
 
     folder = Path(folder)
     results = load_results(folder)
@@ -306,27 +366,31 @@ def build_report(folder: Path) -> list[Path]:
         write_params(folder / "params.json", (r["metrics"] for r in metrics.load()))
         results.params = json.loads((folder / "params.json").read_text(encoding="utf-8"))
         written.append(folder / "params.json")
+    tested = families(results)
     header, rows = summary_rows(results)
     written.append(_write_csv(folder / "summary.csv", header, rows))
     summary_md = _section_summary(results)
     (folder / "summary.md").write_text("\n".join(summary_md) + "\n", encoding="utf-8")
     written.append(folder / "summary.md")
-    header, rows = test_rows(results)
+    header, rows = test_rows(results, tested)
     written.append(_write_csv(folder / "tests.csv", header, rows))
-    figures = plot_all(results, folder)
+    figures = plot_maps(results, tested, folder) if results.kind == "map" else plot_all(results, folder)
     written += figures
-    claims = check_claims(results)
-    title = "Different number of robots" if results.kind == "robots" else "Human laziness (door-opening probability)"
-    lines = [f"# Experiment: {title}", "",
+    claims = check_claims(results, tested)
+    lines = [f"# Experiment: {TITLES.get(results.kind, results.kind)}", "",
              "Paper §V-A. Each trial ran the real planner, restrictor and sim (with its human model) as separate processes over "
              "Zenoh in lockstep mode on a generated site. Rebuilt from `trials.csv` by `arroch experiment report`.", ""]
+    lines += _section_sweep(results)
+    lines += _section_params(results)
+    lines += _section_design()
     lines += _section_trials(results)
     lines += ["## Figures", "", *[f"![{p.stem}]({p.name})" for p in figures], ""]
     lines += summary_md
-    lines += _section_tests(results)
+    lines += _section_tests(results, tested)
+    if results.kind == "map":
+        lines += map_section(results, tested)
     lines += _section_claims(claims)
     lines += _section_drivers(results)
-    lines += _section_params(results)
     lines += _section_time(results)
     lines += _section_discussion(results)
     (folder / "REPORT.md").write_text("\n".join(lines).rstrip() + "\n", encoding="utf-8")

@@ -3,6 +3,12 @@
 Only ``trials.csv`` is required. ``sweep.json`` gives the order of conditions (else the order the
 CSV shows them in) and the sweep's kind (else guessed from what varies); ``timing.csv``,
 ``runs.json`` and ``params.json`` add the wall-clock figures and the model's parameters when present.
+
+A sweep's **level** is the condition it varies: the team size (``robots``), the door-opening
+probability (``laziness``), or the pair (task length, interruption cost) (``map``). Methods are
+compared **pair by pair** (:meth:`Results.pairs`): two trials pair when they share everything but
+the method (``TrialKey.pair``: same site, same human draws) and both completed (``ok``) with the
+metric known; a trial that failed in one method drops that pair.
 """
 
 from __future__ import annotations
@@ -10,18 +16,32 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterator, Protocol, Union
 
-from .design import METHODS, SweepSpec
+from .design import METHODS, SweepSpec, TrialKey, format_p
 from .record import TIMING_FIELDS, TRIAL_FIELDS
 from .store import CsvStore, StoreError
 
-METRICS = ("team_completion_time", "door_openings", "slowest_robot_time", "human_completion_time",
-           "feedback_sent", "feedback_accepted", "replans", "world_versions", "robot_wait_time", "human_time_away")
+METRICS = ("team_completion_time", "sum_of_times", "door_openings", "slowest_robot_time", "human_completion_time",
+           "human_task_time", "human_time_away", "human_door_trips", "human_interruptions", "human_time_lost",
+           "focus_declared", "feedback_sent", "feedback_accepted", "replans", "world_versions", "robot_wait_time")
+COUNTS = frozenset({"door_openings", "human_door_trips", "human_interruptions", "focus_declared", "feedback_sent",
+                    "feedback_accepted", "replans", "world_versions"})  # the others are times (s)
+
+Level = Union[int, float, tuple[float, float]]  # robots; door-opening probability; (task mean, interruption cost)
 
 
 class ReportError(ValueError):
     """A folder the report cannot be built from."""
+
+
+class Conditioned(Protocol):
+    """Anything with a trial's condition (a :class:`TrialResult` or a :class:`~.design.TrialKey`)."""
+
+    robots: int
+    p: float
+    task: float
+    cost: float
 
 
 def _number(text: str) -> float | None:
@@ -34,6 +54,8 @@ class TrialResult:
     robots: int
     objects: int
     p: float
+    task: float  # the human's mean task length (s)
+    cost: float  # interruption cost (s)
     trial: int
     status: str
     reason: str
@@ -44,11 +66,24 @@ class TrialResult:
     def ok(self) -> bool:
         return self.status == "ok"
 
+    @property
+    def key(self) -> TrialKey:
+        return TrialKey(self.method, self.robots, self.objects, self.p, self.task, self.cost, self.trial)
+
+
+@dataclass(frozen=True)
+class Pair:
+    """One trial index's value of a metric in two methods."""
+
+    trial: int
+    a: float
+    b: float
+
 
 @dataclass
 class Results:
     folder: Path
-    kind: str  # robots or laziness: what the sweep varies
+    kind: str  # robots, laziness or map: what the sweep varies
     spec: SweepSpec | None
     trials: list[TrialResult]
     timing: list[dict[str, str]] = field(default_factory=list)
@@ -63,39 +98,75 @@ class Results:
         order = list(self.spec.methods) if self.spec else list(METHODS)
         return [m for m in order if m in present] + sorted(present - set(order))
 
-    @property
-    def levels(self) -> list[float]:
-        """The swept variable's values, in the sweep's order (team sizes, or probabilities)."""
+    def level_of(self, t: Conditioned) -> Level:
         if self.kind == "robots":
-            seen = {t.robots for t in self.trials}
-            order = list(self.spec.robots) if self.spec else sorted(seen)
+            return t.robots
+        if self.kind == "laziness":
+            return t.p
+        return (t.task, t.cost)
+
+    @property
+    def levels(self) -> list[Level]:
+        """The swept variable's values, in the sweep's order (team sizes, probabilities, map cells)."""
+        seen = {self.level_of(t) for t in self.trials}
+        if self.spec is None:
+            order: list[Level] = sorted(seen)  # type: ignore[type-var]
+        elif self.kind == "robots":
+            order = list(self.spec.robots)
+        elif self.kind == "laziness":
+            order = list(self.spec.ps)
         else:
-            seen = {t.p for t in self.trials}
-            order = list(self.spec.ps) if self.spec else sorted(seen)
-        return [v for v in order if v in seen] + sorted(seen - set(order))
+            order = [(w, c) for w in self.spec.tasks for c in self.spec.costs]
+        return [v for v in order if v in seen] + sorted(seen - set(order))  # type: ignore[type-var]
 
-    def level_of(self, t: TrialResult) -> float:
-        return t.robots if self.kind == "robots" else t.p
+    @property
+    def level_columns(self) -> tuple[str, ...]:
+        """The CSV columns that name a level."""
+        return {"robots": ("robots",), "laziness": ("door_probability",)}.get(self.kind, ("task_mean", "interruption_cost"))
 
-    def values(self, method: str, level: float, metric: str) -> list[float]:
+    def level_cells(self, level: Level) -> list[str]:
+        """A level as the text of its :attr:`level_columns`."""
+        if isinstance(level, tuple):
+            return [format_p(v) for v in level]
+        return [str(int(level))] if self.kind == "robots" else [format_p(level)]
+
+    def level_label(self, level: Level) -> str:
+        """A level for people: ``3 robots``, ``p = 0.5``, ``task 600 s, cost 15 s``."""
+        if isinstance(level, tuple):
+            return f"task {format_p(level[0])} s, cost {format_p(level[1])} s"
+        return f"{int(level)} robots" if self.kind == "robots" else f"p = {format_p(level)}"
+
+    @property
+    def variable(self) -> str:
+        return {"robots": "robots", "laziness": "door-opening probability"}.get(self.kind, "task length × interruption cost")
+
+    # ------------------------------------------------------------------ values
+
+    def values(self, method: str, level: Level, metric: str) -> list[float]:
         """``metric`` of the completed (``ok``) trials of one condition."""
         return [t.values[metric] for t in self.trials  # type: ignore[misc]
                 if t.ok and t.method == method and self.level_of(t) == level and t.values.get(metric) is not None]
 
-    def condition(self, method: str, level: float) -> list[TrialResult]:
+    def pairs(self, metric: str, level: Level, a: str, b: str) -> list[Pair]:
+        """``metric`` of methods ``a`` and ``b`` at the same trial index, where both completed, by trial index."""
+        def known(method: str) -> dict[tuple, TrialResult]:
+            return {t.key.pair(): t for t in self.trials
+                    if t.ok and t.method == method and self.level_of(t) == level and t.values.get(metric) is not None}
+
+        mine, theirs = known(a), known(b)
+        common = sorted(set(mine) & set(theirs), key=lambda k: (k[-1], k))
+        return [Pair(mine[k].trial, mine[k].values[metric], theirs[k].values[metric]) for k in common]  # type: ignore[arg-type]
+
+    def condition(self, method: str, level: Level) -> list[TrialResult]:
         return [t for t in self.trials if t.method == method and self.level_of(t) == level]
 
-    def conditions(self) -> Iterator[tuple[float, str, list[TrialResult]]]:
+    def conditions(self) -> Iterator[tuple[Level, str, list[TrialResult]]]:
         """(level, method, trials) of every condition that has trials, in the sweep's order."""
         for level in self.levels:
             for method in self.methods:
                 trials = self.condition(method, level)
                 if trials:
                     yield level, method, trials
-
-    @property
-    def variable(self) -> str:
-        return "robots" if self.kind == "robots" else "door-opening probability"
 
 
 def _trial(row: dict[str, str]) -> TrialResult:
@@ -104,14 +175,26 @@ def _trial(row: dict[str, str]) -> TrialResult:
     if row["status"] == "ok" and row["human_completion_time"] and row["slowest_robot_time"]:
         human_slowest = float(row["human_completion_time"]) >= float(row["slowest_robot_time"])
     return TrialResult(row["method"], int(row["robots"]), int(row["objects"]), float(row["door_probability"]),
-                       int(row["trial"]), row["status"], row["reason"], values, human_slowest)
+                       float(row["task_mean"]), float(row["interruption_cost"]), int(row["trial"]), row["status"],
+                       row["reason"], values, human_slowest)
 
 
 def _kind(spec: SweepSpec | None, trials: list[TrialResult]) -> str:
     if spec is not None:
         return spec.kind
-    # Without sweep.json: whichever of team size and probability varies.
+    # Without sweep.json: whichever varies (task length or interruption cost: the map).
+    if len({t.task for t in trials}) > 1 or len({t.cost for t in trials}) > 1:
+        return "map"
     return "laziness" if len({t.p for t in trials}) > 1 and len({t.robots for t in trials}) == 1 else "robots"
+
+
+def _json(path: Path, default: Any) -> Any:
+    if not path.exists():
+        return default
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise ReportError(f"{path}: not JSON ({exc})") from None
 
 
 def load_results(folder: Path) -> Results:
@@ -131,13 +214,14 @@ def load_results(folder: Path) -> Results:
     except (KeyError, ValueError) as exc:
         raise ReportError(f"{folder / 'trials.csv'}: a malformed row ({exc})") from None
     spec = None
-    if (folder / "sweep.json").exists():
+    sweep = _json(folder / "sweep.json", None)
+    if sweep is not None:
         try:
-            spec = SweepSpec.from_json(json.loads((folder / "sweep.json").read_text(encoding="utf-8")))
-        except (json.JSONDecodeError, ValueError) as exc:
+            spec = SweepSpec.from_json(sweep)
+        except ValueError as exc:
             raise ReportError(f"{folder / 'sweep.json'}: {exc}") from None
-    runs = json.loads((folder / "runs.json").read_text(encoding="utf-8")) if (folder / "runs.json").exists() else []
-    params = json.loads((folder / "params.json").read_text(encoding="utf-8")) if (folder / "params.json").exists() else {}
+    runs = _json(folder / "runs.json", [])
+    params = _json(folder / "params.json", {})
     return Results(folder, _kind(spec, trials), spec, trials, timing, runs, params)
 
 
@@ -148,4 +232,4 @@ def statuses(trials: list[TrialResult]) -> dict[str, int]:
     return counts
 
 
-__all__ = ["METRICS", "ReportError", "Results", "TrialResult", "load_results", "statuses"]
+__all__ = ["COUNTS", "METRICS", "Level", "Pair", "ReportError", "Results", "TrialResult", "load_results", "statuses"]

@@ -15,8 +15,10 @@ The results folder (``--out``):
 - the report (:mod:`.report`), unless ``--no-report``.
 
 Workers are threads, each running one trial at a time (the trial's processes do the work). A
-router is started per worker, for all, or per trial (:mod:`.routers`). SIGINT/SIGTERM cancels the
-sweep: running trials are stopped (processes and all) and not recorded; ``--resume`` runs them again.
+router is started per worker, for all, or per trial (:mod:`.routers`). With ``--cluster`` the trials
+run on a Dask distributed cluster instead, each with its own router on its worker (:mod:`.cluster`);
+they are recorded the same way. SIGINT/SIGTERM cancels the sweep: running trials are stopped
+(processes and all) and not recorded; ``--resume`` runs them again.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from protocol.signals import StopSignals, restore
 
@@ -69,6 +71,7 @@ class RunOptions:
     progress: str = "auto"  # auto, bar, line, off
     report: bool = True
     keep_events: bool = False  # DIR/events/<trial>.jsonl
+    cluster: str | None = None  # a Dask scheduler's address: run the trials there instead of locally
 
     def check(self) -> None:
         if self.jobs < 1:
@@ -239,18 +242,12 @@ class Sweep:
         previous = signals.install((signal.SIGINT, signal.SIGTERM, signal.SIGHUP)) if threading.current_thread() is threading.main_thread() else {}
         shared: Router | None = None
         try:
-            if todo and self.options.router == "shared":
-                shared = Router(self.options.trial.log_level).start()
-            workers = [threading.Thread(target=self._worker, args=(shared,), name=f"worker-{i}", daemon=True) for i in range(jobs)]
-            for worker in workers:
-                worker.start()
-            while any(w.is_alive() for w in workers):
-                for worker in workers:
-                    worker.join(0.5)
-                    if signals.received:
-                        self.cancel.set()
-                if self.progress is not None:
-                    self.progress.tick()
+            if self.options.cluster:
+                self._run_on_cluster(todo, lambda: signals.received)
+            else:
+                if todo and self.options.router == "shared":
+                    shared = Router(self.options.trial.log_level).start()
+                self._run_locally(jobs, shared, lambda: signals.received)
             if signals.received:  # one that came as the last trial ended
                 self.cancel.set()
         finally:
@@ -260,6 +257,41 @@ class Sweep:
             if self.progress is not None:
                 self.progress.close()
                 logging.getLogger().handlers[:] = saved_handlers
+        return self._end(started_at, started, jobs, total)
+
+    def _run_locally(self, jobs: int, shared: Router | None, stopping: Callable[[], bool]) -> None:
+        """``jobs`` worker threads until the queue is empty or the sweep is cancelled."""
+        workers = [threading.Thread(target=self._worker, args=(shared,), name=f"worker-{i}", daemon=True) for i in range(jobs)]
+        for worker in workers:
+            worker.start()
+        while any(w.is_alive() for w in workers):
+            for worker in workers:
+                worker.join(0.5)
+                if stopping():
+                    self.cancel.set()
+            if self.progress is not None:
+                self.progress.tick()
+
+    def _run_on_cluster(self, todo: list[TrialKey], stopping: Callable[[], bool]) -> None:
+        from .cluster import ClusterError, ClusterPool
+
+        assert self.options.cluster is not None
+        try:
+            pool = ClusterPool(self.options.cluster)
+        except ClusterError as exc:
+            raise SweepError(str(exc)) from None
+        try:
+            log.info("cluster %s: %d worker(s); %d trial(s) submitted", self.options.cluster, pool.workers(), len(todo))
+            idle = self.progress.tick if self.progress is not None else (lambda: None)
+            for outcome in pool.run(self.spec, todo, self.options.trial, stopping, idle):
+                if outcome.status != "cancelled":
+                    self._record(outcome)
+            if stopping():
+                self.cancel.set()
+        finally:
+            pool.close()
+
+    def _end(self, started_at: float, started: float, jobs: int, total: int) -> int:
         wall = time.monotonic() - started
         complete = len({key_of(row) for row in self.trials.load()}) == total
         ending = "cancelled" if self.cancel.is_set() else ("complete" if complete else "incomplete")
@@ -282,6 +314,7 @@ class Sweep:
         sessions.append({
             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(started_at)),
             "wall_time": round(wall, 3), "jobs": jobs, "router": self.options.router,
+            "cluster": self.options.cluster,
             "trial_timeout": self.options.trial.timeout, "trials_run": self.ran, "failed": self.failed,
             "ended": ending, "cpu_count": os.cpu_count(), "code_at_end": code_fingerprint(),
         })

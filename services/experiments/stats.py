@@ -1,19 +1,46 @@
-"""Statistics of the report: means with 95 % confidence intervals, Welch's t-test, Mann–Whitney U,
-Cohen's d, the rank-biserial correlation, and Holm's correction.
+"""Statistics of the report: means with 95 % confidence intervals, paired comparisons of two methods
+trial by trial, and Holm's correction.
+
+The sweeps are paired (``design.py``): at one trial index every method meets the same site and the
+same human draws, so two methods are compared through the per-trial differences
+``d_i = a_i - b_i`` (in the report: ARROCH minus a baseline; negative means ARROCH is lower).
 
 Conventions (so a reader can recompute any number from the CSV):
 
-- confidence interval: Student's t interval, ``mean ± t(0.975, n-1) · sd / sqrt(n)``, ``sd`` with
-  ``n - 1``; none for fewer than two values;
-- Welch's t-test: two-sided, unequal variances (``scipy.stats.ttest_ind(equal_var=False)``);
-- Mann–Whitney U: two-sided (``scipy.stats.mannwhitneyu``: exact for small samples without ties,
-  otherwise the normal approximation with tie and continuity corrections); ``U`` is the first
-  sample's: the pairs (a, b) with a > b, plus half the ties;
-- Cohen's d: ``(mean_a - mean_b) / pooled sd``, pooled with ``n - 1`` weights;
-- rank-biserial correlation: ``2 U / (n_a n_b) - 1`` = P(a > b) - P(a < b); negative when the first
-  sample (ARROCH in the report) tends to be lower;
-- when both samples have no spread the t-test is undefined and reported as not available (NaN),
-  not as zero or one.
+- **differences** are rounded to 1e-6 (the CSV holds times to the millisecond), so that differences
+  equal in the CSV are equal here and tie in the ranks;
+- **mean with confidence interval**: Student's t interval, ``mean ± t(0.975, n-1) · sd / sqrt(n)``,
+  ``sd`` with ``n - 1``; none for fewer than two values. The same for the mean difference; when the
+  differences have no spread the interval is the point itself;
+- **fewer than two pairs**: no test (every statistic NaN, shown as n/a);
+- **paired t-test**: ``t = mean(d) / (sd(d) / sqrt(n))`` with ``n - 1`` degrees of freedom, two-sided
+  (``scipy.stats.ttest_rel``); undefined (NaN) when the differences have no spread;
+- **Wilcoxon signed-rank**, two-sided: zero differences are dropped (Wilcoxon's original
+  treatment, ``zero_method="wilcox"``: a pair in which both methods gave the same value says
+  nothing about which one is lower); the nonzero ``|d|`` are ranked with mid-ranks for ties;
+  ``W = min(R+, R-)`` (scipy's two-sided statistic). The p-value comes from the exact null
+  distribution when no two ``|d|`` tie and there are at most 50 nonzero differences; with ties and
+  at most 16 nonzero differences, from the exact enumeration of the ``2^k`` sign flips of the
+  mid-ranks; otherwise from the normal approximation with the tie correction and no continuity
+  correction. With no nonzero difference ``W = 0`` and ``p = 1`` (every sign flip gives the same);
+- **effect size** ``d_z = mean(d) / sd(d)``; NaN (not 0 or infinity) when the differences have no
+  spread;
+- **equivalence (TOST)** against a margin ``δ``: two one-sided paired t-tests,
+  ``p1 = P(T > (mean(d) + δ) / se)`` (H0: mean <= -δ) and ``p2 = P(T < (mean(d) - δ) / se)``
+  (H0: mean >= δ), ``T`` Student's t with ``n - 1`` degrees of freedom, ``se = sd(d) / sqrt(n)``;
+  ``p = max(p1, p2)``. With no spread (``se = 0``) the statistics are infinite: ``p = 0`` when
+  ``|mean(d)| < δ`` and ``p = 1`` otherwise;
+- **sign-flip permutation test** (for counts, whose differences are small integers with many ties
+  and zeros): under H0 each difference is as likely to have either sign; statistic ``S = sum(d)``;
+  two-sided ``p`` = twice the smaller one-sided p (``scipy.stats.permutation_test`` with
+  ``permutation_type="samples"`` on the nonzero differences; for this symmetric null it equals
+  ``P(|S*| >= |S|)``). Zeros are dropped (flipping a zero changes nothing). Exact enumeration of the
+  ``2^k`` sign flips when ``k``, the number of nonzero differences, is at most 16; otherwise
+  ``PERMUTATION_RESAMPLES`` random flips drawn with the fixed seed ``PERMUTATION_SEED`` (so the
+  report is byte-reproducible), one-sided p's counted as ``(1 + hits) / (1 + resamples)``. With no
+  nonzero difference ``p = 1``;
+- **Holm–Bonferroni**: adjusted ``p_(i) = max_{j <= i} min(1, (m - j + 1) p_(j))`` over the sorted
+  p-values of one family; NaN is not a test and stays NaN.
 
 scipy is imported on first use, so commands that never make a report do not pay for it.
 """
@@ -28,6 +55,11 @@ from typing import Sequence
 import numpy as np
 
 NAN = float("nan")
+EXACT_WILCOXON_MAX = 50  # nonzero differences, no ties: exact null distribution up to here
+EXACT_FLIPS_MAX = 16  # nonzero differences whose 2^k sign flips are enumerated exactly (65 536)
+PERMUTATION_RESAMPLES = 99_999  # random sign flips beyond that
+PERMUTATION_SEED = 20_240  # fixed: the same CSV gives the same p-values, byte for byte
+DIFF_DECIMALS = 6  # differences rounded here (the CSV has milliseconds) so equal differences tie
 
 
 def _scipy_stats():  # noqa: ANN202 - the module
@@ -35,6 +67,8 @@ def _scipy_stats():  # noqa: ANN202 - the module
 
     return stats
 
+
+# ---------------------------------------------------------------------------- one sample
 
 @dataclass(frozen=True)
 class Summary:
@@ -63,55 +97,132 @@ def summarize(values: Sequence[float]) -> Summary:
     return Summary(n, mean, sd, mean - half, mean + half)
 
 
-@dataclass(frozen=True)
-class Comparison:
-    """Sample a (ARROCH) against sample b (a baseline)."""
+# ---------------------------------------------------------------------------- paired tests
 
-    n_a: int
-    n_b: int
+def differences(a: Sequence[float], b: Sequence[float]) -> np.ndarray:
+    """``a_i - b_i``, rounded so that equal differences in the CSV are equal here."""
+    x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if x.shape != y.shape:
+        raise ValueError(f"paired samples must have the same length (got {x.size} and {y.size})")
+    return np.round(x - y, DIFF_DECIMALS)
+
+
+def paired_t(d: np.ndarray) -> tuple[float, float]:
+    """(t, two-sided p) of the paired t-test on the differences; NaN without spread or pairs."""
+    if d.size < 2 or float(d.std(ddof=1)) == 0.0:
+        return NAN, NAN
+    res = _scipy_stats().ttest_1samp(d, 0.0)  # the same as ttest_rel on the two samples
+    return float(res.statistic), float(res.pvalue)
+
+
+@dataclass(frozen=True)
+class SignedRank:
+    w: float  # min(R+, R-)
+    r_plus: float  # sum of the ranks of the positive differences
+    r_minus: float
+    p: float
+    method: str  # exact, exact flips, normal, none
+
+
+def wilcoxon_signed_rank(d: np.ndarray) -> SignedRank:
+    """The two-sided Wilcoxon signed-rank test of the differences (module docstring)."""
+    nonzero = d[d != 0]
+    k = int(nonzero.size)
+    if d.size < 2:
+        return SignedRank(NAN, NAN, NAN, NAN, "none")
+    if k == 0:
+        return SignedRank(0.0, 0.0, 0.0, 1.0, "none")
+    st = _scipy_stats()
+    ranks = st.rankdata(np.abs(nonzero))
+    r_plus, r_minus = float(ranks[nonzero > 0].sum()), float(ranks[nonzero < 0].sum())
+    ties = np.unique(np.abs(nonzero)).size < k
+    if not ties and k <= EXACT_WILCOXON_MAX:
+        method, how = "exact", "exact"
+    elif k <= EXACT_FLIPS_MAX:
+        method, how = st.PermutationMethod(n_resamples=2**EXACT_FLIPS_MAX), "exact flips"
+    else:
+        method, how = "asymptotic", "normal"
+    res = st.wilcoxon(nonzero, zero_method="wilcox", correction=False, alternative="two-sided", method=method)
+    return SignedRank(float(res.statistic), r_plus, r_minus, min(1.0, float(res.pvalue)), how)
+
+
+def _sum(x: np.ndarray, axis: int = -1) -> np.ndarray:
+    return np.sum(x, axis=axis)
+
+
+def sign_flip_test(d: np.ndarray) -> float:
+    """Two-sided p of the sign-flip permutation test of ``sum(d)`` (module docstring)."""
+    if d.size < 2:
+        return NAN
+    nonzero = d[d != 0]
+    k = int(nonzero.size)
+    if k == 0:
+        return 1.0
+    exact = k <= EXACT_FLIPS_MAX
+    res = _scipy_stats().permutation_test(
+        (nonzero,), _sum, permutation_type="samples", vectorized=True, alternative="two-sided",
+        n_resamples=2**k if exact else PERMUTATION_RESAMPLES, rng=np.random.default_rng(PERMUTATION_SEED))
+    return min(1.0, float(res.pvalue))
+
+
+def tost(d: np.ndarray, margin: float) -> float:
+    """p of the paired equivalence test (two one-sided t-tests) within ``±margin``."""
+    if d.size < 2 or not margin > 0:
+        return NAN
+    n = d.size
+    mean, se = float(d.mean()), float(d.std(ddof=1)) / math.sqrt(n)
+    if se == 0.0:
+        return 0.0 if abs(mean) < margin else 1.0
+    t_dist = _scipy_stats().t
+    p_above_lower = float(t_dist.sf((mean + margin) / se, n - 1))  # H0: mean <= -margin
+    p_below_upper = float(t_dist.cdf((mean - margin) / se, n - 1))  # H0: mean >= +margin
+    return max(p_above_lower, p_below_upper)
+
+
+@dataclass(frozen=True)
+class Paired:
+    """Sample a (ARROCH) against sample b (a baseline), pair by pair: ``diff = a - b``."""
+
+    n: int  # pairs
+    n_nonzero: int  # pairs with a nonzero difference
     mean_a: float
     mean_b: float
-    welch_t: float
-    welch_df: float
-    welch_p: float
-    mwu_u: float
-    mwu_p: float
-    cohen_d: float
-    rank_biserial: float
+    mean_diff: float
+    sd_diff: float
+    ci_low: float  # 95 % t interval of the mean difference
+    ci_high: float
+    t: float
+    t_p: float
+    wilcoxon: SignedRank
+    perm_p: float  # NaN unless asked for (counts)
+    d_z: float
+    margin: float
+    tost_p: float
 
-    @property
-    def diff(self) -> float:
-        return self.mean_a - self.mean_b
 
-
-def cohen_d(a: Sequence[float], b: Sequence[float]) -> float:
+def paired(a: Sequence[float], b: Sequence[float], *, margin: float, permutation: bool = False) -> Paired:
+    """Every paired statistic of the module docstring; ``permutation``: run the sign-flip test too."""
+    d = differences(a, b)
+    n = int(d.size)
     x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    if x.size < 2 or y.size < 2:
-        return NAN
-    pooled = math.sqrt(((x.size - 1) * x.var(ddof=1) + (y.size - 1) * y.var(ddof=1)) / (x.size + y.size - 2))
-    return float((x.mean() - y.mean()) / pooled) if pooled > 0 else NAN
-
-
-def compare(a: Sequence[float], b: Sequence[float]) -> Comparison:
-    """Welch's t-test, Mann–Whitney U and both effect sizes of ``a`` against ``b``."""
-    x, y = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
-    if x.size < 2 or y.size < 2:
-        return Comparison(int(x.size), int(y.size), float(x.mean()) if x.size else NAN, float(y.mean()) if y.size else NAN,
-                          NAN, NAN, NAN, NAN, NAN, NAN, NAN)
-    st = _scipy_stats()
+    mean_a = float(x.mean()) if n else NAN
+    mean_b = float(y.mean()) if n else NAN
+    s = summarize(d)
     with warnings.catch_warnings():
-        # Nearly constant samples make scipy warn about precision; the NaN handling below covers them.
+        # Nearly constant differences make scipy warn about precision; the cases are handled above.
         warnings.simplefilter("ignore", RuntimeWarning)
-        if x.var(ddof=1) == 0 and y.var(ddof=1) == 0:
-            t, df, p = NAN, NAN, NAN
-        else:
-            welch = st.ttest_ind(x, y, equal_var=False)
-            t, df, p = float(welch.statistic), float(welch.df), float(welch.pvalue)
-        mwu = st.mannwhitneyu(x, y, alternative="two-sided")
-    u = float(mwu.statistic)
-    return Comparison(int(x.size), int(y.size), float(x.mean()), float(y.mean()), t, df, p, u, float(mwu.pvalue),
-                      cohen_d(x, y), 2.0 * u / (x.size * y.size) - 1.0)
+        t, t_p = paired_t(d)
+        rank = wilcoxon_signed_rank(d)
+        perm_p = sign_flip_test(d) if permutation else NAN
+    ci_low, ci_high = s.ci_low, s.ci_high
+    if n >= 2 and s.sd == 0.0:
+        ci_low = ci_high = s.mean
+    d_z = s.mean / s.sd if n >= 2 and s.sd > 0 else NAN
+    return Paired(n, int(np.count_nonzero(d)), mean_a, mean_b, s.mean, s.sd, ci_low, ci_high, t, t_p, rank,
+                  perm_p, d_z, margin, tost(d, margin))
 
+
+# ---------------------------------------------------------------------------- families
 
 def holm(pvalues: Sequence[float]) -> list[float]:
     """Holm–Bonferroni adjusted p-values (NaN stays NaN and does not count as a test)."""

@@ -116,7 +116,10 @@ def service_commands(spec: SweepSpec, key: TrialKey, *, namespace: str, site: Pa
                     mission=MissionOptions(method=key.method, mode="lockstep", seed=spec.sim_seed(key)),
                     run_dir=folder)
     sim = service_argv(SERVICES["sim"], launch) + [
-        "--until-done", "--metrics-out", str(folder / "metrics.json"), "--door-probability", format_p(key.p)]
+        "--until-done", "--metrics-out", str(folder / "metrics.json"), "--door-probability", format_p(key.p),
+        "--task-mean", format_p(key.task), "--interruption-cost", format_p(key.cost)]
+    if spec.focus_reading is not None:
+        sim += ["--focus-reading", spec.focus_reading]
     if human_config is not None:
         sim += ["--human-config", str(human_config)]
     if events is not None:

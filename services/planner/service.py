@@ -11,13 +11,16 @@ or closes; and on every new ``world_version`` - every one is answered with a Tea
 nothing changed, because the simulator's lockstep mode waits for that answer. Triggers arriving
 together (a clock tick, a status and an event for one action) are answered by one replan: the
 planner waits until SETTLE has passed without news - except in lockstep, where the simulator says
-when it has stopped and what for (the Clock's ``awaiting``). When it waits for a plan newer than the
-last one published, everything of that world version has arrived (it was published before the
+when it has stopped and what for (the Clock's ``awaiting``). When it waits for a plan newer than
+the last one published, everything of that world version has arrived (it was published before the
 clock), so the plan is made at once (:meth:`_plan_if_awaited`); while it waits for the ack of the
-human's feedback, the planner holds (up to FEEDBACK_HOLD), since a new ConstraintSet follows and the
-plan must answer it. Planning at those fixed points, not after wall-clock delays, is what makes a
-lockstep mission the same on a busy machine as on an idle one, and fast: a mission has a world
-version every few site seconds.
+human's feedback, the planner does nothing: the ack brings a new ConstraintSet and a clock awaiting
+a plan that answers it. A plan made on a wall-clock delay (SETTLE) before the version's clock came
+would start from whatever part of that version had arrived, which depends on the machine's load
+(:meth:`_version_complete`); planning only at those fixed points is what makes a lockstep mission the
+same on a busy machine as on an idle one, and fast: a mission has a world version every few site
+seconds. For the same reason, in lockstep a robot far off its trajectory is found at plan time, from
+the poses of that instant, not from poses that fell between two versions.
 
 A burst that only brings robots' actions ending when the plan said or earlier (at most
 CONTINUE_TOLERANCE late), or a new world version the plan need not answer (a robot-operated door
@@ -33,8 +36,11 @@ robot's pose and status have arrived (the simulator repeats them once a wall sec
 lockstep time stands still), with the live ConstraintSet it fetched at start, so its first plan
 starts from where the robots are and what they carry and have delivered. The actions robots are
 executing (their statuses name them) are taken over as the ones sent: a plan that keeps them lets
-them run on, with the same action ids, instead of starting them again. When nothing has been heard
-of any robot after START_GRACE, no mission is running yet and the plan starts from the site's start.
+them run on, with the same action ids, instead of starting them again. With the simulator's clock
+(``--clock sim``) nothing is planned before that clock ticks: a plan made from the site's start
+before the simulator is up would be the warm start of its first real plan, and the mission would
+depend on how fast the simulator started. On the wall clock, when nothing has been heard of any
+robot after START_GRACE, no mission is running yet and the plan starts from the site's start.
 
 A TeamPlan lost on its way (the router restarting, a link down) would leave a lockstep simulator
 waiting for it forever: nothing changes, so nothing triggers a new one. While the simulator's clock
@@ -74,7 +80,6 @@ RESEND_INTERVAL = 1.0  # wall s after sending a command before it is sent again 
 START_GRACE = 1.5  # wall s to hear a mission under way (statuses come once a second) before planning from the site's start
 STATE_WAIT = 5.0  # wall s to wait for the last robots' poses and statuses before planning without them
 REPEAT_AFTER = 2.0  # wall s the simulator may stay paused at a version the plan answers before the plan is sent again
-FEEDBACK_HOLD = 1.0  # wall s to hold planning while a lockstep simulator waits for the ack of a feedback
 
 
 @dataclass
@@ -165,7 +170,7 @@ class PlannerService(Service):
         acknowledging its command, or starting to wait at a door - would reach it at a moment that
         depends on the machine's load, and the same seed would not give the same mission. Such news
         is kept and planned for with the next version."""
-        if not (isinstance(self.clock, SimClock) and self.clock.mode == "lockstep"):
+        if not self._lockstep():
             return False
         return not any(reason.partition(":")[0] in LOCKSTEP_TRIGGERS for reason in self._dirty)
 
@@ -194,17 +199,33 @@ class PlannerService(Service):
             self.counters["unknown_robot"] += 1
             return
         self.poses[msg.robot] = (msg.x, msg.y, msg.theta)
-        sent = self.dispatcher.current.get(msg.robot)
-        status = self.statuses.get(msg.robot)
-        if sent is None or len(sent.trajectory) < 2 or status is None or status.state != "moving" or status.action_id != sent.action_id:
-            return
-        if polyline_distance((msg.x, msg.y), sent.trajectory) > self.settings.off_track:
+        if self._lockstep():
+            return  # poses between two world versions fall at wall-clock moments: checked at plan time instead
+        if self._off_track(msg.robot):
             last = self._off_track_at.get(msg.robot, -math.inf)
             if time.monotonic() - last >= OFF_TRACK_COOLDOWN:
                 self._off_track_at[msg.robot] = time.monotonic()
                 self._force.add(msg.robot)
                 self.counters["off_track"] += 1
                 self.trigger(f"off_track:{msg.robot}")
+
+    def _off_track(self, robot: str) -> bool:
+        """Whether ``robot`` is moving along the trajectory sent to it but far from it."""
+        sent = self.dispatcher.current.get(robot)
+        status = self.statuses.get(robot)
+        pose = self.poses.get(robot)
+        if pose is None or sent is None or len(sent.trajectory) < 2 or status is None or status.state != "moving" \
+                or status.action_id != sent.action_id:
+            return False
+        return polyline_distance(pose[:2], sent.trajectory) > self.settings.off_track
+
+    def _force_off_track(self) -> None:
+        """Lockstep: the robots far off their trajectories at this world version (their poses of
+        this instant came just before the clock) get a fresh command with the plan."""
+        for robot in sorted(self.site.robots):
+            if robot not in self._force and self._off_track(robot):
+                self._force.add(robot)
+                self.counters["off_track"] += 1
 
     def on_status(self, msg: RobotStatus, _key: str) -> None:
         if msg.robot not in self.site.robots:
@@ -297,15 +318,32 @@ class PlannerService(Service):
 
     def tick(self) -> None:
         # (The world version is noted in on_clock, in order with the statuses and events before it.)
-        if not self._dirty:
+        if not self._dirty or (self._lockstep() and not self._version_complete()):
             self._repeat_plan()
             return
         now = time.monotonic()
         if now - self._last_trigger < SETTLE and now - self._first_trigger < MAX_DELAY:
             return
-        if self._awaiting("feedback") is not None and now - self._first_trigger < FEEDBACK_HOLD:
-            return  # the ack comes with a new ConstraintSet, which the plan must answer
         self._plan_now(now)
+
+    def _lockstep(self) -> bool:
+        return isinstance(self.clock, SimClock) and self.clock.mode == "lockstep"
+
+    def _version_complete(self) -> bool:
+        """Lockstep: whether everything the plan for the current world version must answer is in.
+
+        A version's statuses and events come before its clock, so until that clock has arrived a
+        plan would start from whatever part of the version had arrived by then (which depends on
+        the machine's load). While the simulator awaits the ack of the human's feedback, the ack
+        brings a ConstraintSet the plan must answer; and a clock awaiting a constraints version
+        this planner has not received yet waits for it too."""
+        clock = self._sim_clock
+        if clock is None or clock.world_version < self.world_version:
+            return False
+        if clock.paused and clock.awaiting == "feedback":
+            return False
+        have = self.constraint_set.version if self.constraint_set is not None else 0
+        return have >= clock.constraints_version
 
     def _awaiting(self, what: str) -> Clock | None:
         """The simulator's clock when it is paused in lockstep at the world version known here,
@@ -339,6 +377,8 @@ class PlannerService(Service):
             self._held = True
             self._repeat_plan()
             return False
+        if self._lockstep():
+            self._force_off_track()
         reasons = sorted(self._dirty)
         self._dirty.clear()
         try:
@@ -377,6 +417,8 @@ class PlannerService(Service):
 
     def _world_heard(self, now: float) -> bool:
         """Whether the planner knows enough of the robots to plan (see the module docstring)."""
+        if isinstance(self.clock, SimClock) and not self.clock.synced:
+            return False  # the simulator's clock is the site's time: nothing to plan before it ticks
         missing = [rid for rid in self.site.robots if rid not in self.poses or rid not in self.statuses]
         if not missing:
             if self._state_wait_since is not None:

@@ -18,7 +18,7 @@ from protocol.runner import add_common_arguments, run_service
 from protocol.transport import MODES as ZENOH_MODES
 from protocol.transport import options_from
 
-from .human import METHODS, HumanConfig
+from .human import FOCUS_READINGS, METHODS, HumanConfig
 from .pacing import MODES
 
 
@@ -45,11 +45,19 @@ def register(subparsers: Any) -> None:
     run.add_argument("--time-limit", type=float, metavar="S", help="end the mission unfinished after S sim seconds (default 7200; 0: never)")
     run.add_argument("--tick", type=float, metavar="S", help="sim seconds per engine step (default 0.05, i.e. 20 Hz)")
     run.add_argument("--pose-rate", type=float, default=20.0, metavar="HZ", help="pose publication rate in sim time (default 20)")
+    run.add_argument("--lockstep-abort", type=float, default=None, metavar="S",
+                     help="lockstep: wall seconds to wait for the ack of the human's feedback before the run fails "
+                          "(exit code 3; default 120). Time stands still meanwhile, so the wait never changes the mission")
     run.add_argument("--metrics-out", metavar="FILE.json", help="write the mission's metrics there when it ends")
     run.add_argument("--events-out", metavar="FILE.jsonl", help="write every event there, one JSON line each")
     human = parser.add_argument_group("simulated human")
     human.add_argument("--human-config", metavar="FILE", help="TOML file with the human model's parameters ([human] table; see docs)")
     human.add_argument("--door-probability", type=float, metavar="P", help="chance per waiting robot per decision interval that she goes to open (default 0.5)")
+    human.add_argument("--task-mean", type=float, metavar="S", help="mean length of her own task in seconds (default 600)")
+    human.add_argument("--interruption-cost", type=float, metavar="S",
+                       help="seconds of her task lost each time she leaves it during a focus interval (default 0)")
+    human.add_argument("--focus-reading", choices=FOCUS_READINGS,
+                       help="faithful (default): only a declared focus interval keeps her from doors; strict: any focus interval does")
     from .camfeed import add_camera_arguments
 
     add_camera_arguments(parser.add_argument_group("virtual tablet camera"))
@@ -88,7 +96,10 @@ def build_options(args: argparse.Namespace) -> Any:
     mode, rate = _clock_mode(args)
     if not args.pose_rate > 0:
         raise ValueError("--pose-rate must be > 0")
-    overrides = {"door_probability": args.door_probability}
+    if args.lockstep_abort is not None and not args.lockstep_abort > 0:
+        raise ValueError(f"--lockstep-abort must be > 0 wall seconds (got {args.lockstep_abort:g})")
+    overrides = {"door_probability": args.door_probability, "task_mean": args.task_mean,
+                 "interruption_cost": args.interruption_cost, "focus_reading": args.focus_reading}
     human = HumanConfig.from_toml(args.human_config, **overrides) if args.human_config else HumanConfig(**{k: v for k, v in overrides.items() if v is not None})
     return SimOptions(
         method=args.method,
@@ -102,6 +113,7 @@ def build_options(args: argparse.Namespace) -> Any:
         engine=engine_config_with(tick=args.tick, time_limit=args.time_limit),
         human=human,
         camera=camera_options_from(args),
+        **({"lockstep_abort": args.lockstep_abort} if args.lockstep_abort is not None else {}),
     )
 
 

@@ -30,6 +30,7 @@ from .controller import ControllerConfig
 from .crossings import ClosedDoorWatch
 from .doors import DoorChange, DoorConfig, Doors
 from .human import Declare, HumanConfig, HumanModel, OpenDoor, TaskDone
+from .streams import Streams
 from .metrics import MetricsRecorder
 from .objects import Objects
 from .robots import Outcome, Robot, RobotConfig, RobotExecutor
@@ -97,7 +98,7 @@ class Engine:
         self.config = config or EngineConfig()
         self.human_config = human or HumanConfig()
         p = site.params
-        self.rng = np.random.default_rng(seed)  # the run's only source of randomness
+        self.streams = Streams(seed)  # the run's only source of randomness, keyed by purpose (streams.py)
         self.doors = Doors(
             site.doors.values(),
             DoorConfig(swing_time=self.config.door_swing_time, hold_time=p.door_hold_time, auto_close_delay=self.config.auto_close_delay),
@@ -128,7 +129,7 @@ class Engine:
         self.human = HumanModel(
             self.human_config,
             method,
-            self.rng,
+            self.streams,
             site.human.position,
             {d: site.doors[d].beside(her_room, HUMAN_DOOR_STANDOFF) for d in self.human_doors},
         )
@@ -321,6 +322,8 @@ class Engine:
             "door_trips": h.counters.door_trips,
             "turned_back": h.counters.turned_back,
             "declarations": h.counters.declarations,
+            "interruptions": h.counters.interruptions,
+            "time_lost": round(h.counters.time_lost, 6),
             "time_away": round(h.counters.time_away, 6),
             "focus": h.focus_report(),
             "focus_started": h.counters.focus_started,

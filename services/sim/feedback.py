@@ -5,6 +5,12 @@ the Feedback goes out as a query on ``feedback``, and an ack published on ``feed
 counts too. An attempt with no ack within ``timeout`` wall seconds is repeated, ``retries`` times.
 That blocks, so it runs on one background thread here; answers come back through :meth:`answers`,
 read by the service's worker.
+
+In lockstep the human's time stands still until her feedback is answered, so how long the ack takes
+on the wall clock must not change the mission: there the sender never gives up on its own. It
+repeats the attempt every ``timeout`` wall seconds until ``abort_after`` wall seconds have passed,
+and then reports the answer as *aborted*: the sim ends the run as failed, loudly, rather than
+going on without the constraint (which would make the outcome depend on the machine's load).
 """
 
 from __future__ import annotations
@@ -25,13 +31,15 @@ log = logging.getLogger("arroch.sim.feedback")
 class Answer:
     request: Any  # the engine's FeedbackRequest, handed back untouched
     ack: FeedbackAck | None  # None: no ack after every attempt
+    aborted: bool = False  # lockstep: no ack within abort_after wall seconds (the run cannot go on faithfully)
 
 
 class FeedbackSender:
-    def __init__(self, service: Service, *, timeout: float, retries: int) -> None:
+    def __init__(self, service: Service, *, timeout: float, retries: int, abort_after: float | None = None) -> None:
         self._service = service
         self._timeout = timeout
         self._retries = retries
+        self._abort_after = abort_after  # lockstep: keep trying this long (wall s), then abort
         self._stop = threading.Event()
         self._todo: queue.Queue = queue.Queue()
         self._answers: queue.Queue[Answer] = queue.Queue()
@@ -67,7 +75,8 @@ class FeedbackSender:
             request, kind, params = item
             try:
                 # Retries inside keep the same src and seq, so the restrictor can tell a repeat.
-                ack = send_feedback(self._service, kind, params, timeout=self._timeout * (self._retries + 1), retry=self._timeout)
+                budget = self._abort_after if self._abort_after is not None else self._timeout * (self._retries + 1)
+                ack = send_feedback(self._service, kind, params, timeout=budget, retry=self._timeout)
             except Exception as exc:  # a session closing under us at shutdown, a broken link
                 if self._stop.is_set():
                     return
@@ -76,6 +85,7 @@ class FeedbackSender:
                 ack = None
             if self._stop.is_set():
                 return
-            if ack is None:
+            aborted = ack is None and self._abort_after is not None
+            if ack is None and not aborted:
                 log.warning("no ack for feedback %s %s after %d attempt(s)", kind, params, self._retries + 1)
-            self._answers.put(Answer(request, ack))
+            self._answers.put(Answer(request, ack, aborted))

@@ -16,15 +16,26 @@ When she decides to open the door depends on what she can see:
   with ``no_comm_probability`` (0.6), whether a robot is there or not.
 
 Focus intervals are drawn before she starts (their number and lengths from the config, placed
-uniformly at random, not overlapping, within her nominal task time). During one she opens no door,
-whatever the method: she draws no decision, and a walk to the door that a focus interval
-interrupts turns back. At the start of each one, in ARROCH only, she declares a2(N) with
-``declare_probability`` (0.9), N being the interval's length in whole minutes, for each door she
-operates.
+uniformly at random, not overlapping, within her nominal task time). At the start of each one, in
+ARROCH only, she declares a2(N) with ``declare_probability`` (0.9), N being the interval's length in
+whole minutes, for each door she operates; declaring takes ``declare_time`` (a tap). What a focus
+interval does depends on the reading (``focus_reading``):
+
+- ``faithful`` (the default, DESIGN §6 as corrected): a focus interval keeps her from opening doors
+  only when she *declared* it. Then she draws no decision and a walk to the door turns back — the
+  robots know and plan around her. Without the declaration (no-feedback, no-comm, and ARROCH's
+  undeclared 10 %) she decides as at any other time: the robots she sees waiting call her away
+  (no-comm: the once-a-minute rule goes on). Each time she leaves her task during a focus interval
+  she loses ``interruption_cost`` seconds of it (resuming the puzzle): that interruption is what
+  a2(N) exists to prevent.
+- ``strict`` (the earlier reading, kept to compare): during any focus interval she opens no door,
+  whatever the method; declaring changes nothing she does.
 
 The model is pure: it reads the time, the robots waiting at her doors and whether each door is
-open, and returns what she does. All randomness comes from the one ``numpy.random.Generator`` the
-engine hands it, drawn in a fixed order, so a seed fixes her behaviour given the same inputs.
+open, and returns what she does. Every random number comes from a stream keyed by what it is for
+(:mod:`.streams`): her task time, her focus intervals, the declaration at each interval, the k-th
+decision about each robot at each door, the no-comm decision of each minute. So for one seed she
+draws the same in every method and every condition, and methods are compared on the same draws.
 """
 
 from __future__ import annotations
@@ -35,9 +46,10 @@ from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
-import numpy as np
+from .streams import Streams
 
 METHODS = ("arroch", "no-feedback", "no-comm")
+FOCUS_READINGS = ("faithful", "strict")  # see the module docstring
 
 
 @dataclass(frozen=True)
@@ -46,12 +58,12 @@ class HumanConfig:
     minute in no-comm, 0.9 for a2 at a focus interval's start); otherwise chosen to fit the
     office site (a delivery mission of a few robots takes 5–15 minutes)."""
 
-    task_mean: float = 600.0  # s of work her own task needs (Gaussian mean)
+    task_mean: float = 600.0  # s of work her own task needs (Gaussian mean; chosen: the paper gives no figure)
     task_std: float = 60.0  # s (Gaussian standard deviation)
     task_min: float = 60.0  # s; the Gaussian is clipped here so a draw is never absurd
     walk_speed: float = 1.0  # m/s between her desk and a door
     open_time: float = 3.0  # s at the door to open it
-    declare_time: float = 5.0  # s on the tablet to declare a2(N)
+    declare_time: float = 1.0  # s on the tablet to declare a2(N): one tap on a card (chosen)
     door_probability: float = 0.5  # chance per waiting robot per decision interval (AR methods)
     decision_interval: float = 10.0  # s between two decisions about one waiting robot
     no_comm_probability: float = 0.6  # chance per no_comm_interval (paper: 0.6 each minute)
@@ -60,6 +72,8 @@ class HumanConfig:
     focus_min_minutes: int = 2  # a focus interval lasts a whole number of minutes in [min, max]
     focus_max_minutes: int = 4
     declare_probability: float = 0.9  # chance of a2(N) at a focus interval's start (paper: 0.9)
+    focus_reading: str = "faithful"  # faithful: only a declared focus interval keeps her from doors; strict: any
+    interruption_cost: float = 0.0  # s of her task lost each time she leaves it during a focus interval (chosen: 0)
     feedback_timeout: float = 2.0  # s to wait for the restrictor's ack of one attempt (wall time)
     feedback_retries: int = 3  # further attempts after the first goes unanswered
 
@@ -71,7 +85,9 @@ class HumanConfig:
         for name in ("task_mean", "walk_speed", "decision_interval", "no_comm_interval", "feedback_timeout"):
             if not getattr(self, name) > 0.0:
                 problems.append(f"{name} must be > 0")
-        for name in ("task_std", "task_min", "open_time", "declare_time"):
+        if self.focus_reading not in FOCUS_READINGS:
+            problems.append(f"focus_reading must be one of {', '.join(FOCUS_READINGS)} (got {self.focus_reading!r})")
+        for name in ("task_std", "task_min", "open_time", "declare_time", "interruption_cost"):
             if not getattr(self, name) >= 0.0:
                 problems.append(f"{name} must be >= 0")
         if self.focus_count < 0 or self.feedback_retries < 0:
@@ -100,6 +116,11 @@ class HumanConfig:
             raise ValueError(f"human config {path}: unknown key(s) {', '.join(unknown)}; known: {', '.join(known)}")
         values: dict[str, Any] = {}
         for name, value in table.items():
+            if known[name] in ("str", str):
+                if not isinstance(value, str):
+                    raise ValueError(f"human config {path}: {name} must be a string")
+                values[name] = value
+                continue
             want = int if known[name] in ("int", int) else float
             if isinstance(value, bool) or not isinstance(value, (int, float)) or (want is int and not isinstance(value, int)):
                 raise ValueError(f"human config {path}: {name} must be a{'n integer' if want is int else ' number'}")
@@ -158,9 +179,11 @@ class HumanCounters:
     no_comm_triggers: int = 0
     door_trips: int = 0  # walks toward a door begun
     door_openings: int = 0  # times she opened a door (a1 completed)
-    turned_back: int = 0  # walks abandoned because a focus interval began
+    turned_back: int = 0  # walks abandoned because a focus interval she declared (strict: any) began
     focus_started: int = 0
     declarations: int = 0  # a2(N) taken (one per focus interval, whatever the number of doors)
+    interruptions: int = 0  # walks to a door begun during a focus interval (faithful reading)
+    time_lost: float = 0.0  # s of her task lost to those interruptions (interruption_cost each)
     time_away: float = 0.0  # s spent walking and at the door
     time_declaring: float = 0.0
 
@@ -180,7 +203,7 @@ class HumanModel:
         self,
         config: HumanConfig,
         method: str,
-        rng: np.random.Generator,
+        streams: Streams,
         desk: tuple[float, float],
         doors: dict[str, tuple[float, float]],
     ) -> None:
@@ -188,12 +211,15 @@ class HumanModel:
             raise ValueError(f"method {method!r} is not one of {', '.join(METHODS)}")
         self.config = config
         self.method = method
-        self.rng = rng
+        self.streams = streams
         self.desk = desk
         self.door_points = dict(doors)  # where she stands to open each door she operates
         self.walk_time = {d: math.dist(desk, p) / config.walk_speed for d, p in doors.items()}
-        self.task_duration = max(config.task_min, float(rng.normal(config.task_mean, config.task_std)))
+        # One standard normal per trial, scaled here: the same draw at every task length (the map's axis).
+        z = float(streams.generator("task").standard_normal())
+        self.task_duration = max(config.task_min, config.task_mean + config.task_std * z)
         self.focus = self._sample_focus(self.task_duration)
+        self.declared = [self._would_declare(i) for i in range(len(self.focus))]  # drawn for every method alike
         self.counters = HumanCounters()
         self.work_done = 0.0
         self.done_time: float | None = None
@@ -201,7 +227,8 @@ class HumanModel:
         self.trip: _Trip | None = None
         self._focus_next = 0  # index of the next focus interval to start
         self._next_check: dict[tuple[str, str], float] = {}  # (door, robot) -> next decision time
-        self._next_minute = config.no_comm_interval
+        self._draws: dict[tuple[str, str], int] = {}  # (door, robot) -> decisions drawn about it so far
+        self._minute = 0  # no-comm: index of the next once-a-minute decision
         self.opened_at: list[float] = []  # times she opened a door (for tests and metrics)
 
     # ------------------------------------------------------------------ set-up
@@ -213,22 +240,43 @@ class HumanModel:
         placement of the intervals in order is equally likely. If they cannot fit, fewer are kept.
         """
         cfg = self.config
-        lengths = [60.0 * int(self.rng.integers(cfg.focus_min_minutes, cfg.focus_max_minutes + 1)) for _ in range(cfg.focus_count)]
+        rng = self.streams.generator("focus")
+        lengths = [60.0 * int(rng.integers(cfg.focus_min_minutes, cfg.focus_max_minutes + 1)) for _ in range(cfg.focus_count)]
         while lengths and sum(lengths) > 0.9 * duration:
             lengths.pop()
         free = duration - sum(lengths)
-        cuts = np.sort(self.rng.uniform(0.0, free, size=len(lengths)))
+        cuts = sorted(float(u) * free for u in rng.random(size=len(lengths)))
         out, offset = [], 0.0
         for cut, length in zip(cuts, lengths):
-            start = float(cut) + offset
+            start = cut + offset
             out.append(FocusInterval(start, start + length))
             offset += length
         return out
 
+    def _would_declare(self, index: int) -> bool:
+        """Whether she declares focus interval ``index`` (ARROCH): the draw is made for every method,
+        so the same intervals are declared whichever method the trial runs."""
+        return self.method == "arroch" and bool(self.door_points) and \
+            self.streams.uniform("declare", index) < self.config.declare_probability
+
     # ------------------------------------------------------------------ queries
 
+    def focus_at(self, t: float) -> int | None:
+        """Index of the focus interval running at ``t``, if any."""
+        for i, f in enumerate(self.focus):
+            if f.start <= t < f.end:
+                return i
+        return None
+
     def in_focus(self, t: float) -> bool:
-        return any(f.start <= t < f.end for f in self.focus)
+        return self.focus_at(t) is not None
+
+    def unavailable(self, t: float) -> bool:
+        """Whether a focus interval keeps her from her doors at ``t`` (see the module docstring)."""
+        i = self.focus_at(t)
+        if i is None or self.done:
+            return False
+        return self.config.focus_reading == "strict" or self.declared[i]
 
     @property
     def done(self) -> bool:
@@ -277,19 +325,11 @@ class HumanModel:
         t1 = now + dt
         self._advance(now, dt, actions)
         self._start_focus(t1, actions)
-        if not self.in_focus(t1):
-            if self.method == "no-comm":
-                self._decide_blind(t1)
-            else:
-                self._decide_seen(t1, waiting, door_open)
+        draw = not self.unavailable(t1)  # a focus interval that keeps her away: decisions due meanwhile are skipped
+        if self.method == "no-comm":
+            self._decide_blind(t1, draw)
         else:
-            # No decisions are drawn during a focus interval; decisions due meanwhile are skipped.
-            for key, due in self._next_check.items():
-                while due <= t1:
-                    due += self.config.decision_interval
-                self._next_check[key] = due
-            while self._next_minute <= t1:
-                self._next_minute += self.config.no_comm_interval
+            self._decide_seen(t1, waiting, door_open, draw)
         # Forget robots no longer waiting, so a robot that comes back is seen afresh.
         live = {(d, r) for d, robots in waiting.items() for r in robots}
         for key in [k for k in self._next_check if k not in live]:
@@ -309,9 +349,9 @@ class HumanModel:
                 if left <= 1e-12:
                     break
                 if not self.done:
-                    need = self.task_duration - self.work_done
+                    need = self.task_duration + self.counters.time_lost - self.work_done
                     if need <= left:
-                        self.work_done = self.task_duration
+                        self.work_done += need
                         self.done_time = t + need
                         actions.append(TaskDone(self.done_time))
                     else:
@@ -326,7 +366,7 @@ class HumanModel:
             if trip.left > 1e-12:
                 return
             if trip.leg == "to":
-                if self.in_focus(t):  # arrived as a focus interval runs: leave the door shut
+                if self.unavailable(t):  # arrived as a focus interval that keeps her away runs: leave the door shut
                     self.counters.turned_back += 1
                     self.trip = _Trip(trip.door, "back", trip.walked)
                 else:
@@ -341,23 +381,22 @@ class HumanModel:
 
     def _start_focus(self, t1: float, actions: list[HumanAction]) -> None:
         while self._focus_next < len(self.focus) and self.focus[self._focus_next].start <= t1:
-            interval = self.focus[self._focus_next]
+            index = self._focus_next
+            interval = self.focus[index]
             self._focus_next += 1
             if self.done:
                 continue  # intervals are part of her task: none once it is finished
             self.counters.focus_started += 1
-            if self.trip is not None and self.trip.leg == "to":
+            if self.declared[index]:
+                self.counters.declarations += 1
+                self.pause += self.config.declare_time
+                for door in self.door_points:
+                    actions.append(Declare(door, interval.minutes))
+            if self.trip is not None and self.trip.leg == "to" and self.unavailable(t1):
                 self.counters.turned_back += 1
                 self.trip = _Trip(self.trip.door, "back", self.trip.walked)
-            if self.method == "arroch" and self.door_points:
-                # Drawn in ARROCH only, so the other methods' random streams stay comparable.
-                if self.rng.random() < self.config.declare_probability:
-                    self.counters.declarations += 1
-                    self.pause += self.config.declare_time
-                    for door in self.door_points:
-                        actions.append(Declare(door, interval.minutes))
 
-    def _decide_seen(self, t1: float, waiting: dict[str, dict[str, float]], door_open: dict[str, bool]) -> None:
+    def _decide_seen(self, t1: float, waiting: dict[str, dict[str, float]], door_open: dict[str, bool], draw: bool) -> None:
         for door in sorted(waiting):
             if door not in self.door_points:
                 continue
@@ -367,27 +406,34 @@ class HumanModel:
                 while due <= t1:
                     due += self.config.decision_interval
                     # A decision needs her at her desk and the door still shut.
-                    if self.available and not door_open.get(door, False):
+                    if draw and self.available and not door_open.get(door, False):
+                        k = self._draws.get(key, 0)
+                        self._draws[key] = k + 1
                         self.counters.ar_decisions += 1
-                        if self.rng.random() < self.config.door_probability:
+                        if self.streams.uniform("seen", door, robot, k) < self.config.door_probability:
                             self.counters.ar_triggers += 1
-                            self._go(door)
+                            self._go(door, t1)
                 self._next_check[key] = due
 
-    def _decide_blind(self, t1: float) -> None:
-        while self._next_minute <= t1:
-            self._next_minute += self.config.no_comm_interval
-            if self.available and self.door_points:
+    def _decide_blind(self, t1: float, draw: bool) -> None:
+        while (self._minute + 1) * self.config.no_comm_interval <= t1:
+            self._minute += 1
+            if draw and self.available and self.door_points:
                 self.counters.no_comm_decisions += 1
-                if self.rng.random() < self.config.no_comm_probability:
+                if self.streams.uniform("blind", self._minute) < self.config.no_comm_probability:
                     self.counters.no_comm_triggers += 1
                     doors = sorted(self.door_points)
-                    door = doors[int(self.rng.integers(len(doors)))] if len(doors) > 1 else doors[0]
-                    self._go(door)
+                    door = doors[int(self.streams.uniform("blind-door", self._minute) * len(doors))]
+                    self._go(door, t1)
 
-    def _go(self, door: str) -> None:
+    def _go(self, door: str, t: float) -> None:
         self.counters.door_trips += 1
+        if self.in_focus(t) and not self.done:
+            # She leaves her task in the middle of a focus interval: resuming it costs her.
+            self.counters.interruptions += 1
+            self.counters.time_lost += self.config.interruption_cost
         self.trip = _Trip(door, "to", self.walk_time[door])
 
-    def focus_report(self) -> list[dict[str, float]]:
-        return [{"start": f.start, "end": f.end, "minutes": f.minutes} for f in self.focus]
+    def focus_report(self) -> list[dict[str, Any]]:
+        return [{"start": f.start, "end": f.end, "minutes": f.minutes, "declared": declared}
+                for f, declared in zip(self.focus, self.declared)]

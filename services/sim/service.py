@@ -18,7 +18,11 @@ Publishing rates:
   time stands still (paused in lockstep, or the mission over);
 - statuses and door states when they change, and all of them once a wall second for late joiners
   (with every pose: while lockstep time stands still no pose batch is due, and a planner restarted
-  then must still learn where the robots are);
+  then must still learn where the robots are). In lockstep that repetition happens only while time
+  stands still, and every status goes out again at each new world version: a repetition between two
+  versions would fall at a wall-clock moment, and the planner would plan from a status (a progress, a
+  pose) that depends on the machine's load. A door state is stamped with the time its state last
+  changed, however often it is repeated;
 - events as they happen.
 
 Everything runs on the service's worker thread (the Service base's loop); the only other thread
@@ -52,6 +56,8 @@ HEARTBEAT = 1.0  # wall s between republications of every status and door state
 PAUSED_CLOCK = 0.5  # wall s between clock messages while time stands still
 LOCKSTEP_BUDGET = 0.02  # wall s of stepping per turn of the loop in lockstep, so messages get in
 STALL_WARNING = 10.0  # wall s paused on one reason before lockstep says so at WARNING level
+FEEDBACK_ABORT = 120.0  # lockstep: default wall s without an ack of the human's feedback before the run is aborted
+EXIT_ABORTED = 3  # exit code of a lockstep run aborted for want of an answer (feedback ack)
 
 
 @dataclass
@@ -67,6 +73,7 @@ class SimOptions:
     engine: EngineConfig = field(default_factory=EngineConfig)
     human: HumanConfig = field(default_factory=HumanConfig)
     camera: Any = None  # a services.sim.camfeed.CameraOptions, or None
+    lockstep_abort: float = FEEDBACK_ABORT  # lockstep: wall s to wait for an answer (feedback ack) before failing the run
 
     def as_params(self) -> dict[str, Any]:
         return {"mode": self.mode, "rate": self.rate if self.mode == "rate" else (1.0 if self.mode == "realtime" else 0.0), "pose_rate": self.pose_rate}
@@ -112,6 +119,8 @@ class SimService(Service):
         self._started_wall = 0.0
         self._exit_at: float | None = None
         self._camera = None
+        self.exit_code = 0  # run_service's exit code: EXIT_ABORTED when lockstep had to give up
+        self._door_since: dict[str, float] = {}  # door -> site time its open/closed state last changed
 
     # ------------------------------------------------------------------ set-up
 
@@ -121,7 +130,9 @@ class SimService(Service):
         self.subscribe(self.keys.robot_command(), RobotCommand, self._on_command)
         self.subscribe(self.keys.plan(), TeamPlan, self._on_plan)
         hc = self.options.human
-        self._sender = FeedbackSender(self, timeout=hc.feedback_timeout, retries=hc.feedback_retries)
+        lockstep = self.options.mode == "lockstep"
+        self._sender = FeedbackSender(self, timeout=hc.feedback_timeout, retries=hc.feedback_retries,
+                                      abort_after=self.options.lockstep_abort if lockstep else None)
         if self.options.camera is not None:
             from .camfeed import CameraFeed  # pybullet only when a camera is asked for
 
@@ -200,7 +211,8 @@ class SimService(Service):
                     break
         if self._camera is not None:
             self._camera.maybe_render(self, wall)
-        if wall - self._last_heartbeat >= HEARTBEAT:
+        lockstep_running = self.options.mode == "lockstep" and not self._blocker
+        if wall - self._last_heartbeat >= HEARTBEAT and not lockstep_running:
             self._last_heartbeat = wall
             self._publish_poses()
             self._publish_states(everything=True)
@@ -258,7 +270,8 @@ class SimService(Service):
             self._publish_poses()
             self._last_pose_wall = wall
             self._next_pose_sim = t + self._pose_period
-        self._publish_states(everything=False)
+        # Lockstep: at a new world version every status as of this instant (see the module docstring).
+        self._publish_states(everything=force_poses and self.options.mode == "lockstep")
         for event in events:
             self._publish_event(event)
         if force_poses or due or events:
@@ -294,9 +307,13 @@ class SimService(Service):
         changed = set(doors.doors) if everything else self.engine.door_changed
         for did in sorted(changed):
             door = doors[did]
+            if did in self.engine.door_changed or did not in self._door_since:
+                self._door_since[did] = self.engine.time
             until = door.hold_until if door.human_operated and door.passable else 0.0
             state = DoorState(door=did, open=door.passable, by=self.engine.door_by.get(did, ""), until=until, world_version=version)
-            self.publish(self.keys.door_state(did), state)
+            # Stamped with the time of its last change: a repetition must not look like news.
+            state.src, state.seq, state.stamp = self.src, self.next_seq(), self._door_since[did]
+            self.publish(self.keys.door_state(did), state, stamp=False)
         self.engine.door_changed = set()
 
     def _publish_event(self, event: SimEvent) -> None:
@@ -380,6 +397,15 @@ class SimService(Service):
         for answer in self._sender.answers():
             request = answer.request
             assert isinstance(request, FeedbackRequest)
+            if answer.aborted:
+                self.log.error("lockstep aborted at t=%.2f: no ack of the human's feedback %s %s within %.0f wall s "
+                               "(is the restrictor running?); going on without it would make this run depend on the "
+                               "machine's load, so it ends here, as failed", self.engine.time, request.kind,
+                               dict(request.params), self.options.lockstep_abort)
+                self.count("feedback_aborted")
+                self.exit_code = EXIT_ABORTED
+                self.stop()
+                return
             ack = answer.ack
             accepted = None if ack is None else ack.accepted
             cv = ack.constraints_version if ack is not None else 0

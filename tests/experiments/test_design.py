@@ -21,16 +21,38 @@ def test_derive_seed_is_sha256_of_the_parts() -> None:
     assert derive_seed(0, "sim", "arroch", 3, 3, "0.5", 7) == expected
 
 
-def test_seeds_per_trial() -> None:
+def key(method: str, p: float, trial: int, *, robots: int = 3, task: float = 600.0, cost: float = 0.0) -> TrialKey:
+    return TrialKey(method, robots, 3, p, task, cost, trial)
+
+
+def test_seeds_per_trial_are_paired_across_methods_and_human_parameters() -> None:
     s = spec(kind="laziness", robots=(3,), ps=(0.1, 0.5))
-    a = TrialKey("arroch", 3, 3, 0.1, 0)
-    # One building per (team size, repetition), whatever the method and probability ...
-    assert s.site_seed(a) == s.site_seed(TrialKey("no-comm", 3, 3, 0.5, 0))
-    assert s.site_seed(a) != s.site_seed(TrialKey("arroch", 3, 3, 0.1, 1))
-    # ... while the human's draws differ with every field of the key and with the base seed.
-    sims = {s.sim_seed(TrialKey(m, 3, 3, p, i)) for m in ("arroch", "no-comm") for p in (0.1, 0.5) for i in range(3)}
-    assert len(sims) == 12
+    a = key("arroch", 0.1, 0)
+    # One building and one human per (team size, repetition), whatever the method, the probability,
+    # her task length and the interruption cost: the conditions are compared on the same draws ...
+    for other in (key("no-comm", 0.5, 0), key("no-feedback", 0.1, 0, task=300.0, cost=60.0)):
+        assert s.site_seed(a) == s.site_seed(other) and s.sim_seed(a) == s.sim_seed(other)
+    # ... and differ from one repetition (and team size, and base seed) to the next.
+    sims = {s.sim_seed(key("arroch", 0.1, i, robots=n)) for i in range(3) for n in (2, 3)}
+    assert len(sims) == 6
+    assert s.site_seed(a) != s.site_seed(key("arroch", 0.1, 1))
     assert spec(seed=1).sim_seed(a) != s.sim_seed(a)
+
+
+def test_defaults_are_the_simulators() -> None:
+    from services.experiments.design import DEFAULT_COST, DEFAULT_TASK, FOCUS_READINGS
+    from services.sim.human import FOCUS_READINGS as SIM_READINGS
+    from services.sim.human import HumanConfig
+
+    assert (DEFAULT_TASK, DEFAULT_COST) == (HumanConfig().task_mean, HumanConfig().interruption_cost)
+    assert FOCUS_READINGS == SIM_READINGS
+
+
+def test_a_map_sweep_crosses_task_lengths_and_costs() -> None:
+    s = spec(kind="map", robots=(3,), tasks=(150.0, 600.0), costs=(0.0, 15.0, 60.0), trials=2)
+    assert s.trial_count() == 3 * 2 * 3 * 2 == len(set(s.keys()))
+    assert {(k.task, k.cost) for k in s.keys()} == {(t, c) for t in (150.0, 600.0) for c in (0.0, 15.0, 60.0)}
+    assert len({s.sim_seed(k) for k in s.keys()}) == 2  # one human per repetition
 
 
 def test_schedule_runs_every_trial_once_repetition_by_repetition() -> None:
@@ -48,6 +70,9 @@ def test_schedule_runs_every_trial_once_repetition_by_repetition() -> None:
     ({"ps": (1.5,)}, "door-opening probabilities"),
     ({"trials": 0}, "trials must be >= 1"),
     ({"kind": "speed"}, "sweep kind"),
+    ({"tasks": (0.0,)}, "task lengths"),
+    ({"costs": (-1.0,)}, "interruption costs"),
+    ({"focus_reading": "lenient"}, "focus reading"),
 ])
 def test_bad_specs_are_refused_by_name(changes: dict[str, object], message: str) -> None:
     with pytest.raises(ValueError, match=message):

@@ -7,7 +7,7 @@ from services.experiments.record import TIMING_FIELDS, TRIAL_FIELDS, key_of, tim
 from services.experiments.trial import TrialOutcome
 
 SPEC = SweepSpec(kind="robots", methods=("arroch",), robots=(2,), objects=1, ps=(0.5,), trials=1, seed=0)
-KEY = TrialKey("arroch", 2, 1, 0.5, 0)
+KEY = TrialKey("arroch", 2, 1, 0.5, 600.0, 15.0, 0)
 
 # The shape of the sim's metrics (services/sim/metrics.py), with made-up numbers.
 METRICS = {
@@ -17,7 +17,8 @@ METRICS = {
     "feedback": {"sent": 2, "accepted": 1, "refused": 1, "unanswered": 0},
     "actions": {"done": 20, "failed": 0}, "world_versions": 27,
     "robots": {"r0": {"wait_time": 12.5}, "r1": {"wait_time": 0.25}},
-    "human": {"door_trips": 4, "time_away": 31.5},
+    "human": {"door_trips": 4, "time_away": 31.5, "task_duration": 598.25, "interruptions": 2, "time_lost": 30.0,
+              "declarations": 1},
     "run": {"wall_time": 9.87, "realtime_factor": 65.06},
 }
 
@@ -28,7 +29,11 @@ def test_trial_row() -> None:
     assert tuple(row) == TRIAL_FIELDS
     assert key_of(row) == KEY
     assert row["site_seed"] == str(SPEC.site_seed(KEY)) and row["seed"] == str(SPEC.sim_seed(KEY))
+    assert (row["task_mean"], row["interruption_cost"]) == ("600", "15")
     assert row["team_completion_time"] == "642.100"
+    assert row["sum_of_times"] == "1355.350"  # 301.25 + 412.0000001 + 642.1, rounded once
+    assert (row["human_task_time"], row["human_interruptions"], row["human_time_lost"], row["focus_declared"]) == (
+        "598.250", "2", "30.000", "1")
     assert row["slowest_robot_time"] == "412.000"
     assert row["agent_completion_times"] == "r0=301.250;r1=412.000;human=642.100"
     assert (row["door_openings"], row["human_door_trips"]) == ("3", "4")

@@ -7,6 +7,7 @@ sim time) keep this module within a few minutes of wall time on two cores.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import os
 import signal
@@ -14,6 +15,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Iterator
 
 import pytest
 
@@ -129,7 +131,7 @@ def test_a_trial_is_bounded_recorded_and_leaves_nothing(tmp_path: Path, human: P
     assert float(timing["services_up"]) > 0
     if row["status"] == "timeout":
         assert code == 1 and row["reason"].startswith("no end of mission within 15 s wall")
-        log = (out / "logs" / "arroch-n2-o1-p0.5-t00.log").read_text()
+        log = (out / "logs" / "arroch-n2-o1-p0.5-w90-c0-t00.log").read_text()
         assert "status: timeout" in log
     else:
         assert code == 0 and float(row["team_completion_time"]) >= float(row["human_completion_time"]) > 0
@@ -154,10 +156,25 @@ def test_sigint_stops_a_running_sweep_cleanly(tmp_path: Path, human: Path) -> No
     assert all(r["status"] == "ok" for r in recorded)  # a stopped trial is not recorded as anything
 
 
-def test_same_seed_gives_the_same_csv(reference: Path, tmp_path: Path, human: Path) -> None:
+@contextlib.contextmanager
+def cpu_burners(count: int = 2) -> Iterator[None]:
+    """``count`` processes spinning on the CPU: a loaded machine (the 2 cores are shared with them)."""
+    burners = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(count)]
+    try:
+        yield
+    finally:
+        for burner in burners:
+            burner.kill()
+            burner.wait()
+
+
+def test_same_seed_gives_the_same_csv_beside_cpu_burning_processes(reference: Path, tmp_path: Path, human: Path) -> None:
+    """Lockstep waits for answers in site time, never on the wall clock: a loaded machine runs the
+    same missions, byte for byte (the reference ran without the burners)."""
     out = tmp_path / "again"
-    proc = start(["robots", *TINY, "--methods", "arroch,no-comm", "--out", str(out), "--trial-timeout", "60"], human)
-    code, output = finish(proc, 300)
+    with cpu_burners():
+        proc = start(["robots", *TINY, "--methods", "arroch,no-comm", "--out", str(out), "--trial-timeout", "120"], human)
+        code, output = finish(proc, 400)
     assert code == 0, output
     assert (out / "trials.csv").read_bytes() == (reference / "trials.csv").read_bytes()
     # And the figures are real: the human's task and the robots' deliveries both took sim time.
@@ -165,6 +182,33 @@ def test_same_seed_gives_the_same_csv(reference: Path, tmp_path: Path, human: Pa
         assert float(r["human_completion_time"]) > 60 and float(r["slowest_robot_time"]) > 0
         assert float(r["team_completion_time"]) == max(float(r["human_completion_time"]), float(r["slowest_robot_time"]))
     assert {r["method"]: r["feedback_sent"] for r in rows(out) if r["trial"] == "0"}["no-comm"] == "0"
+    # Paired: both methods of one trial index met the same site and the same human.
+    for i in ("0", "1"):
+        same = {(r["site_seed"], r["seed"], r["human_task_time"]) for r in rows(out) if r["trial"] == i}
+        assert len(same) == 1, same
+
+
+def test_a_dask_cluster_gives_the_same_csv(reference: Path, tmp_path: Path, human: Path) -> None:
+    """--cluster: each trial runs on a worker of a (here local, two-worker) Dask cluster with its own
+    router and services; the results are the local pool's, byte for byte."""
+    import distributed  # the test extra installs it (pyproject.toml)
+
+    out = tmp_path / "cluster"
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                                  host="127.0.0.1") as cluster:
+        proc = start(["robots", *TINY, "--methods", "arroch,no-comm", "--out", str(out), "--trial-timeout", "120",
+                      "--cluster", cluster.scheduler_address], human)
+        code, output = finish(proc, 400)
+    assert code == 0, output
+    assert "cluster tcp://127.0.0.1:" in output and "2 worker(s)" in output
+    assert (out / "trials.csv").read_bytes() == (reference / "trials.csv").read_bytes()
+    assert '"cluster": "tcp://127.0.0.1:' in (out / "runs.json").read_text()
+
+
+def test_an_unreachable_cluster_is_refused_by_name(tmp_path: Path, human: Path) -> None:
+    proc = start(["robots", *TINY, "--out", str(tmp_path / "nowhere"), "--cluster", "tcp://127.0.0.1:9"], human)
+    code, output = finish(proc, 120)
+    assert code == 2 and "cannot reach the Dask scheduler at tcp://127.0.0.1:9" in output
 
 
 def test_killed_sweep_resumes_to_the_same_csv(reference: Path, tmp_path: Path, human: Path) -> None:

@@ -194,22 +194,52 @@ def test_constraints_expire_on_the_sim_clock(start_restrictor, client) -> None:
     early = ask(client, "forbid_room", room="lab", minutes=1)
     assert not early.accepted and "site clock is not known yet" in early.reason
 
-    # lockstep: sim time only moves when the sim says so, so the window edges are exact
-    client.publish(client.keys.clock(), Clock(time=100.0, mode="lockstep"))
+    # a paused sim clock does not run on between messages, so the window edges are exact
+    client.publish(client.keys.clock(), Clock(time=100.0, mode="rate", rate=10.0, paused=True))
     time.sleep(0.3)
     assert ask(client, "forbid_room", room="lab", minutes=1).accepted  # [100, 160)
     assert ask(client, "forbid_room", room="room_a", minutes=2).accepted  # [100, 220)
     current = wait_for_message(sets, lambda s: s.version == 2)
     assert [(c.start, c.end) for c in current.constraints] == [(100.0, 160.0), (100.0, 220.0)]
 
-    client.publish(client.keys.clock(), Clock(time=159.0, mode="lockstep"))
+    client.publish(client.keys.clock(), Clock(time=159.0, mode="rate", rate=10.0, paused=True))
     time.sleep(0.6)  # several expiry checks: nothing is due yet
     assert query_set(client).version == 2
-    client.publish(client.keys.clock(), Clock(time=160.0, mode="lockstep"))
+    client.publish(client.keys.clock(), Clock(time=160.0, mode="rate", rate=10.0, paused=True))
     expired = wait_for_message(sets, lambda s: s.version == 3, timeout=5)
     assert [c.id for c in expired.constraints] == ["c2"] and "lab" not in expired.asp
-    client.publish(client.keys.clock(), Clock(time=500.0, mode="lockstep"))
+    client.publish(client.keys.clock(), Clock(time=500.0, mode="rate", rate=10.0, paused=True))
     assert wait_for_message(sets, lambda s: s.version == 4, timeout=5).constraints == []
+
+
+def test_in_lockstep_windows_start_at_the_feedbacks_stamp_and_expire_only_with_feedback(start_restrictor, client) -> None:
+    """The clock heard here lags the simulator's by what is still on the way: a lockstep feedback's
+    window starts at its own stamp, and nothing expires on a timer (a set published between two world
+    versions would reach the planner at a moment of the machine's choosing)."""
+    start_restrictor(clock="sim")
+    sets = client.collect(client.keys.constraints(), ConstraintSet)
+    client.publish(client.keys.clock(), Clock(time=100.0, mode="lockstep"))
+    time.sleep(SETTLE)
+    acks = client.collect(client.keys.feedback_ack("sim-test"), FeedbackAck)
+    time.sleep(SETTLE)
+    stamped = Feedback(kind="forbid_room", params={"room": "lab", "minutes": 1})
+    stamped.src, stamped.seq, stamped.stamp = "sim-test", 1, 103.0  # the simulator's time, ahead of the clock heard
+    client.publish(client.keys.feedback(), stamped, stamp=False)
+    assert wait_for_message(acks).accepted
+    first = wait_for_message(sets, lambda s: s.version == 1)
+    assert [(c.start, c.end) for c in first.constraints] == [(103.0, 163.0)]
+    # a stamp far ahead of the clock (this client stamps with the wall clock) is not trusted
+    assert ask(client, "forbid_room", room="room_a", minutes=1).accepted
+    second = wait_for_message(sets, lambda s: s.version == 2)
+    assert [(c.start, c.end) for c in second.constraints] == [(103.0, 163.0), (100.0, 160.0)]
+
+    client.publish(client.keys.clock(), Clock(time=400.0, mode="lockstep"))
+    time.sleep(1.0)  # several expiry periods: in lockstep nothing expires on the timer
+    assert query_set(client).version == 2
+    # the next feedback takes the expired ones with it, in one new version
+    ask(client, "forbid_room", room="lab", minutes=2)
+    after = wait_for_message(sets, lambda s: s.version >= 3, timeout=5)
+    assert [(c.start, c.end) for c in after.constraints] == [(400.0, 520.0)]
 
 
 def run_cli(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:

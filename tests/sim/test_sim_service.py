@@ -209,18 +209,22 @@ def test_help(spawn):
         assert option in proc.output
 
 
-def test_feedback_nobody_acknowledges_does_not_stall_lockstep(router, client, spawn, tmp_path):
+def test_feedback_nobody_acknowledges_ends_lockstep_loudly_as_failed(router, client, spawn, tmp_path):
+    """In lockstep the human's time stands still until her feedback is answered; going on without the
+    answer after some wall seconds would make the mission depend on the machine's load. So the run
+    waits, and past --lockstep-abort it fails (exit code 3, an ERROR line, no metrics)."""
     site = load_site(None)
     human = tmp_path / "human.toml"
-    human.write_text("[human]\ntask_mean = 240.0\ntask_std = 0.0\nfocus_count = 1\ndeclare_probability = 1.0\nfeedback_timeout = 0.3\nfeedback_retries = 1\n")
+    human.write_text("[human]\ntask_mean = 400.0\ntask_std = 0.0\nfocus_count = 1\ndeclare_probability = 1.0\nfeedback_timeout = 0.3\nfeedback_retries = 1\n")
     metrics = tmp_path / "m.json"
-    sim = spawn(sim_argv(router, client.keys.site, "--mode", "lockstep", "--method", "arroch", "--human-config", str(human), "--until-done", "--metrics-out", str(metrics)), name="sim")
+    sim = spawn(sim_argv(router, client.keys.site, "--mode", "lockstep", "--method", "arroch", "--human-config", str(human),
+                         "--until-done", "--metrics-out", str(metrics), "--lockstep-abort", "2"), name="sim")
     sim.wait_for("up on namespace")
     with Running(StandInPlanner(site, client.keys.site, router, restrictor=False)):  # and no restrictor at all
-        assert sim.popen.wait(60) == 0, sim.output
-    m = json.loads(metrics.read_text())
-    assert m["completed"] and m["feedback"] == {"sent": 1, "accepted": 0, "refused": 0, "unanswered": 1}
-    assert "no ack for feedback door_unavailable" in sim.output
+        assert sim.popen.wait(60) == 3, sim.output
+    assert "lockstep aborted" in sim.output and "no ack of the human's feedback door_unavailable" in sim.output
+    assert "no ack for feedback" not in sim.output  # it kept trying (every 0.3 s) rather than giving up after 2 attempts
+    assert not metrics.exists()
 
 
 @pytest.mark.parametrize("method", ["no-feedback", "no-comm"])

@@ -156,8 +156,8 @@ def sign_flip_test(d: np.ndarray) -> float:
         return NAN
     nonzero = d[d != 0]
     k = int(nonzero.size)
-    if k == 0:
-        return 1.0
+    if k <= 1:
+        return 1.0  # no difference, or one: its two sign arrangements have the same |sum|
     exact = k <= EXACT_FLIPS_MAX
     res = _scipy_stats().permutation_test(
         (nonzero,), _sum, permutation_type="samples", vectorized=True, alternative="two-sided",

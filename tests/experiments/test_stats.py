@@ -90,6 +90,12 @@ def test_sign_flip_exact_by_hand() -> None:
     assert r.perm_p == pytest.approx(0.25)
 
 
+def test_sign_flip_with_a_single_nonzero_difference_is_p_1() -> None:
+    # One nonzero difference: +3 and -3 are the only arrangements, |S| = 3 in both.
+    assert sign_flip_test(np.array([0.0, 3.0, 0.0])) == 1.0
+    assert wilcoxon_signed_rank(np.array([0.0, 3.0, 0.0])).p == pytest.approx(1.0)
+
+
 def test_sign_flip_monte_carlo_is_reproducible_and_close_to_exact() -> None:
     d = np.array([-1.0] * 14 + [1.0] * 3 + [-2.0] * 3)  # 20 nonzero: beyond exact enumeration
     observed = abs(d.sum())

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from typing import Iterable
 
 from .doors import Doors
-from .geometry import segment_distance
+from protocol.plane import segment_distance
 from .robots import Robot
 
 # Overlap below this (m) is touching, not entering: a robot stopped exactly at the guard distance

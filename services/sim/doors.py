@@ -29,7 +29,7 @@ import math
 
 from protocol.site.model import DoorLeaf, Opening
 
-from .geometry import segment_distance
+from protocol.plane import segment_distance
 
 
 @dataclass(frozen=True)

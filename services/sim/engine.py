@@ -26,7 +26,7 @@ import numpy as np
 from protocol.messages import RobotCommand
 from protocol.site.model import Site
 
-from .controller import ControllerConfig
+from protocol.pursuit import ControllerConfig
 from .crossings import ClosedDoorWatch
 from .doors import DoorChange, DoorConfig, Doors
 from .human import Declare, HumanConfig, HumanModel, OpenDoor, TaskDone

@@ -27,9 +27,9 @@ from typing import Any
 from protocol.messages import RobotCommand
 from protocol.site.model import Site
 
-from .controller import ControllerConfig, Path, PurePursuit, Step
+from protocol.pursuit import ControllerConfig, Path, PurePursuit, Step
 from .doors import Doors
-from .geometry import segment_distance, segment_intersection
+from protocol.plane import segment_distance, segment_intersection
 from .objects import Objects
 
 

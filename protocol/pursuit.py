@@ -1,4 +1,4 @@
-"""Trajectory following: pure pursuit on a unicycle.
+"""Trajectory following: pure pursuit on a unicycle (the simulator's robots and `arroch robot`).
 
 A robot is a unicycle (x, y, theta) driven by a linear speed ``v`` and a turn rate ``omega``.
 Pure pursuit steers toward a point ``lookahead`` metres further along the path; the curvature that
@@ -20,7 +20,7 @@ import bisect
 import math
 from dataclasses import dataclass
 
-from .geometry import wrap
+from .plane import wrap
 
 
 @dataclass(frozen=True)

@@ -24,12 +24,13 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from protocol.execution import command_problem
 from protocol.messages import RobotCommand
 from protocol.site.model import Site
 
-from protocol.pursuit import ControllerConfig, Path, PurePursuit, Step
+from protocol.pursuit import ControllerConfig, Path, PurePursuit, Step, path_crossings
 from .doors import Doors
-from protocol.plane import segment_distance, segment_intersection
+from protocol.plane import segment_distance
 from .objects import Objects
 
 
@@ -126,16 +127,8 @@ class RobotExecutor:
         return []
 
     def _check(self, robot: Robot, cmd: RobotCommand) -> None:
-        site = self.site
         target = cmd.args[0] if cmd.args else ""
-        if cmd.action in ("approach", "gothrough", "opendoor"):
-            try:
-                opening = site.opening(target)
-            except KeyError:
-                raise CommandError(f"{cmd.action}: no door or passage {target!r}") from None
-            if cmd.action == "opendoor" and opening.kind != "door":
-                raise CommandError(f"opendoor: {target!r} is a passage, not a door")
-        elif cmd.action in ("load", "unload"):
+        if cmd.action in ("load", "unload"):
             if target not in self.objects:
                 raise CommandError(f"{cmd.action}: no object {target!r}")
             obj = self.objects[target]
@@ -148,34 +141,12 @@ class RobotExecutor:
                     raise CommandError(f"load: robot is full ({self.config.capacity} object(s))")
             elif target not in robot.carrying:
                 raise CommandError(f"unload: robot does not carry {target!r}")
-        if not cmd.trajectory:
-            if cmd.action == "gothrough":
-                raise CommandError(f"gothrough: empty trajectory cannot go through {target!r}")
-            return
-        x0, y0 = cmd.trajectory[0][1], cmd.trajectory[0][2]
-        gap = math.hypot(x0 - robot.x, y0 - robot.y)
-        if gap > self.config.start_tolerance:
-            raise CommandError(f"trajectory starts {gap:.2f} m from the robot (more than {self.config.start_tolerance} m)")
-        points = [(robot.x, robot.y)] + [(row[1], row[2]) for row in cmd.trajectory]
-        for a, b in zip(points, points[1:]):
-            for wall in site.walls:
-                if segment_intersection(a, b, wall.a, wall.b) is not None:
-                    raise CommandError(f"trajectory segment {_fmt(a)}->{_fmt(b)} crosses a wall")
-        if cmd.action == "gothrough":
-            ea, eb = site.opening(target).endpoints
-            if not any(segment_intersection(a, b, ea, eb) is not None for a, b in zip(points, points[1:])):
-                raise CommandError(f"gothrough: trajectory does not cross {target!r}")
+        problem = command_problem(self.site, robot.x, robot.y, cmd, self.config.start_tolerance)
+        if problem:
+            raise CommandError(problem)
 
     def _crossings(self, path: Path) -> list[tuple[float, str]]:
-        found: list[tuple[float, str]] = []
-        for door in self.doors.doors.values():
-            a, b = door.opening.endpoints
-            for i in range(len(path.points) - 1):
-                t = segment_intersection(path.points[i], path.points[i + 1], a, b)
-                if t is not None:
-                    found.append((path.s[i] + t * (path.s[i + 1] - path.s[i]), door.id))
-                    break
-        return sorted(found)
+        return path_crossings(path, {door.id: door.opening.endpoints for door in self.doors.doors.values()})
 
     # ------------------------------------------------------------------ stepping
 
@@ -331,6 +302,3 @@ class RobotExecutor:
                 setattr(robot, name, value)
                 robot.status_changed = True
 
-
-def _fmt(p: tuple[float, float]) -> str:
-    return f"({p[0]:.2f}, {p[1]:.2f})"

@@ -1,0 +1,163 @@
+"""How each robot is reached through ROS 2: the ``[ros2]`` tables of a robot config file (TOML).
+
+```toml
+[ros2]
+key_format = "rmw_zenoh"        # or "ros2dds" (zenoh-bridge-ros2dds)
+domain = 0                      # ROS_DOMAIN_ID (rmw_zenoh keys and tokens)
+bridge_namespace = ""           # ros2dds only: the bridge's `namespace` setting
+
+[ros2.robots.r0]
+namespace = "/r0"               # ROS namespace of the robot's topics (default "/<robot id>")
+cmd_vel = "cmd_vel"             # geometry_msgs/Twist in
+pose_topic = "odom"             # where its pose comes from
+pose_type = "odometry"          # nav_msgs/Odometry (odom frame), or "pose":
+                                # geometry_msgs/PoseWithCovarianceStamped (map frame, e.g. amcl_pose)
+map_to_odom = [1.0, 2.0, 0.0]   # fixed map->odom transform (x, y, yaw rad); default: the robot's
+                                # start pose in the site file (odometry starts at zero where it boots)
+# tf_topic = "/tf"              # instead: take map->odom from tf2_msgs/TFMessage on this topic
+map_frame = "map"
+odom_frame = "odom"
+base_frame = "base_link"
+max_speed = 0.5                 # m/s sent at most (default: the site's robot_speed)
+max_turn_rate = 1.5             # rad/s
+pose_timeout = 0.3              # s of site time without a pose before the base is stopped
+control_period = 0.05           # s between two poses (odometry rate); the controller's step
+```
+
+Every key is optional; a robot without a table gets the defaults. Errors name the file and key.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from .keys import KEY_FORMATS, TopicNaming, full_topic
+from .types import POSE_TYPES
+
+
+class RosConfigError(ValueError):
+    """A robot config file that cannot be used: the message names the file and the key."""
+
+
+@dataclass(frozen=True)
+class RobotLink:
+    robot: str
+    namespace: str
+    cmd_vel: str = "cmd_vel"
+    pose_topic: str = "odom"
+    pose_type: str = "odometry"
+    map_to_odom: tuple[float, float, float] | None = None  # None: the site start pose
+    tf_topic: str = ""
+    map_frame: str = "map"
+    odom_frame: str = "odom"
+    base_frame: str = "base_link"
+    max_speed: float | None = None
+    max_turn_rate: float = 1.5
+    pose_timeout: float = 0.3
+    control_period: float = 0.05
+
+    @property
+    def pose_typename(self) -> str:
+        return POSE_TYPES[self.pose_type]
+
+    def topic(self, name: str) -> str:
+        return full_topic(self.namespace, name)
+
+
+@dataclass(frozen=True)
+class Ros2Config:
+    key_format: str = "rmw_zenoh"
+    domain: int = 0
+    bridge_namespace: str = ""
+    robots: dict[str, RobotLink] = field(default_factory=dict)
+    source: str = "<defaults>"
+
+    def naming(self) -> TopicNaming:
+        return TopicNaming(self.key_format, self.domain, self.bridge_namespace)
+
+    def link(self, robot: str) -> RobotLink:
+        return self.robots.get(robot) or RobotLink(robot, f"/{robot}")
+
+    def with_overrides(self, *, key_format: str | None = None, domain: int | None = None) -> "Ros2Config":
+        changed = replace(self, key_format=key_format or self.key_format, domain=self.domain if domain is None else domain)
+        changed.naming()  # checks them
+        return changed
+
+
+_FLOATS = ("max_speed", "max_turn_rate", "pose_timeout", "control_period")
+_STRINGS = ("namespace", "cmd_vel", "pose_topic", "pose_type", "tf_topic", "map_frame", "odom_frame", "base_frame")
+
+
+def load_ros2_config(path: str | Path | None) -> Ros2Config:
+    """The config in ``path`` (``None``: all defaults)."""
+    if path is None:
+        return Ros2Config()
+    name = Path(path).name
+    try:
+        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise RosConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise RosConfigError(f"{name}: not TOML: {exc}") from None
+    return parse_ros2_config(data.get("ros2", {}), name)
+
+
+def parse_ros2_config(table: Any, name: str = "<config>") -> Ros2Config:
+    def fail(key: str, problem: str) -> RosConfigError:
+        return RosConfigError(f"{name}: ros2.{key}: {problem}")
+
+    if not isinstance(table, dict):
+        raise fail("", "must be a table")
+    key_format = table.get("key_format", "rmw_zenoh")
+    if key_format not in KEY_FORMATS:
+        raise fail("key_format", f"expected one of {', '.join(KEY_FORMATS)}, got {key_format!r}")
+    domain = table.get("domain", 0)
+    if not isinstance(domain, int) or isinstance(domain, bool) or not 0 <= domain <= 232:
+        raise fail("domain", f"expected an integer 0..232, got {domain!r}")
+    bridge_ns = table.get("bridge_namespace", "")
+    if not isinstance(bridge_ns, str):
+        raise fail("bridge_namespace", "expected a string")
+    robots: dict[str, RobotLink] = {}
+    for rid, entry in (table.get("robots") or {}).items():
+        robots[rid] = _parse_link(rid, entry, lambda key, problem, rid=rid: fail(f"robots.{rid}.{key}", problem))
+    return Ros2Config(key_format, domain, bridge_ns, robots, name)
+
+
+def _parse_link(rid: str, entry: Any, fail: Any) -> RobotLink:
+    if not isinstance(entry, dict):
+        raise fail("", "must be a table")
+    known = set(_FLOATS) | set(_STRINGS) | {"map_to_odom"}
+    for key in entry:
+        if key not in known:
+            raise fail(key, f"unknown key (known: {', '.join(sorted(known))})")
+    values: dict[str, Any] = {"namespace": f"/{rid}"}
+    for key in _STRINGS:
+        if key in entry:
+            if not isinstance(entry[key], str):
+                raise fail(key, f"expected a string, got {entry[key]!r}")
+            values[key] = entry[key]
+    for key in _FLOATS:
+        if key in entry:
+            value = entry[key]
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+                raise fail(key, f"expected a number > 0, got {value!r}")
+            values[key] = float(value)
+    if "map_to_odom" in entry:
+        value = entry["map_to_odom"]
+        if (not isinstance(value, list) or len(value) != 3
+                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)):
+            raise fail("map_to_odom", f"expected [x, y, yaw] (metres, radians), got {value!r}")
+        values["map_to_odom"] = tuple(float(v) for v in value)
+    if values.get("pose_type", "odometry") not in POSE_TYPES:
+        raise fail("pose_type", f"expected one of {', '.join(POSE_TYPES)}, got {values['pose_type']!r}")
+    link = RobotLink(rid, **values)
+    for key in ("cmd_vel", "pose_topic") + (("tf_topic",) if link.tf_topic else ()):
+        try:
+            link.topic(getattr(link, key))
+        except ValueError as exc:
+            raise fail(key, str(exc)) from None
+    return link

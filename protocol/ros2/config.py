@@ -161,3 +161,15 @@ def _parse_link(rid: str, entry: Any, fail: Any) -> RobotLink:
         except ValueError as exc:
             raise fail(key, str(exc)) from None
     return link
+
+
+def add_ros2_link_arguments(parser: Any) -> None:
+    """The ROS 2 options every ROS 2 facing command shares (robot driver, simulated bases, bridge)."""
+    parser.add_argument("--ros2-config", metavar="FILE", help="robot config file with [ros2] tables (docs/ros2.md); default: built-in defaults")
+    parser.add_argument("--key-format", choices=KEY_FORMATS, help="ROS 2 key format (overrides the config file; default rmw_zenoh)")
+    parser.add_argument("--domain", type=int, metavar="N", help="ROS domain id (overrides the config file; default 0)")
+
+
+def ros2_config_from(args: Any) -> Ros2Config:
+    """The config the options above name (raises RosConfigError, a ValueError, when it is bad)."""
+    return load_ros2_config(args.ros2_config).with_overrides(key_format=args.key_format, domain=args.domain)

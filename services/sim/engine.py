@@ -122,6 +122,8 @@ class Engine:
             ),
         )
         self.robots: dict[str, Robot] = {rid: Robot(rid, *spec.start) for rid, spec in sorted(site.robots.items())}
+        # Robots executed elsewhere (services/sim/ros2_base.py): stepped by their own object, not the executor.
+        self.external: dict[str, Any] = {}
         self.closed_doors = ClosedDoorWatch(self.doors, p.robot_radius)  # safety invariant, checked every tick
         her_room = site.human.room
         self.human_doors = sorted(d.id for d in site.doors.values() if d.human_operated and her_room in d.rooms)
@@ -175,7 +177,7 @@ class Engine:
             return
         now, dt = self.time, self.config.tick
         for robot in self.robots.values():
-            self._report(self.executor.step(robot, now, dt), now + dt)
+            self._report(self.external.get(robot.id, self.executor).step(robot, now, dt), now + dt)
         positions = [(r.x, r.y) for r in self.robots.values()]
         self.ticks += 1
         t1 = self.time
@@ -198,12 +200,15 @@ class Engine:
     # ------------------------------------------------------------------ inputs
 
     def apply_command(self, cmd: RobotCommand) -> str:
-        """Apply a command now. Returns ``"applied"``, ``"stale"`` (not newer than the last one for
+        """Apply a command now. Returns ``"applied"``, ``"external"`` (its driver executes it), ``"stale"`` (not newer than the last one for
         that robot) or ``"unknown_robot"``."""
         robot = self.robots.get(cmd.robot)
         if robot is None:
             self._emit("action_failed", robot=cmd.robot, data={"plan_id": cmd.plan_id, "action_id": cmd.action_id, "action": cmd.action, "args": list(cmd.args), "reason": f"no robot {cmd.robot!r} on this site"})
             return "unknown_robot"
+        if robot.id in self.external:
+            self.external[robot.id].command(cmd)
+            return "external"
         if cmd.action_id <= robot.last_action_id:
             return "stale"
         self._waiting_since.pop(robot.id, None)

@@ -1,0 +1,113 @@
+"""``arroch robot --ros2`` brings the base to zero velocity within 0.5 s of site time when its pose
+goes stale, the planner is SIGKILLed, its command is refused, or it gets SIGTERM. The driver is a
+real process; the base and the site clock are :class:`tests.ros2.harness.FakeBase` in the test
+(site time = wall time there), the planner a real process holding the planner's liveliness token."""
+
+from __future__ import annotations
+
+import signal
+import sys
+import textwrap
+
+import pytest
+
+from protocol.messages import RobotStatus
+from protocol.ros2.config import Ros2Config
+from protocol.site import load_site
+from tests.conftest import wait_for_message
+from tests.procs import arroch
+from tests.ros2.harness import FakeBase, straight_command
+
+SITE = load_site()
+ROBOT = "r0"
+START = SITE.robots[ROBOT].start
+LIMIT = 0.5  # s of site time from the event to the first zero Twist
+
+
+@pytest.fixture
+def base(client):
+    b = FakeBase(client, ROBOT, START, Ros2Config())
+    yield b
+    b.close()
+
+
+_DRIVERS: list = []
+
+
+def driver_output() -> str:
+    return "\n".join(p.output[-3000:] for p in _DRIVERS)
+
+
+def start_driver(spawn, router: str, namespace: str, *extra: str):
+    _DRIVERS.clear()
+    proc = spawn(arroch("robot", "--ros2", "--robot", ROBOT, "--connect", router, "--namespace", namespace, *extra), name="robot")
+    proc.wait_for(f"robot robot-{ROBOT}-", timeout=20)
+    _DRIVERS.append(proc)
+    return proc
+
+
+def drive(client, base: FakeBase) -> float:
+    """Send a long straight command; wait until the base moves. Returns that site time."""
+    statuses = client.collect(client.keys.robot_status(ROBOT), RobotStatus)
+    wait_for_message(statuses, lambda s: True, timeout=10)
+    base.first_zero_after(0.0, timeout=10)  # the driver answers poses: it knows where the robot is
+    client.publish(client.keys.robot_command(ROBOT), straight_command(ROBOT, START, 8.0))
+    try:
+        moving = base.wait_moving()
+    except AssertionError as exc:
+        raise AssertionError(f"{exc}\n{driver_output()}") from None
+    assert base.map_pose()[0] >= START[0] - 0.01
+    return moving
+
+
+def test_stale_pose_stops_the_base(spawn, router, namespace, client, base):
+    start_driver(spawn, router, namespace)
+    drive(client, base)
+    t = base.now()
+    base.odometry_on = False
+    stop = base.first_zero_after(t)
+    assert stop.site_time - t <= LIMIT, f"zero Twist {stop.site_time - t:.3f} s after the last pose"
+
+
+def test_killed_planner_stops_the_base(spawn, router, namespace, client, base):
+    planner = spawn([sys.executable, "-c", textwrap.dedent(f"""
+        import time
+        from protocol.service import Service
+        from protocol.transport import ZenohOptions
+        with Service("planner", "{namespace}", ZenohOptions(mode="client", connect=["{router}"])):
+            print("planner token declared", flush=True)
+            time.sleep(600)
+    """)], name="planner")
+    planner.wait_for("planner token declared", timeout=20)
+    driver = start_driver(spawn, router, namespace)
+    drive(client, base)
+    t = base.now()
+    planner.signal(signal.SIGKILL)
+    stop = base.first_zero_after(t)
+    assert stop.site_time - t <= LIMIT, f"zero Twist {stop.site_time - t:.3f} s after the planner died"
+    driver.wait_for("planner lost", timeout=5)
+
+
+def test_refused_command_stops_the_base(spawn, router, namespace, client, base):
+    start_driver(spawn, router, namespace)
+    statuses = client.collect(client.keys.robot_status(ROBOT), RobotStatus)
+    drive(client, base)
+    t = base.now()
+    # A trajectory starting 3 m behind the robot: refused (the execution contract's 1.5 m).
+    client.publish(client.keys.robot_command(ROBOT), straight_command(ROBOT, START, 8.0, action_id=2, offset=3.0))
+    stop = base.first_zero_after(t)
+    assert stop.site_time - t <= LIMIT, f"zero Twist {stop.site_time - t:.3f} s after the refused command"
+    failed = wait_for_message(statuses, lambda s: s.action_id == 2 and s.state == "failed", timeout=5)
+    assert "trajectory starts" in failed.detail
+    assert all(tw.zero for tw in base.twists if tw.site_time > stop.site_time)
+
+
+def test_sigterm_stops_the_base(spawn, router, namespace, client, base):
+    driver = start_driver(spawn, router, namespace)
+    drive(client, base)
+    t = base.now()
+    driver.signal(signal.SIGTERM)
+    stop = base.first_zero_after(t)
+    assert stop.site_time - t <= LIMIT, f"zero Twist {stop.site_time - t:.3f} s after SIGTERM"
+    assert driver.popen.wait(10) == 0
+    assert base.twists[-1].zero

@@ -1,7 +1,8 @@
 """``arroch robot --ros2`` brings the base to zero velocity within 0.5 s of site time when its pose
 goes stale, the planner is SIGKILLed, its command is refused, or it gets SIGTERM. The driver is a
 real process; the base and the site clock are :class:`tests.ros2.harness.FakeBase` in the test
-(site time = wall time there), the planner a real process holding the planner's liveliness token."""
+(site time = wall time there), the planner a real process holding the planner's liveliness token.
+And at a closed door it holds short of the leaf, going on once the door opens."""
 
 from __future__ import annotations
 
@@ -11,7 +12,9 @@ import textwrap
 
 import pytest
 
-from protocol.messages import RobotStatus
+import time
+
+from protocol.messages import DoorState, RobotCommand, RobotStatus
 from protocol.ros2.config import Ros2Config
 from protocol.site import load_site
 from tests.conftest import wait_for_message
@@ -38,10 +41,10 @@ def driver_output() -> str:
     return "\n".join(p.output[-3000:] for p in _DRIVERS)
 
 
-def start_driver(spawn, router: str, namespace: str, *extra: str):
+def start_driver(spawn, router: str, namespace: str, *extra: str, robot: str = ROBOT):
     _DRIVERS.clear()
-    proc = spawn(arroch("robot", "--ros2", "--robot", ROBOT, "--connect", router, "--namespace", namespace, *extra), name="robot")
-    proc.wait_for(f"robot robot-{ROBOT}-", timeout=20)
+    proc = spawn(arroch("robot", "--ros2", "--robot", robot, "--connect", router, "--namespace", namespace, *extra), name="robot")
+    proc.wait_for(f"robot robot-{robot}-", timeout=20)
     _DRIVERS.append(proc)
     return proc
 
@@ -111,3 +114,31 @@ def test_sigterm_stops_the_base(spawn, router, namespace, client, base):
     assert stop.site_time - t <= LIMIT, f"zero Twist {stop.site_time - t:.3f} s after SIGTERM"
     assert driver.popen.wait(10) == 0
     assert base.twists[-1].zero
+
+
+def test_closed_door_holds_the_robot_short_of_the_leaf(spawn, router, namespace, client):
+    robot = "r1"  # in the lab, facing d_lab (on the wall y = 6) from 2 m
+    start = SITE.robots[robot].start
+    line = SITE.doors["d_lab"].center[1]
+    radius = SITE.params.robot_radius
+    base = FakeBase(client, robot, start, Ros2Config())
+    try:
+        statuses = client.collect(client.keys.robot_status(robot), RobotStatus)
+        start_driver(spawn, router, namespace, robot=robot)
+        base.first_zero_after(0.0, timeout=10)
+        client.publish(client.keys.door_state("d_lab"), DoorState(door="d_lab", open=False))
+        rows = straight_command(robot, start, 3.0).trajectory
+        client.publish(client.keys.robot_command(robot),
+                       RobotCommand(robot=robot, plan_id=1, action_id=1, action="gothrough", args=["d_lab"], trajectory=rows))
+        wait_for_message(statuses, lambda st: st.state == "waiting_at_door" and st.waiting_door == "d_lab", timeout=15)
+        base.first_zero_after(base.now())
+        time.sleep(0.3)
+        gap = base.map_pose()[1] - line  # robot centre to the door's line
+        assert radius < gap <= radius + 0.15 + 0.03, f"held {gap:.3f} m from the door's line"
+        client.publish(client.keys.door_state("d_lab"), DoorState(door="d_lab", open=True))
+        deadline = time.monotonic() + 10
+        while base.map_pose()[1] > line - radius - 0.1 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert base.map_pose()[1] < line - radius - 0.1, "the robot did not go through once the door opened"
+    finally:
+        base.close()

@@ -15,7 +15,7 @@ shutting down).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 from typing import Callable
 
 from protocol.execution import START_TOLERANCE, command_problem
@@ -34,26 +34,17 @@ class DriverConfig:
     control_period: float = 0.05  # s between poses: the controller's step
 
 
-@dataclass
-class DriverState:
-    state: str = "idle"
-    command: RobotCommand | None = None
-    last_action_id: int = 0
-    carrying: list[str] = field(default_factory=list)
-    delivered: list[str] = field(default_factory=list)
-    waiting_door: str = ""
-    detail: str = ""
-    progress: float = 0.0
-
-
 class Driver:
-    """One robot's command execution. ``changed`` is set whenever the status to report changed."""
+    """One robot's command execution. Its state is the RobotStatus it reports (:attr:`s`);
+    ``changed`` is set whenever that changed."""
 
     def __init__(self, robot: str, site: Site, config: DriverConfig) -> None:
         self.robot = robot
         self.site = site
         self.config = config
-        self.s = DriverState()
+        self.s = RobotStatus(robot=robot, state="idle")
+        self.command: RobotCommand | None = None
+        self.last_action_id = 0
         self.phase = "idle"  # idle, drive, wait_open, dwell, done, failed
         self._follower: PurePursuit | None = None
         self._crossings: list[tuple[float, str]] = []
@@ -66,12 +57,12 @@ class Driver:
     def assign(self, cmd: RobotCommand, pose: tuple[float, float, float] | None, now: float) -> str:
         """Take a command. Returns ``"stale"`` (not newer than the last one: ignored), ``"refused"``
         (it cannot be executed: the robot stops, state ``failed``) or ``"accepted"``."""
-        if cmd.action_id <= self.s.last_action_id:
+        if cmd.action_id <= self.last_action_id:
             return "stale"
-        s = self.s
-        s.command, s.last_action_id = cmd, cmd.action_id
+        self.command, self.last_action_id = cmd, cmd.action_id
         self._follower, self._crossings = None, []
-        self._set(state="moving", waiting_door="", detail="", progress=0.0)
+        self._set(state="moving", plan_id=cmd.plan_id, action_id=cmd.action_id, action=cmd.action, args=list(cmd.args),
+                  waiting_door="", detail="", progress=0.0)
         self.changed = True  # a new action id even if the state stays "moving"
         if cmd.action == "stop":
             self.phase = "idle"
@@ -142,7 +133,7 @@ class Driver:
         return step.v, step.omega
 
     def _arrived(self, now: float, door_open: Callable[[str], bool]) -> None:
-        cmd = self.s.command
+        cmd = self.command
         assert cmd is not None
         if cmd.action in ("approach", "gothrough"):
             self._done()
@@ -157,7 +148,7 @@ class Driver:
             self._dwell(now)
 
     def _wait_open(self, door_open: Callable[[str], bool]) -> None:
-        cmd = self.s.command
+        cmd = self.command
         assert cmd is not None
         if door_open(cmd.args[0]):
             self._done()
@@ -165,7 +156,7 @@ class Driver:
             self._set(state="waiting_at_door", waiting_door=cmd.args[0])
 
     def _dwell(self, now: float) -> None:
-        cmd = self.s.command
+        cmd = self.command
         assert cmd is not None
         left = self._dwell_end - now
         self.s.progress = min(1.0, 1.0 - left / self._dwell_total) if self._dwell_total > 0 else 1.0
@@ -193,10 +184,7 @@ class Driver:
     # ------------------------------------------------------------------ reporting
 
     def status(self, world_version: int) -> RobotStatus:
-        s, cmd = self.s, self.s.command
-        return RobotStatus(
-            robot=self.robot, state=s.state, plan_id=cmd.plan_id if cmd else 0, action_id=cmd.action_id if cmd else 0,
-            action=cmd.action if cmd else "", args=list(cmd.args) if cmd else [], progress=max(0.0, min(1.0, s.progress)),
-            carrying=list(s.carrying), delivered=list(s.delivered), waiting_door=s.waiting_door, detail=s.detail[:512],
-            world_version=world_version,
-        )
+        """A copy of the status to report, with the world version the robot last heard of."""
+        s = self.s
+        return replace(s, args=list(s.args), carrying=list(s.carrying), delivered=list(s.delivered), detail=s.detail[:512],
+                       progress=max(0.0, min(1.0, s.progress)), world_version=world_version)

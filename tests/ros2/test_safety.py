@@ -63,13 +63,19 @@ def drive(client, base: FakeBase) -> float:
     return moving
 
 
+def assert_stops_in_time(base: FakeBase, trigger, what: str):  # noqa: ANN001
+    """Pull ``trigger()`` while the base drives; the first zero Twist must follow within LIMIT site seconds."""
+    t = base.now()
+    trigger()
+    stop = base.first_zero_after(t)
+    assert stop.site_time - t <= LIMIT, f"zero Twist {stop.site_time - t:.3f} s after {what}"
+    return stop
+
+
 def test_stale_pose_stops_the_base(spawn, router, namespace, client, base):
     start_driver(spawn, router, namespace)
     drive(client, base)
-    t = base.now()
-    base.odometry_on = False
-    stop = base.first_zero_after(t)
-    assert stop.site_time - t <= LIMIT, f"zero Twist {stop.site_time - t:.3f} s after the last pose"
+    assert_stops_in_time(base, lambda: setattr(base, "odometry_on", False), "the last pose")
 
 
 def test_killed_planner_stops_the_base(spawn, router, namespace, client, base):
@@ -84,10 +90,7 @@ def test_killed_planner_stops_the_base(spawn, router, namespace, client, base):
     planner.wait_for("planner token declared", timeout=20)
     driver = start_driver(spawn, router, namespace)
     drive(client, base)
-    t = base.now()
-    planner.signal(signal.SIGKILL)
-    stop = base.first_zero_after(t)
-    assert stop.site_time - t <= LIMIT, f"zero Twist {stop.site_time - t:.3f} s after the planner died"
+    assert_stops_in_time(base, lambda: planner.signal(signal.SIGKILL), "the planner died")
     driver.wait_for("planner lost", timeout=5)
 
 
@@ -95,11 +98,9 @@ def test_refused_command_stops_the_base(spawn, router, namespace, client, base):
     start_driver(spawn, router, namespace)
     statuses = client.collect(client.keys.robot_status(ROBOT), RobotStatus)
     drive(client, base)
-    t = base.now()
     # A trajectory starting 3 m behind the robot: refused (the execution contract's 1.5 m).
-    client.publish(client.keys.robot_command(ROBOT), straight_command(ROBOT, START, 8.0, action_id=2, offset=3.0))
-    stop = base.first_zero_after(t)
-    assert stop.site_time - t <= LIMIT, f"zero Twist {stop.site_time - t:.3f} s after the refused command"
+    refused = straight_command(ROBOT, START, 8.0, action_id=2, offset=3.0)
+    stop = assert_stops_in_time(base, lambda: client.publish(client.keys.robot_command(ROBOT), refused), "the refused command")
     failed = wait_for_message(statuses, lambda s: s.action_id == 2 and s.state == "failed", timeout=5)
     assert "trajectory starts" in failed.detail
     assert all(tw.zero for tw in base.twists if tw.site_time > stop.site_time)
@@ -108,10 +109,7 @@ def test_refused_command_stops_the_base(spawn, router, namespace, client, base):
 def test_sigterm_stops_the_base(spawn, router, namespace, client, base):
     driver = start_driver(spawn, router, namespace)
     drive(client, base)
-    t = base.now()
-    driver.signal(signal.SIGTERM)
-    stop = base.first_zero_after(t)
-    assert stop.site_time - t <= LIMIT, f"zero Twist {stop.site_time - t:.3f} s after SIGTERM"
+    assert_stops_in_time(base, lambda: driver.signal(signal.SIGTERM), "SIGTERM")
     assert driver.popen.wait(10) == 0
     assert base.twists[-1].zero
 

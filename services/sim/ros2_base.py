@@ -21,7 +21,9 @@ within ``auto_open_distance`` of a door its current command's trajectory goes th
 
 from __future__ import annotations
 
+import logging
 import math
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -34,7 +36,10 @@ from protocol.ros2.node import RosNode, RosPublisher
 
 from .robots import Outcome, Robot
 
+log = logging.getLogger("arroch.sim")
+
 HEARTBEAT = 1.0  # wall s between odometry messages of bases at rest
+ANSWER_TIMEOUT = 2.0  # wall s lockstep waits for a driver's Twist before going on without it
 CMD_VEL_TIMEOUT = 0.5  # s of site time after which a base stops on its own without a new Twist
 # Driver states in which its robot does something as site time passes (drives, dwells): in lockstep
 # every tick waits for its answer then, so the driver acts at the tick it must. A robot waiting at a
@@ -55,6 +60,8 @@ class RosBase:
     omega: float = 0.0
     twist_at: float = -math.inf  # site time the last Twist arrived
     awaiting: bool = False  # lockstep: an odometry went out and its Twist has not come yet
+    awaiting_since: float = 0.0  # wall (monotonic) time it went out
+    silent: bool = False  # its driver missed ANSWER_TIMEOUT: not waited for until it answers again
     twists: int = 0
 
     def velocity(self, now: float) -> tuple[float, float]:
@@ -130,6 +137,7 @@ class ExternalRobot:
         self.base.v, self.base.omega = float(msg.linear.x), float(msg.angular.z)
         self.base.twist_at = now
         self.base.awaiting = False
+        self.base.silent = False
         self.base.twists += 1
 
     # ------------------------------------------------------------------ the engine's tick
@@ -204,9 +212,18 @@ class ExternalRobots:
         for rid, ext in self.robots.items():
             if ext.base is not None:
                 ext.base.publish_odometry(now, self.engine.robots[rid])
-                ext.base.awaiting = self.lockstep and ext.driver_state in EXECUTING
+                ext.base.awaiting = self.lockstep and ext.driver_state in EXECUTING and not ext.base.silent
+                ext.base.awaiting_since = time.monotonic()
 
     def blocker(self) -> str:
         """What lockstep waits for from the robots' drivers ("" for nothing)."""
+        wall = time.monotonic()
+        for rid, ext in self.robots.items():
+            base = ext.base
+            if base is not None and base.awaiting and wall - base.awaiting_since > ANSWER_TIMEOUT:
+                # A driver that died or hangs must not stop the world: its base stops on its own (no Twist).
+                log.warning("no cmd_vel from %s's driver for %.0f s: lockstep goes on without waiting for it "
+                            "until it answers again", rid, ANSWER_TIMEOUT)
+                base.awaiting, base.silent = False, True
         waiting = [rid for rid, ext in self.robots.items() if ext.base is not None and ext.base.awaiting]
         return f"cmd_vel of {', '.join(waiting)} answering the last odometry" if waiting else ""

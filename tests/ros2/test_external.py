@@ -72,3 +72,41 @@ def test_a_ros2_base_integrates_twists_and_stops_without_them():
     moved = engine.robots["r0"].x - x0
     assert math.isclose(moved, 0.5 * CMD_VEL_TIMEOUT, abs_tol=0.5 * engine.config.tick + 1e-9)  # then the watchdog stopped it
     assert engine.robots["r0"].v == 0.0
+
+
+def test_lockstep_waits_for_a_moving_robots_driver_but_not_for_ever():
+    import time
+
+    class Sink:
+        def __init__(self) -> None:
+            self.sent = 0
+
+        def publish(self, msg) -> None:  # noqa: ANN001
+            self.sent += 1
+
+    engine = Engine(SITE, method="arroch", seed=0)
+    robots = ExternalRobots(engine, ["r0"], ros2=None, lockstep=True)
+    ext = engine.external["r0"]
+    sink = Sink()
+    ext.base = RosBase(odom=sink, origin=SITE.robots["r0"].start, odom_frame="odom", base_frame="base_link")  # type: ignore[arg-type]
+    engine.start()
+    robots.after_tick()
+    assert sink.sent == 1 and robots.blocker() == ""  # idle: not waited for
+    ext.on_status(status(1, "approach", "moving", args=["d_lab"]))
+    robots.after_tick()
+    assert "cmd_vel of r0" in robots.blocker()
+    ext.base.awaiting_since = time.monotonic() - 3.0  # its driver died
+    assert robots.blocker() == "" and ext.base.silent
+    robots.after_tick()
+    assert robots.blocker() == ""  # not waited for while silent
+
+    class Twist:
+        class linear:
+            x = 0.0
+
+        class angular:
+            z = 0.0
+
+    ext.on_twist(Twist, engine.time)  # back: waited for again
+    robots.after_tick()
+    assert "cmd_vel of r0" in robots.blocker()

@@ -5,7 +5,7 @@ announced with rmw_zenoh's liveliness tokens (what ``ros2 topic list`` reads).
 - the bridge: RobotPose → ``/tf``, Intent → ``/arroch/<rid>/path``, DoorState → ``/arroch/site``
   markers, and feedback in / ack out through a real restrictor;
 - the driver: the base's ``/r1/odom`` (decoded here) → the driver's RobotPose, through the map→odom
-  transform of r1's start pose (rotated by -90°).
+  transform of r1's start pose (rotated by -90°), or of the map→odom transform it reads on `/tf`.
 """
 
 from __future__ import annotations
@@ -171,5 +171,29 @@ def test_driver_pose_matches_the_odometry_it_came_from(spawn, router, namespace,
         assert checked >= 10
         msg, att = twist.next()
         assert att is not None and len(att.gid) == 16
+    finally:
+        base.close()
+
+
+def test_driver_takes_map_to_odom_from_tf(spawn, router, namespace, client, tmp_path):
+    robot = "r1"
+    config_file = tmp_path / "robots.toml"
+    config_file.write_text('[ros2.robots.r1]\ntf_topic = "/tf"\n')
+    base = FakeBase(client, robot, SITE.robots[robot].start, Ros2Config())
+    try:
+        from protocol.ros2.node import RosNode
+
+        tf = RosNode(client, NAMING, "test_localiser", "/").publisher("/tf", ros.TF_MESSAGE)
+        map_to_odom = (12.0, 8.2, -1.4)  # not the start pose: the pose must come from tf
+        poses = client.collect(client.keys.robot_pose(robot), RobotPose)
+        spawn(arroch("robot", "--ros2", "--robot", robot, "--connect", router, "--namespace", namespace,
+                     "--ros2-config", str(config_file)), name="robot").wait_for("robot robot-r1-", timeout=20)
+        deadline = time.monotonic() + 10
+        while not poses.qsize() and time.monotonic() < deadline:
+            tf.publish(ros.t(ros.TF_MESSAGE)(transforms=[ros.transform_stamped(0.0, "map", "odom", *map_to_odom)]))
+            time.sleep(0.1)
+        pose = wait_for_message(poses, timeout=5)
+        assert abs(pose.x - map_to_odom[0]) <= MM and abs(pose.y - map_to_odom[1]) <= MM
+        assert angle_gap(pose.theta, map_to_odom[2]) <= DEG
     finally:
         base.close()

@@ -42,6 +42,7 @@ class FakeBase:
         self.x, self.y, self.theta = 0.0, 0.0, 0.0  # odom frame: zero where the base booted (its start)
         self.v = self.omega = 0.0
         self.twists: list[TwistSeen] = []
+        self.odometry_sent: list[float] = []  # site times the odometry messages went out
         self.odometry_on = True
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -75,6 +76,7 @@ class FakeBase:
                 x, y, theta, v, omega = self.x, self.y, self.theta, self.v, self.omega
             if self.odometry_on:
                 self._odom.publish(ros.odometry(now, "odom", "base_link", x, y, theta, v, omega))
+                self.odometry_sent.append(now)
 
     def close(self) -> None:
         self._stop.set()

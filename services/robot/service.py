@@ -106,6 +106,9 @@ class RobotService(Service):
 
     def _on_pose(self, msg: Any, key: str) -> None:
         p = ros.pose_2d(msg, self.link.pose_typename)
+        if not all(math.isfinite(value) for value in (p.x, p.y, p.theta, p.v, p.omega)):
+            self.count("poses_not_finite")  # dropped: a NaN must never reach the controller
+            return
         if self.link.pose_type == "odometry":
             if self.map_to_odom is None:
                 self.count("poses_without_map_to_odom")

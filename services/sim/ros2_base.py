@@ -132,13 +132,18 @@ class ExternalRobot:
     def on_pose(self, pose: RobotPose) -> None:
         self.pose = pose
 
-    def on_twist(self, msg: Any, now: float) -> None:
+    def on_twist(self, msg: Any, now: float) -> bool:
+        """Obey a Twist; False (ignored) for one that is not finite."""
         assert self.base is not None
-        self.base.v, self.base.omega = float(msg.linear.x), float(msg.angular.z)
+        v, omega = float(msg.linear.x), float(msg.angular.z)
+        if not (math.isfinite(v) and math.isfinite(omega)):
+            return False
+        self.base.v, self.base.omega = v, omega
         self.base.twist_at = now
         self.base.awaiting = False
         self.base.silent = False
         self.base.twists += 1
+        return True
 
     # ------------------------------------------------------------------ the engine's tick
 
@@ -193,7 +198,8 @@ class ExternalRobots:
             node = RosNode(service, self.ros2.naming(), f"arroch_sim_base_{rid}", link.namespace)
             start = self.engine.site.robots[rid].start
             ext.base = RosBase(node.publisher(link.pose_topic, ros.ODOMETRY), tuple(start), link.odom_frame, link.base_frame)
-            node.subscribe(link.cmd_vel, ros.TWIST, lambda msg, key, ext=ext: ext.on_twist(msg, self.engine.time))
+            node.subscribe(link.cmd_vel, ros.TWIST, lambda msg, key, ext=ext: ext.on_twist(msg, self.engine.time)
+                           or service.count("twists_not_finite"))
         if self.ros2 is not None:
             # A driver started while time stands still (lockstep waiting for a plan) still learns where its
             # robot is; while the driver moves the robot, every tick's odometry does that.

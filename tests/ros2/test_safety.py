@@ -140,3 +140,21 @@ def test_closed_door_holds_the_robot_short_of_the_leaf(spawn, router, namespace,
         assert base.map_pose()[1] < line - radius - 0.1, "the robot did not go through once the door opened"
     finally:
         base.close()
+
+
+def test_bad_odometry_is_dropped_and_counted(spawn, router, namespace, client, base):
+    from protocol.messages import Event
+    from protocol.ros2 import types as ros
+    from protocol.ros2.keys import TopicNaming
+
+    driver = start_driver(spawn, router, namespace)
+    base.first_zero_after(0.0, timeout=10)
+    key = TopicNaming().data_key("/r0/odom", ros.ODOMETRY)
+    client.session.put(key, b"\x00\x01\x00\x00not an odometry")
+    nan = ros.odometry(base.now(), "odom", "base_link", float("nan"), 0.0, 0.0, 0.0, 0.0)
+    client.session.put(key, ros.serialize(nan, ros.ODOMETRY))
+    time.sleep(0.5)
+    (stats,) = [e.data for e in client.query(client.keys.stats("robot"), Event)]
+    assert stats["bad_messages"] >= 1 and stats["poses_not_finite"] >= 1, stats
+    assert driver.alive()
+    drive(client, base)  # and it still drives

@@ -3,7 +3,9 @@ simulator's robots (services/sim/robots.py) and real robots' drivers (services/r
 
 :func:`command_problem` says why a command cannot be executed from where the robot stands (an
 unknown opening, a trajectory that starts too far away, crosses a wall, or does not go through the
-opening it names), or returns ``""``. Object checks belong to whoever tracks the objects.
+opening it names), or returns ``""``; :func:`dwell_problem` why a ``load``/``unload`` that has
+arrived cannot start its dwell (the object out of reach, the robot outside the object's
+destination room). Who may load what (ownership, capacity) belongs to whoever tracks the objects.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from .plane import segment_intersection
 from .site.model import Site
 
 START_TOLERANCE = 1.5  # m; a trajectory may start at most this far from the robot
+REACH = 1.0  # m from the robot's centre within which it can pick up an object
 
 
 def command_problem(site: Site, x: float, y: float, cmd: RobotCommand, start_tolerance: float = START_TOLERANCE) -> str:
@@ -42,6 +45,20 @@ def command_problem(site: Site, x: float, y: float, cmd: RobotCommand, start_tol
         ea, eb = site.opening(target).endpoints
         if not any(segment_intersection(a, b, ea, eb) is not None for a, b in zip(points, points[1:])):
             return f"gothrough: trajectory does not cross {target!r}"
+    return ""
+
+
+def dwell_problem(site: Site, x: float, y: float, cmd: RobotCommand, object_xy: tuple[float, float], reach: float = REACH) -> str:
+    """Why the ``load``/``unload`` ``cmd``, its drive over at (x, y), cannot dwell; ``""`` if it can.
+    ``object_xy``: where the object is (for a load)."""
+    oid = cmd.args[0]
+    if cmd.action == "load":
+        gap = math.hypot(object_xy[0] - x, object_xy[1] - y)
+        return f"load: object {oid!r} is {gap:.2f} m away (reach {reach} m)" if gap > reach else ""
+    goes_to = site.objects[oid].deliver_to
+    room = site.room_at(x, y)
+    if room is None or room.id != goes_to:
+        return f"unload: robot is in {room.id if room else 'no room'!r}, object {oid!r} goes to {goes_to!r}"
     return ""
 
 

@@ -18,7 +18,7 @@ import math
 from dataclasses import dataclass, replace
 from typing import Callable
 
-from protocol.execution import START_TOLERANCE, command_problem
+from protocol.execution import REACH, START_TOLERANCE, command_problem, dwell_problem
 from protocol.messages import RobotCommand, RobotStatus
 from protocol.pursuit import ControllerConfig, Path, PurePursuit, path_crossings
 from protocol.site.model import Site
@@ -31,6 +31,8 @@ class DriverConfig:
     load_time: float = 10.0
     stop_margin: float = 0.15  # m between a waiting robot's disc and a closed leaf's line (as the simulator)
     start_tolerance: float = START_TOLERANCE
+    reach: float = REACH
+    capacity: int = 1
     control_period: float = 0.05  # s between poses: the controller's step
 
 
@@ -82,12 +84,17 @@ class Driver:
         if pose is None:
             return "no pose of the robot yet"
         target = cmd.args[0] if cmd.args else ""
-        if cmd.action == "load" and len(self.s.carrying) >= 1:
-            return "load: robot is full (1 object(s))"
-        if cmd.action == "unload" and target not in self.s.carrying:
-            return f"unload: robot does not carry {target!r}"
         if cmd.action in ("load", "unload") and target not in self.site.objects:
             return f"{cmd.action}: no object {target!r}"
+        if cmd.action == "load":
+            if self.site.objects[target].robot != self.robot:
+                return f"load: object {target!r} belongs to robot {self.site.objects[target].robot!r}"
+            if target in self.s.carrying or target in self.s.delivered:
+                return f"load: object {target!r} is {'delivered' if target in self.s.delivered else 'carried already'}"
+            if len(self.s.carrying) >= self.config.capacity:
+                return f"load: robot is full ({self.config.capacity} object(s))"
+        if cmd.action == "unload" and target not in self.s.carrying:
+            return f"unload: robot does not carry {target!r}"
         return command_problem(self.site, pose[0], pose[1], cmd, self.config.start_tolerance)
 
     def refuse(self, reason: str) -> None:
@@ -110,7 +117,7 @@ class Driver:
     def _drive(self, pose: tuple[float, float, float], now: float, door_open: Callable[[str], bool]) -> tuple[float, float]:
         follower = self._follower
         if follower is None:
-            self._arrived(now, door_open)
+            self._arrived(pose, now, door_open)
             return 0.0, 0.0
         cfg = self.config
         s_limit, blocking = math.inf, ""
@@ -128,11 +135,11 @@ class Driver:
         if self.s.state == "waiting_at_door":
             self._set(state="moving", waiting_door="")
         if step.arrived:
-            self._arrived(now, door_open)
+            self._arrived(pose, now, door_open)
             return 0.0, 0.0
         return step.v, step.omega
 
-    def _arrived(self, now: float, door_open: Callable[[str], bool]) -> None:
+    def _arrived(self, pose: tuple[float, float, float], now: float, door_open: Callable[[str], bool]) -> None:
         cmd = self.command
         assert cmd is not None
         if cmd.action in ("approach", "gothrough"):
@@ -141,6 +148,11 @@ class Driver:
             self.phase = "wait_open"
             self._wait_open(door_open)
         else:
+            # An object waits where the site file puts it until its robot loads it.
+            problem = dwell_problem(self.site, pose[0], pose[1], cmd, self.site.objects[cmd.args[0]].position, self.config.reach)
+            if problem:
+                self.refuse(problem)
+                return
             self.phase = "dwell"
             self._dwell_total = cmd.duration if cmd.duration > 0 else self.config.load_time
             self._dwell_end = now + self._dwell_total

@@ -62,7 +62,8 @@ class RobotService(Service):
         p = site.params
         speed = min(link.max_speed, p.robot_speed) if link.max_speed else p.robot_speed
         self.driver = Driver(robot, site, DriverConfig(controller=ControllerConfig(speed=speed, max_turn_rate=link.max_turn_rate),
-                                                       radius=p.robot_radius, load_time=p.load_time, control_period=link.control_period))
+                                                       radius=p.robot_radius, load_time=p.load_time, capacity=p.robot_capacity,
+                                                       control_period=link.control_period))
         start = site.robots[robot].start
         self.map_to_odom: tuple[float, float, float] | None = None if link.tf_topic else (link.map_to_odom or tuple(start))
         self.pose: tuple[float, float, float] | None = None

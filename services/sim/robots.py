@@ -24,7 +24,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from protocol.execution import command_problem
+from protocol.execution import REACH, START_TOLERANCE, command_problem, dwell_problem
 from protocol.messages import RobotCommand
 from protocol.site.model import Site
 
@@ -43,8 +43,8 @@ class RobotConfig:
     stop_margin: float = 0.15  # m between a waiting robot's disc and a closed leaf's line
     guard_margin: float = 0.05  # m; the hard limit no step may cross toward a shut door
     auto_open_distance: float = 1.5  # m of path ahead within which an automatic door is asked to open
-    start_tolerance: float = 1.5  # m; a trajectory may start at most this far from the robot
-    reach: float = 1.0  # m from the robot's centre within which it can pick up an object
+    start_tolerance: float = START_TOLERANCE  # m; a trajectory may start at most this far from the robot
+    reach: float = REACH  # m from the robot's centre within which it can pick up an object
 
 
 @dataclass(frozen=True)
@@ -218,15 +218,9 @@ class RobotExecutor:
             return self._wait_open(robot, 0.0)
         # load / unload: check now that the dwell can succeed, so a doomed one fails at once.
         obj = self.objects[cmd.args[0]]
-        if cmd.action == "load":
-            gap = math.hypot(obj.x - robot.x, obj.y - robot.y)
-            if gap > self.config.reach:
-                return self._fail(robot, f"load: object {obj.id!r} is {gap:.2f} m away (reach {self.config.reach} m)")
-        else:
-            room = self.site.room_at(robot.x, robot.y)
-            if room is None or room.id != obj.spec.deliver_to:
-                where = room.id if room else "no room"
-                return self._fail(robot, f"unload: robot is in {where!r}, object {obj.id!r} goes to {obj.spec.deliver_to!r}")
+        problem = dwell_problem(self.site, robot.x, robot.y, cmd, (obj.x, obj.y), self.config.reach)
+        if problem:
+            return self._fail(robot, problem)
         robot.phase = "dwell"
         robot.dwell_total = robot.dwell_left = cmd.duration if cmd.duration > 0 else self.config.load_time
         robot.progress = 0.0

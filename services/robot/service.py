@@ -133,7 +133,11 @@ class RobotService(Service):
         for tr in msg.transforms:
             if tr.header.frame_id.strip("/") == self.link.map_frame and tr.child_frame_id.strip("/") == self.link.odom_frame:
                 t = tr.transform
-                self.map_to_odom = (t.translation.x, t.translation.y, ros.yaw_of(t.rotation))
+                transform = (t.translation.x, t.translation.y, ros.yaw_of(t.rotation))
+                if all(math.isfinite(value) for value in transform):
+                    self.map_to_odom = transform
+                else:
+                    self.count("transforms_not_finite")
 
     def _on_door(self, msg: DoorState, key: str) -> None:
         self._doors_open[msg.door] = msg.open

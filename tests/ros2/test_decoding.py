@@ -5,7 +5,9 @@ announced with rmw_zenoh's liveliness tokens (what ``ros2 topic list`` reads).
 - the bridge: RobotPose → ``/tf``, Intent → ``/arroch/<rid>/path``, DoorState → ``/arroch/site``
   markers, and feedback in / ack out through a real restrictor;
 - the driver: the base's ``/r1/odom`` (decoded here) → the driver's RobotPose, through the map→odom
-  transform of r1's start pose (rotated by -90°), or of the map→odom transform it reads on `/tf`.
+  transform of r1's start pose (rotated by -90°), or of the map→odom transform it reads on `/tf`;
+- the simulated bases: each `/<rid>/odom`, moved by its map→odom transform, is the robot's pose in the
+  simulator; a Twist moves it and the base stops on its own without one.
 """
 
 from __future__ import annotations
@@ -197,3 +199,26 @@ def test_driver_takes_map_to_odom_from_tf(spawn, router, namespace, client, tmp_
         assert angle_gap(pose.theta, map_to_odom[2]) <= DEG
     finally:
         base.close()
+
+
+def test_simulated_bases_publish_their_robots_poses_as_odometry(spawn, router, namespace, client):
+    """``arroch sim --ros2-bases``: each base's odometry, read back and moved by its map->odom
+    transform (the start pose), is where the simulator has the robot; a Twist moves it."""
+    taps = {rid: Tap(client, f"/{rid}/odom", ros.ODOMETRY) for rid in SITE.robots}
+    spawn(arroch("sim", "--connect", router, "--namespace", namespace, "--ros2-bases"), name="sim").wait_for("sim sim-", timeout=20)
+    for rid, tap in taps.items():
+        msg, att = tap.next(timeout=10)
+        p = ros.pose_2d(msg, ros.ODOMETRY)
+        assert (p.frame, p.child_frame) == ("odom", "base_link") and att is not None
+        x0, y0, th0 = SITE.robots[rid].start
+        c, s = math.cos(th0), math.sin(th0)
+        assert abs(x0 + c * p.x - s * p.y - x0) <= MM and abs(y0 + s * p.x + c * p.y - y0) <= MM
+        assert angle_gap(th0 + p.theta, th0) <= DEG
+    from protocol.ros2.node import RosNode
+
+    cmd_vel = RosNode(client, NAMING, "test_teleop", "/r0").publisher("cmd_vel", ros.TWIST)
+    for _ in range(10):  # 1 s at 0.4 m/s, straight ahead
+        cmd_vel.publish(ros.twist(0.4, 0.0))
+        time.sleep(0.1)
+    msg, _ = taps["r0"].next(lambda m: m.twist.twist.linear.x == 0.0 and m.pose.pose.position.x > 0.2, timeout=10)
+    assert 0.2 < msg.pose.pose.position.x < 0.8 and abs(msg.pose.pose.position.y) <= MM  # then it stopped on its own

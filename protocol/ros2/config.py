@@ -7,6 +7,7 @@ domain = 0                      # ROS_DOMAIN_ID (rmw_zenoh keys and tokens)
 bridge_namespace = ""           # ros2dds only: the bridge's `namespace` setting
 
 [ros2.robots.r0]
+# key_format = "ros2dds"        # this robot only (a mixed fleet); likewise domain
 namespace = "/r0"               # ROS namespace of the robot's topics (default "/<robot id>")
 cmd_vel = "cmd_vel"             # geometry_msgs/Twist in
 pose_topic = "odom"             # where its pose comes from
@@ -59,6 +60,8 @@ class RobotLink:
     max_turn_rate: float = 1.5
     pose_timeout: float = 0.3
     control_period: float = 0.05
+    key_format: str | None = None  # None: the [ros2] table's
+    domain: int | None = None
 
     @property
     def pose_typename(self) -> str:
@@ -76,14 +79,21 @@ class Ros2Config:
     robots: dict[str, RobotLink] = field(default_factory=dict)
     source: str = "<defaults>"
 
-    def naming(self) -> TopicNaming:
-        return TopicNaming(self.key_format, self.domain, self.bridge_namespace)
+    def naming(self, robot: str | None = None) -> TopicNaming:
+        """Keys for the whole deployment, or for ``robot`` (its own key format and domain, if set)."""
+        link = self.robots.get(robot) if robot else None
+        key_format = (link.key_format if link else None) or self.key_format
+        domain = link.domain if link is not None and link.domain is not None else self.domain
+        return TopicNaming(key_format, domain, self.bridge_namespace)
 
     def link(self, robot: str) -> RobotLink:
         return self.robots.get(robot) or RobotLink(robot, f"/{robot}")
 
     def with_overrides(self, *, key_format: str | None = None, domain: int | None = None) -> "Ros2Config":
-        changed = replace(self, key_format=key_format or self.key_format, domain=self.domain if domain is None else domain)
+        """The command line's key format and domain, for every robot."""
+        robots = {rid: replace(link, key_format=key_format or link.key_format, domain=link.domain if domain is None else domain)
+                  for rid, link in self.robots.items()}
+        changed = replace(self, key_format=key_format or self.key_format, domain=self.domain if domain is None else domain, robots=robots)
         changed.naming()  # checks them
         return changed
 
@@ -116,7 +126,7 @@ def parse_ros2_config(table: Any, name: str = "<config>") -> Ros2Config:
     if key_format not in KEY_FORMATS:
         raise fail("key_format", f"expected one of {', '.join(KEY_FORMATS)}, got {key_format!r}")
     domain = table.get("domain", 0)
-    if not isinstance(domain, int) or isinstance(domain, bool) or not 0 <= domain <= 232:
+    if not _is_domain(domain):
         raise fail("domain", f"expected an integer 0..232, got {domain!r}")
     bridge_ns = table.get("bridge_namespace", "")
     if not isinstance(bridge_ns, str):
@@ -127,10 +137,14 @@ def parse_ros2_config(table: Any, name: str = "<config>") -> Ros2Config:
     return Ros2Config(key_format, domain, bridge_ns, robots, name)
 
 
+def _is_domain(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= 232
+
+
 def _parse_link(rid: str, entry: Any, fail: Any) -> RobotLink:
     if not isinstance(entry, dict):
         raise fail("", "must be a table")
-    known = set(_FLOATS) | set(_STRINGS) | {"map_to_odom"}
+    known = set(_FLOATS) | set(_STRINGS) | {"map_to_odom", "key_format", "domain"}
     for key in entry:
         if key not in known:
             raise fail(key, f"unknown key (known: {', '.join(sorted(known))})")
@@ -152,6 +166,14 @@ def _parse_link(rid: str, entry: Any, fail: Any) -> RobotLink:
                 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)):
             raise fail("map_to_odom", f"expected [x, y, yaw] (metres, radians), got {value!r}")
         values["map_to_odom"] = tuple(float(v) for v in value)
+    if "key_format" in entry:
+        if entry["key_format"] not in KEY_FORMATS:
+            raise fail("key_format", f"expected one of {', '.join(KEY_FORMATS)}, got {entry['key_format']!r}")
+        values["key_format"] = entry["key_format"]
+    if "domain" in entry:
+        if not _is_domain(entry["domain"]):
+            raise fail("domain", f"expected an integer 0..232, got {entry['domain']!r}")
+        values["domain"] = entry["domain"]
     if values.get("pose_type", "odometry") not in POSE_TYPES:
         raise fail("pose_type", f"expected one of {', '.join(POSE_TYPES)}, got {values['pose_type']!r}")
     link = RobotLink(rid, **values)

@@ -138,6 +138,12 @@ def odometry(at: float, frame: str, child_frame: str, x: float, y: float, yaw: f
     )
 
 
+def pose_with_covariance_stamped(at: float, frame: str, x: float, y: float, yaw: float) -> Any:
+    """``geometry_msgs/PoseWithCovarianceStamped`` (what a localiser such as amcl publishes)."""
+    return t(POSE_COV_STAMPED)(header=header(at, frame), pose=t("geometry_msgs/msg/PoseWithCovariance")(
+        pose=pose(x, y, yaw), covariance=np.zeros(36, dtype=np.float64)))
+
+
 def transform_stamped(at: float, parent: str, child: str, x: float, y: float, yaw: float) -> Any:
     return t("geometry_msgs/msg/TransformStamped")(
         header=header(at, parent),

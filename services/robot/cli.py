@@ -43,7 +43,7 @@ def _run(args: argparse.Namespace) -> int:
 
         site = load_site(args.site)
         config = ros2_config_from(args)
-        return RobotService(site, args.robot, config.link(args.robot), config.naming(), options_from(args), namespace=args.namespace,
+        return RobotService(site, args.robot, config.link(args.robot), config.naming(args.robot), options_from(args), namespace=args.namespace,
                             clock=make_clock(args.clock), options=RobotOptions(hold_without_planner=not args.no_planner_hold))
 
     return run_service(build)

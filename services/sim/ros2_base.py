@@ -195,7 +195,7 @@ class ExternalRobots:
                 service.subscribe(keys.robot_pose(rid), RobotPose, lambda p, key, ext=ext: ext.on_pose(p), latest=True)
                 continue
             link = self.ros2.link(rid)
-            node = RosNode(service, self.ros2.naming(), f"arroch_sim_base_{rid}", link.namespace)
+            node = RosNode(service, self.ros2.naming(rid), f"arroch_sim_base_{rid}", link.namespace)
             start = self.engine.site.robots[rid].start
             ext.base = RosBase(node.publisher(link.pose_topic, ros.ODOMETRY), tuple(start), link.odom_frame, link.base_frame)
             node.subscribe(link.cmd_vel, ros.TWIST, lambda msg, key, ext=ext: ext.on_twist(msg, self.engine.time)

@@ -5,7 +5,8 @@ announced with rmw_zenoh's liveliness tokens (what ``ros2 topic list`` reads).
 - the bridge: RobotPose → ``/tf``, Intent → ``/arroch/<rid>/path``, DoorState → ``/arroch/site``
   markers, and feedback in / ack out through a real restrictor;
 - the driver: the base's ``/r1/odom`` (decoded here) → the driver's RobotPose, through the map→odom
-  transform of r1's start pose (rotated by -90°), or of the map→odom transform it reads on `/tf`;
+  transform of r1's start pose (rotated by -90°), or of the map→odom transform it reads on `/tf`, or
+  straight from a localiser's PoseWithCovarianceStamped;
 - the simulated bases: each `/<rid>/odom`, moved by its map→odom transform, is the robot's pose in the
   simulator; a Twist moves it and the base stops on its own without one.
 """
@@ -222,3 +223,25 @@ def test_simulated_bases_publish_their_robots_poses_as_odometry(spawn, router, n
         time.sleep(0.1)
     msg, _ = taps["r0"].next(lambda m: m.twist.twist.linear.x == 0.0 and m.pose.pose.position.x > 0.2, timeout=10)
     assert 0.2 < msg.pose.pose.position.x < 0.8 and abs(msg.pose.pose.position.y) <= MM  # then it stopped on its own
+
+
+def test_driver_takes_its_pose_from_a_localisation_topic(spawn, router, namespace, client, tmp_path):
+    """``pose_type = "pose"``: PoseWithCovarianceStamped in the map frame (e.g. amcl_pose), no transform."""
+    from protocol.ros2.node import RosNode
+
+    config_file = tmp_path / "robots.toml"
+    config_file.write_text('[ros2.robots.r1]\npose_topic = "amcl_pose"\npose_type = "pose"\n')
+    localiser = RosNode(client, NAMING, "test_amcl", "/r1").publisher("amcl_pose", ros.POSE_COV_STAMPED)
+    twist = Tap(client, "/r1/cmd_vel", ros.TWIST)
+    poses = client.collect(client.keys.robot_pose("r1"), RobotPose)
+    spawn(arroch("robot", "--ros2", "--robot", "r1", "--connect", router, "--namespace", namespace,
+                 "--ros2-config", str(config_file)), name="robot").wait_for("robot robot-r1-", timeout=20)
+    where = (12.3456, 7.6543, -1.2345)
+    deadline = time.monotonic() + 10
+    while not poses.qsize() and time.monotonic() < deadline:
+        localiser.publish(ros.pose_with_covariance_stamped(0.0, "map", *where))
+        time.sleep(0.1)
+    pose = wait_for_message(poses, timeout=5)
+    assert abs(pose.x - where[0]) <= MM and abs(pose.y - where[1]) <= MM and angle_gap(pose.theta, where[2]) <= DEG
+    msg, _ = twist.next()  # every pose is answered
+    assert msg.linear.x == 0.0

@@ -74,6 +74,11 @@ def test_config_file(tmp_path):
     assert link.topic(link.pose_topic) == "/tb3/amcl_pose" and link.pose_typename == ros.POSE_COV_STAMPED
     assert link.map_to_odom == (1.0, 2.0, 0.5)
     assert config.link("r9").topic("cmd_vel") == "/r9/cmd_vel"  # a robot without a table: defaults
+    f.write_text('[ros2]\ndomain = 5\n[ros2.robots.r1]\nkey_format = "ros2dds"\ndomain = 9\n')
+    mixed = load_ros2_config(f)
+    assert (mixed.naming("r1").key_format, mixed.naming("r1").domain) == ("ros2dds", 9)
+    assert (mixed.naming("r0").key_format, mixed.naming("r0").domain) == ("rmw_zenoh", 5)
+    assert mixed.with_overrides(domain=2).naming("r1").domain == 2  # the command line wins
 
 
 @pytest.mark.parametrize("table, where", [
@@ -84,6 +89,7 @@ def test_config_file(tmp_path):
     ({"robots": {"r0": {"cmd_vel": "bad topic"}}}, "ros2.robots.r0.cmd_vel"),
     ({"robots": {"r0": {"speed": 1}}}, "ros2.robots.r0.speed"),
     ({"robots": {"r0": {"pose_timeout": -1}}}, "ros2.robots.r0.pose_timeout"),
+    ({"robots": {"r0": {"key_format": "fastdds"}}}, "ros2.robots.r0.key_format"),
 ])
 def test_config_errors_name_the_key(table, where):
     with pytest.raises(RosConfigError, match=f"robots.toml: {where}"):

@@ -35,7 +35,8 @@ class TwistSeen:
 
 
 class FakeBase:
-    def __init__(self, client: TestClient, robot: str, start: tuple[float, float, float], config: Ros2Config) -> None:
+    def __init__(self, client: TestClient, robot: str, start: tuple[float, float, float], config: Ros2Config, *,
+                 publish_clock: bool = True) -> None:
         self.client = client
         self.robot = robot
         self.start = start
@@ -44,6 +45,7 @@ class FakeBase:
         self.twists: list[TwistSeen] = []
         self.odometry_sent: list[float] = []  # site times the odometry messages went out
         self.odometry_on = True
+        self.publish_clock = publish_clock  # False: a simulator keeps the site clock
         self._lock = threading.Lock()
         self._stop = threading.Event()
         link = config.link(robot)
@@ -70,7 +72,8 @@ class FakeBase:
         while not self._stop.wait(PERIOD):
             now = self.now()
             seq += 1
-            self.client.publish(self.client.keys.clock(), Clock(time=now, mode="realtime", rate=1.0, world_version=1))
+            if self.publish_clock:
+                self.client.publish(self.client.keys.clock(), Clock(time=now, mode="realtime", rate=1.0, world_version=1))
             with self._lock:
                 self.x, self.y, self.theta = integrate(self.x, self.y, self.theta, self.v, self.omega, PERIOD)
                 x, y, theta, v, omega = self.x, self.y, self.theta, self.v, self.omega

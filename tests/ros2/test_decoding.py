@@ -18,8 +18,6 @@ import math
 import queue
 import time
 
-import pytest
-
 from protocol.messages import DoorState, Intent, RobotPose
 from protocol.ros2 import types as ros
 from protocol.ros2.attachment import Attachment

@@ -52,7 +52,7 @@ def codec_figures() -> dict:
         "TFMessage_1": (ros.TF_MESSAGE, ros.t(ros.TF_MESSAGE)(transforms=[ros.transform_stamped(1.0, "map", "r0/base_link", 1, 2, 0.3)])),
         "Path_200": (ros.PATH, ros.t(ros.PATH)(header=ros.header(1.0, "map"),
                                                 poses=[PoseStamped(header=ros.header(i, "map"), pose=ros.pose(i * 0.1, 1, 0)) for i in range(200)])),
-        "MarkerArray_office": (ros.MARKER_ARRAY, site_markers(site, SiteState(), {}, 1.0)),
+        "MarkerArray_office": (ros.MARKER_ARRAY, site_markers(site, SiteState(), 1.0)),
     }
     out = {}
     for name, (typename, msg) in messages.items():

@@ -4,7 +4,8 @@ Out (frame ``map``; topic names under ``--ros-namespace``, default ``/arroch``):
 - ``/tf`` ``tf2_msgs/TFMessage``: ``map`` → ``<rid>/base_link`` for every RobotPose;
 - ``<ns>/<rid>/path`` ``nav_msgs/Path``: each robot's Intent (its current trajectory; a row's
   time is the pose's stamp);
-- ``<ns>/site`` ``visualization_msgs/MarkerArray``: walls, doors with their state, tags, objects;
+- ``<ns>/site`` ``visualization_msgs/MarkerArray``: walls, doors with their state, tags, objects, the
+  robots' bodies (on their tf frames);
   again on every door or object change and once a second (RViz joining late, no durable QoS here);
 - ``<ns>/feedback_ack`` ``std_msgs/String``: JSON ``{"request", "accepted", "reason",
   "constraint_id", "constraints_version"}`` answering each feedback.
@@ -76,11 +77,9 @@ class BridgeService(Service):
     # ------------------------------------------------------------------ ARROCH → ROS 2
 
     def _on_pose(self, pose: RobotPose, key: str) -> None:
-        self.poses[pose.robot] = (pose.x, pose.y, pose.theta)
+        self.poses[pose.robot] = (pose.x, pose.y, pose.theta)  # where a robot puts down what it carried
         tf = ros.transform_stamped(pose.stamp, self.map_frame, f"{pose.robot}/base_link", pose.x, pose.y, pose.theta)
         self._tf.publish(ros.t(ros.TF_MESSAGE)(transforms=[tf]))
-        if any(r == pose.robot for r in self.state.carried_by.values()):
-            self._markers_dirty = True
 
     def _on_intent(self, intent: Intent, key: str) -> None:
         publisher = self._paths.get(intent.robot)
@@ -123,7 +122,7 @@ class BridgeService(Service):
 
     def _publish_markers(self) -> None:
         self._markers_dirty = False
-        self._markers.publish(site_markers(self.site, self.state, self.poses, self.clock.now(), self.map_frame))
+        self._markers.publish(site_markers(self.site, self.state, self.clock.now(), self.map_frame))
 
     # ------------------------------------------------------------------ ROS 2 → ARROCH
 

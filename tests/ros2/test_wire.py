@@ -94,3 +94,22 @@ def test_config_file(tmp_path):
 def test_config_errors_name_the_key(table, where):
     with pytest.raises(RosConfigError, match=f"robots.toml: {where}"):
         parse_ros2_config(table, "robots.toml")
+
+
+def test_site_markers_follow_the_state():
+    from protocol.site import load_site
+    from services.ros2.markers import SiteState, site_markers
+
+    site = load_site()
+    state = SiteState(doors_open={"d_lab": True}, carried_by={"o0": "r0"}, delivered={"o1"}, object_at={"o1": (6.0, 2.0)})
+    msg = ros.deserialize(ros.serialize(site_markers(site, state, 3.0), ros.MARKER_ARRAY), ros.MARKER_ARRAY)
+    by = {(m.ns, m.id): m for m in msg.markers}
+    assert len([k for k in by if k[0] == "walls"]) == len(site.walls)
+    doors = list(site.door_leaves)
+    assert by[("doors", doors.index("d_lab"))].color.g > 0.5 and by[("doors", doors.index("d_storage"))].color.r > 0.5
+    objects = list(site.objects)
+    carried = by[("objects", objects.index("o0"))]
+    assert carried.header.frame_id == "r0/base_link" and carried.frame_locked
+    delivered = by[("objects", objects.index("o1"))]
+    assert (delivered.pose.position.x, delivered.pose.position.y) == (6.0, 2.0) and abs(delivered.color.a - 0.4) < 1e-6  # float32
+    assert {m.header.frame_id for m in msg.markers if m.ns == "robots"} == {f"{rid}/base_link" for rid in site.robots}

@@ -24,9 +24,9 @@ from typing import Any
 import numpy as np
 
 from protocol.messages import RobotCommand
+from protocol.pursuit import ControllerConfig
 from protocol.site.model import Site
 
-from protocol.pursuit import ControllerConfig
 from .crossings import ClosedDoorWatch
 from .doors import DoorChange, DoorConfig, Doors
 from .human import Declare, HumanConfig, HumanModel, OpenDoor, TaskDone
@@ -200,8 +200,8 @@ class Engine:
     # ------------------------------------------------------------------ inputs
 
     def apply_command(self, cmd: RobotCommand) -> str:
-        """Apply a command now. Returns ``"applied"``, ``"external"`` (its driver executes it), ``"stale"`` (not newer than the last one for
-        that robot) or ``"unknown_robot"``."""
+        """Apply a command now. Returns ``"applied"``, ``"stale"`` (not newer than the last one for
+        that robot), ``"external"`` (a robot its own driver executes) or ``"unknown_robot"``."""
         robot = self.robots.get(cmd.robot)
         if robot is None:
             self._emit("action_failed", robot=cmd.robot, data={"plan_id": cmd.plan_id, "action_id": cmd.action_id, "action": cmd.action, "args": list(cmd.args), "reason": f"no robot {cmd.robot!r} on this site"})

@@ -26,11 +26,11 @@ from typing import Any
 
 from protocol.execution import REACH, START_TOLERANCE, command_problem, dwell_problem
 from protocol.messages import RobotCommand
+from protocol.plane import segment_distance
+from protocol.pursuit import ControllerConfig, Path, PurePursuit, Step, path_crossings
 from protocol.site.model import Site
 
-from protocol.pursuit import ControllerConfig, Path, PurePursuit, Step, path_crossings
 from .doors import Doors
-from protocol.plane import segment_distance
 from .objects import Objects
 
 

@@ -396,6 +396,32 @@ class Service:
         # hand the sample to (one thread wake-up less per message).
         self._declared.append(self.session.declare_subscriber(key, on_zenoh_thread(on_sample) if inline or ordered else on_sample))
 
+    def subscribe_foreign(self, key: str, decode_payload: Callable[[bytes], Any], handler: Callable[[Any, str], None], *,
+                          latest: bool = False, ordered: bool = False) -> None:
+        """Like :meth:`subscribe`, for payloads that are not ARROCH messages (e.g. ROS 2 CDR):
+        ``decode_payload(bytes)`` runs on arrival, and whatever it raises counts the payload as a bad
+        message (dropped, logged at most once a minute); its result goes to ``handler(value, key)``
+        on the worker. ``latest`` and ``ordered`` mean what they mean for :meth:`subscribe`."""
+        sub = _Subscription(key, object, handler, latest)  # type: ignore[arg-type]
+        refuse = self._refuser(key)
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            payload = sample.payload.to_bytes()
+            try:
+                value = decode_payload(payload)
+            except Exception as exc:  # any decoder's complaint: the payload is bad, not the service
+                refuse(sample, payload, ProtocolError("payload", str(exc) or type(exc).__name__))
+                return
+            self._enqueue(sub, str(sample.key_expr), value)
+
+        self._declared.append(self.session.declare_subscriber(key, on_zenoh_thread(on_sample) if ordered else on_sample))
+
+    def hold(self, entity: Any) -> Any:
+        """Undeclare ``entity`` (a token, publisher, subscriber... declared on :attr:`session`) when
+        the service closes. Returns it."""
+        self._declared.append(entity)
+        return entity
+
     def relay(self, key: str, msg_type: type[Message], to_key: str) -> None:
         """Republish every valid ``msg_type`` payload heard on ``key`` on ``to_key``, as it came.
 

@@ -21,6 +21,8 @@ COMMANDS: tuple[str, ...] = (
     "services.planner.cli",  # arroch planner, arroch plan
     "services.restrictor.cli",  # arroch restrictor, feedback, constraints
     "services.sim.cli",  # arroch sim, sim snapshot
+    "services.robot.cli",  # arroch robot --ros2
+    "services.ros2.cli",  # arroch ros2 bridge
     "services.ar_client.cli",  # arroch ar, ar localize|render, tags
     "services.ar_client.web.cli",  # arroch tablet, ar calibrate
     "services.supervisor.cli",  # arroch up

@@ -50,6 +50,14 @@ def register(subparsers: Any) -> None:
                           "(exit code 3; default 120). Time stands still meanwhile, so the wait never changes the mission")
     run.add_argument("--metrics-out", metavar="FILE.json", help="write the mission's metrics there when it ends")
     run.add_argument("--events-out", metavar="FILE.jsonl", help="write every event there, one JSON line each")
+    real = parser.add_argument_group("real robots and ROS 2 bases (docs/ros2.md)")
+    real.add_argument("--robots", choices=("sim", "none"), default="sim", help="none: the robots are real, each driven by its own "
+                      "`arroch robot --ros2`; the simulator keeps doors, objects and the human (default sim)")
+    real.add_argument("--ros2-bases", action="store_true", help="each robot is a simulated ROS 2 mobile base: Twist on cmd_vel in, "
+                      "Odometry out; `arroch robot --ros2` drives it")
+    from protocol.ros2.config import add_ros2_link_arguments
+
+    add_ros2_link_arguments(real)
     human = parser.add_argument_group("simulated human")
     human.add_argument("--human-config", metavar="FILE", help="TOML file with the human model's parameters ([human] table; see docs)")
     human.add_argument("--door-probability", type=float, metavar="P", help="chance per waiting robot per decision interval that she goes to open (default 0.5)")
@@ -94,6 +102,13 @@ def build_options(args: argparse.Namespace) -> Any:
     from .service import SimOptions
 
     mode, rate = _clock_mode(args)
+    ros2_bases = None
+    if args.ros2_bases:
+        from protocol.ros2.config import ros2_config_from
+
+        if args.robots == "none":
+            raise ValueError("--ros2-bases simulates the robots' bases: it cannot go with --robots none")
+        ros2_bases = ros2_config_from(args)
     if not args.pose_rate > 0:
         raise ValueError("--pose-rate must be > 0")
     if args.lockstep_abort is not None and not args.lockstep_abort > 0:
@@ -114,6 +129,8 @@ def build_options(args: argparse.Namespace) -> Any:
         human=human,
         camera=camera_options_from(args),
         **({"lockstep_abort": args.lockstep_abort} if args.lockstep_abort is not None else {}),
+        robots=args.robots,
+        ros2_bases=ros2_bases,
     )
 
 

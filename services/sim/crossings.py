@@ -17,8 +17,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Iterable
 
+from protocol.plane import segment_distance
+
 from .doors import Doors
-from .geometry import segment_distance
 from .robots import Robot
 
 # Overlap below this (m) is touching, not entering: a robot stopped exactly at the guard distance

@@ -27,9 +27,8 @@ from typing import Iterable
 
 import math
 
+from protocol.plane import segment_distance
 from protocol.site.model import DoorLeaf, Opening
-
-from .geometry import segment_distance
 
 
 @dataclass(frozen=True)

@@ -24,9 +24,9 @@ from typing import Any
 import numpy as np
 
 from protocol.messages import RobotCommand
+from protocol.pursuit import ControllerConfig
 from protocol.site.model import Site
 
-from .controller import ControllerConfig
 from .crossings import ClosedDoorWatch
 from .doors import DoorChange, DoorConfig, Doors
 from .human import Declare, HumanConfig, HumanModel, OpenDoor, TaskDone
@@ -123,6 +123,8 @@ class Engine:
             ),
         )
         self.robots: dict[str, Robot] = {rid: Robot(rid, *spec.start) for rid, spec in sorted(site.robots.items())}
+        # Robots executed elsewhere (services/sim/ros2_base.py): stepped by their own object, not the executor.
+        self.external: dict[str, Any] = {}
         self.closed_doors = ClosedDoorWatch(self.doors, p.robot_radius)  # safety invariant, checked every tick
         her_room = site.human.room
         self.human_doors = sorted(d.id for d in site.doors.values() if d.human_operated and her_room in d.rooms)
@@ -176,7 +178,7 @@ class Engine:
             return
         now, dt = self.time, self.config.tick
         for robot in self.robots.values():
-            self._report(self.executor.step(robot, now, dt), now + dt)
+            self._report(self.external.get(robot.id, self.executor).step(robot, now, dt), now + dt)
         positions = [(r.x, r.y) for r in self.robots.values()]
         self.ticks += 1
         t1 = self.time
@@ -200,11 +202,14 @@ class Engine:
 
     def apply_command(self, cmd: RobotCommand) -> str:
         """Apply a command now. Returns ``"applied"``, ``"stale"`` (not newer than the last one for
-        that robot) or ``"unknown_robot"``."""
+        that robot), ``"external"`` (a robot its own driver executes) or ``"unknown_robot"``."""
         robot = self.robots.get(cmd.robot)
         if robot is None:
             self._emit("action_failed", robot=cmd.robot, data={"plan_id": cmd.plan_id, "action_id": cmd.action_id, "action": cmd.action, "args": list(cmd.args), "reason": f"no robot {cmd.robot!r} on this site"})
             return "unknown_robot"
+        if robot.id in self.external:
+            self.external[robot.id].command(cmd)
+            return "external"
         if cmd.action_id <= robot.last_action_id:
             return "stale"
         self._waiting_since.pop(robot.id, None)

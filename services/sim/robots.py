@@ -24,12 +24,13 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from protocol.execution import REACH, START_TOLERANCE, command_problem, dwell_problem
 from protocol.messages import RobotCommand
+from protocol.plane import segment_distance
+from protocol.pursuit import ControllerConfig, Path, PurePursuit, Step, path_crossings
 from protocol.site.model import Site
 
-from .controller import ControllerConfig, Path, PurePursuit, Step
 from .doors import Doors
-from .geometry import segment_distance, segment_intersection
 from .objects import Objects
 
 
@@ -42,8 +43,8 @@ class RobotConfig:
     stop_margin: float = 0.15  # m between a waiting robot's disc and a closed leaf's line
     guard_margin: float = 0.05  # m; the hard limit no step may cross toward a shut door
     auto_open_distance: float = 1.5  # m of path ahead within which an automatic door is asked to open
-    start_tolerance: float = 1.5  # m; a trajectory may start at most this far from the robot
-    reach: float = 1.0  # m from the robot's centre within which it can pick up an object
+    start_tolerance: float = START_TOLERANCE  # m; a trajectory may start at most this far from the robot
+    reach: float = REACH  # m from the robot's centre within which it can pick up an object
 
 
 @dataclass(frozen=True)
@@ -126,16 +127,8 @@ class RobotExecutor:
         return []
 
     def _check(self, robot: Robot, cmd: RobotCommand) -> None:
-        site = self.site
         target = cmd.args[0] if cmd.args else ""
-        if cmd.action in ("approach", "gothrough", "opendoor"):
-            try:
-                opening = site.opening(target)
-            except KeyError:
-                raise CommandError(f"{cmd.action}: no door or passage {target!r}") from None
-            if cmd.action == "opendoor" and opening.kind != "door":
-                raise CommandError(f"opendoor: {target!r} is a passage, not a door")
-        elif cmd.action in ("load", "unload"):
+        if cmd.action in ("load", "unload"):
             if target not in self.objects:
                 raise CommandError(f"{cmd.action}: no object {target!r}")
             obj = self.objects[target]
@@ -148,34 +141,12 @@ class RobotExecutor:
                     raise CommandError(f"load: robot is full ({self.config.capacity} object(s))")
             elif target not in robot.carrying:
                 raise CommandError(f"unload: robot does not carry {target!r}")
-        if not cmd.trajectory:
-            if cmd.action == "gothrough":
-                raise CommandError(f"gothrough: empty trajectory cannot go through {target!r}")
-            return
-        x0, y0 = cmd.trajectory[0][1], cmd.trajectory[0][2]
-        gap = math.hypot(x0 - robot.x, y0 - robot.y)
-        if gap > self.config.start_tolerance:
-            raise CommandError(f"trajectory starts {gap:.2f} m from the robot (more than {self.config.start_tolerance} m)")
-        points = [(robot.x, robot.y)] + [(row[1], row[2]) for row in cmd.trajectory]
-        for a, b in zip(points, points[1:]):
-            for wall in site.walls:
-                if segment_intersection(a, b, wall.a, wall.b) is not None:
-                    raise CommandError(f"trajectory segment {_fmt(a)}->{_fmt(b)} crosses a wall")
-        if cmd.action == "gothrough":
-            ea, eb = site.opening(target).endpoints
-            if not any(segment_intersection(a, b, ea, eb) is not None for a, b in zip(points, points[1:])):
-                raise CommandError(f"gothrough: trajectory does not cross {target!r}")
+        problem = command_problem(self.site, robot.x, robot.y, cmd, self.config.start_tolerance)
+        if problem:
+            raise CommandError(problem)
 
     def _crossings(self, path: Path) -> list[tuple[float, str]]:
-        found: list[tuple[float, str]] = []
-        for door in self.doors.doors.values():
-            a, b = door.opening.endpoints
-            for i in range(len(path.points) - 1):
-                t = segment_intersection(path.points[i], path.points[i + 1], a, b)
-                if t is not None:
-                    found.append((path.s[i] + t * (path.s[i + 1] - path.s[i]), door.id))
-                    break
-        return sorted(found)
+        return path_crossings(path, {door.id: door.opening.endpoints for door in self.doors.doors.values()})
 
     # ------------------------------------------------------------------ stepping
 
@@ -247,15 +218,9 @@ class RobotExecutor:
             return self._wait_open(robot, 0.0)
         # load / unload: check now that the dwell can succeed, so a doomed one fails at once.
         obj = self.objects[cmd.args[0]]
-        if cmd.action == "load":
-            gap = math.hypot(obj.x - robot.x, obj.y - robot.y)
-            if gap > self.config.reach:
-                return self._fail(robot, f"load: object {obj.id!r} is {gap:.2f} m away (reach {self.config.reach} m)")
-        else:
-            room = self.site.room_at(robot.x, robot.y)
-            if room is None or room.id != obj.spec.deliver_to:
-                where = room.id if room else "no room"
-                return self._fail(robot, f"unload: robot is in {where!r}, object {obj.id!r} goes to {obj.spec.deliver_to!r}")
+        problem = dwell_problem(self.site, robot.x, robot.y, cmd, (obj.x, obj.y), self.config.reach)
+        if problem:
+            return self._fail(robot, problem)
         robot.phase = "dwell"
         robot.dwell_total = robot.dwell_left = cmd.duration if cmd.duration > 0 else self.config.load_time
         robot.progress = 0.0
@@ -331,6 +296,3 @@ class RobotExecutor:
                 setattr(robot, name, value)
                 robot.status_changed = True
 
-
-def _fmt(p: tuple[float, float]) -> str:
-    return f"({p[0]:.2f}, {p[1]:.2f})"

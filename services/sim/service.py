@@ -74,6 +74,8 @@ class SimOptions:
     human: HumanConfig = field(default_factory=HumanConfig)
     camera: Any = None  # a services.sim.camfeed.CameraOptions, or None
     lockstep_abort: float = FEEDBACK_ABORT  # lockstep: wall s to wait for an answer (feedback ack) before failing the run
+    robots: str = "sim"  # "none": every robot is real, executed by its own driver (services/sim/ros2_base.py)
+    ros2_bases: Any = None  # a protocol.ros2.config.Ros2Config: every robot is a simulated ROS 2 base
 
     def as_params(self) -> dict[str, Any]:
         return {"mode": self.mode, "rate": self.rate if self.mode == "rate" else (1.0 if self.mode == "realtime" else 0.0), "pose_rate": self.pose_rate}
@@ -121,6 +123,11 @@ class SimService(Service):
         self._camera = None
         self.exit_code = 0  # run_service's exit code: EXIT_ABORTED when lockstep had to give up
         self._door_since: dict[str, float] = {}  # door -> site time its open/closed state last changed
+        self._external = None
+        if options.robots == "none" or options.ros2_bases is not None:
+            from .ros2_base import ExternalRobots
+
+            self._external = ExternalRobots(self.engine, sorted(self.engine.robots), ros2=options.ros2_bases, lockstep=options.mode == "lockstep")
 
     # ------------------------------------------------------------------ set-up
 
@@ -133,6 +140,8 @@ class SimService(Service):
         lockstep = self.options.mode == "lockstep"
         self._sender = FeedbackSender(self, timeout=hc.feedback_timeout, retries=hc.feedback_retries,
                                       abort_after=self.options.lockstep_abort if lockstep else None)
+        if self._external is not None:
+            self._external.setup(self)
         if self.options.camera is not None:
             from .camfeed import CameraFeed  # pybullet only when a camera is asked for
 
@@ -252,6 +261,8 @@ class SimService(Service):
             self._send_feedback(request)
         changed = self.engine.world_version != version
         self._publish_tick(force_poses=changed, wall=wall)
+        if self._external is not None:
+            self._external.after_tick()  # the ROS 2 bases' odometry, after the door states it depends on
         if self.engine.done:
             self._finish()
             return False
@@ -279,12 +290,14 @@ class SimService(Service):
 
     def _publish_poses(self) -> None:
         for rid, r in self.engine.robots.items():
+            if rid in self.engine.external:
+                continue  # its driver publishes its pose
             self.publish(self.keys.robot_pose(rid), RobotPose(robot=rid, x=r.x, y=r.y, theta=r.theta, vel=r.v, omega=r.omega))
 
     def _publish_states(self, *, everything: bool) -> None:
         version = self.engine.world_version
         for rid, r in self.engine.robots.items():
-            if not (everything or r.status_changed):
+            if not (everything or r.status_changed) or rid in self.engine.external:
                 continue
             r.status_changed = False
             cmd = r.command
@@ -334,7 +347,8 @@ class SimService(Service):
             return "", ""
         kind, gate = self.gate.waits_for(self.engine.world_version, {rid: r.last_action_id for rid, r in self.engine.robots.items()})
         hold = self._camera.hold.blocker() if self._camera is not None and self._camera.hold is not None else ""
-        return kind or ("camera" if hold else ""), "; ".join(b for b in (gate, hold) if b)
+        drivers = self._external.blocker() if self._external is not None else ""
+        return kind or ("camera" if hold else "") or ("command" if drivers else ""), "; ".join(b for b in (gate, hold, drivers) if b)
 
     def _camera_hold(self) -> None:
         """Lockstep with a camera: take the held frame when one is due; end a hold that timed out."""

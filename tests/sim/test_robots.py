@@ -7,7 +7,7 @@ import math
 import pytest
 
 from services.sim.engine import Engine
-from services.sim.geometry import segment_distance
+from protocol.plane import segment_distance
 from services.sim.human import HumanConfig
 from tests.sim.helpers import command, small_site
 

@@ -1,4 +1,4 @@
-"""Trajectory following: pure pursuit on a unicycle.
+"""Trajectory following: pure pursuit on a unicycle (the simulator's robots and `arroch robot`).
 
 A robot is a unicycle (x, y, theta) driven by a linear speed ``v`` and a turn rate ``omega``.
 Pure pursuit steers toward a point ``lookahead`` metres further along the path; the curvature that
@@ -20,7 +20,7 @@ import bisect
 import math
 from dataclasses import dataclass
 
-from .geometry import wrap
+from .plane import segment_intersection, wrap
 
 
 @dataclass(frozen=True)
@@ -92,6 +92,19 @@ class Path:
             if d < best_d:
                 best_s, best_d = s, d
         return best_s, best_d
+
+
+def path_crossings(path: Path, gaps: dict[str, tuple[tuple[float, float], tuple[float, float]]]) -> list[tuple[float, str]]:
+    """Where ``path`` first crosses each gap (``{id: (end a, end b)}``, e.g. door openings), as
+    ``(arc length, id)`` in path order. A robot following the path meets the doors in this order."""
+    found: list[tuple[float, str]] = []
+    for gap_id, (a, b) in gaps.items():
+        for i in range(len(path.points) - 1):
+            t = segment_intersection(path.points[i], path.points[i + 1], a, b)
+            if t is not None:
+                found.append((path.s[i] + t * (path.s[i + 1] - path.s[i]), gap_id))
+                break
+    return sorted(found)
 
 
 @dataclass

@@ -1,4 +1,4 @@
-"""Plane geometry the simulator needs: angles, segments, distances.
+"""Plane geometry the simulator and the robot driver need: angles, segments, distances.
 
 Plain floats rather than numpy arrays: the engine calls these a few times per robot per tick on
 2-D points, where numpy's per-call overhead costs more than the arithmetic.

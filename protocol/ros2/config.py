@@ -1,0 +1,197 @@
+"""How each robot is reached through ROS 2: the ``[ros2]`` tables of a robot config file (TOML).
+
+```toml
+[ros2]
+key_format = "rmw_zenoh"        # or "ros2dds" (zenoh-bridge-ros2dds)
+domain = 0                      # ROS_DOMAIN_ID (rmw_zenoh keys and tokens)
+bridge_namespace = ""           # ros2dds only: the bridge's `namespace` setting
+
+[ros2.robots.r0]
+# key_format = "ros2dds"        # this robot only (a mixed fleet); likewise domain
+namespace = "/r0"               # ROS namespace of the robot's topics (default "/<robot id>")
+cmd_vel = "cmd_vel"             # geometry_msgs/Twist in
+pose_topic = "odom"             # where its pose comes from
+pose_type = "odometry"          # nav_msgs/Odometry (odom frame), or "pose":
+                                # geometry_msgs/PoseWithCovarianceStamped (map frame, e.g. amcl_pose)
+map_to_odom = [1.0, 2.0, 0.0]   # fixed map->odom transform (x, y, yaw rad); default: the robot's
+                                # start pose in the site file (odometry starts at zero where it boots)
+# tf_topic = "/tf"              # instead: take map->odom from tf2_msgs/TFMessage on this topic
+map_frame = "map"
+odom_frame = "odom"
+base_frame = "base_link"
+max_speed = 0.5                 # m/s sent at most (default: the site's robot_speed)
+max_turn_rate = 1.5             # rad/s
+pose_timeout = 0.3              # s of site time without a pose before the base is stopped
+control_period = 0.05           # s between two poses (odometry rate); the controller's step
+```
+
+Every key is optional; a robot without a table gets the defaults. Errors name the file and key.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from .keys import KEY_FORMATS, TopicNaming, full_topic
+from .types import POSE_TYPES
+
+
+class RosConfigError(ValueError):
+    """A robot config file that cannot be used: the message names the file and the key."""
+
+
+@dataclass(frozen=True)
+class RobotLink:
+    robot: str
+    namespace: str
+    cmd_vel: str = "cmd_vel"
+    pose_topic: str = "odom"
+    pose_type: str = "odometry"
+    map_to_odom: tuple[float, float, float] | None = None  # None: the site start pose
+    tf_topic: str = ""
+    map_frame: str = "map"
+    odom_frame: str = "odom"
+    base_frame: str = "base_link"
+    max_speed: float | None = None
+    max_turn_rate: float = 1.5
+    pose_timeout: float = 0.3
+    control_period: float = 0.05
+    key_format: str | None = None  # None: the [ros2] table's
+    domain: int | None = None
+
+    @property
+    def pose_typename(self) -> str:
+        return POSE_TYPES[self.pose_type]
+
+    def topic(self, name: str) -> str:
+        return full_topic(self.namespace, name)
+
+
+@dataclass(frozen=True)
+class Ros2Config:
+    key_format: str = "rmw_zenoh"
+    domain: int = 0
+    bridge_namespace: str = ""
+    robots: dict[str, RobotLink] = field(default_factory=dict)
+    source: str = "<defaults>"
+
+    def naming(self, robot: str | None = None) -> TopicNaming:
+        """Keys for the whole deployment, or for ``robot`` (its own key format and domain, if set)."""
+        link = self.robots.get(robot) if robot else None
+        key_format = (link.key_format if link else None) or self.key_format
+        domain = link.domain if link is not None and link.domain is not None else self.domain
+        return TopicNaming(key_format, domain, self.bridge_namespace)
+
+    def link(self, robot: str) -> RobotLink:
+        return self.robots.get(robot) or RobotLink(robot, f"/{robot}")
+
+    def with_overrides(self, *, key_format: str | None = None, domain: int | None = None) -> "Ros2Config":
+        """The command line's key format and domain, for every robot."""
+        robots = {rid: replace(link, key_format=key_format or link.key_format, domain=link.domain if domain is None else domain)
+                  for rid, link in self.robots.items()}
+        changed = replace(self, key_format=key_format or self.key_format, domain=self.domain if domain is None else domain, robots=robots)
+        changed.naming()  # checks them
+        return changed
+
+
+_FLOATS = ("max_speed", "max_turn_rate", "pose_timeout", "control_period")
+_STRINGS = ("namespace", "cmd_vel", "pose_topic", "pose_type", "tf_topic", "map_frame", "odom_frame", "base_frame")
+
+
+def load_ros2_config(path: str | Path | None) -> Ros2Config:
+    """The config in ``path`` (``None``: all defaults)."""
+    if path is None:
+        return Ros2Config()
+    name = Path(path).name
+    try:
+        data = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise RosConfigError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise RosConfigError(f"{name}: not TOML: {exc}") from None
+    return parse_ros2_config(data.get("ros2", {}), name)
+
+
+def parse_ros2_config(table: Any, name: str = "<config>") -> Ros2Config:
+    def fail(key: str, problem: str) -> RosConfigError:
+        return RosConfigError(f"{name}: ros2.{key}: {problem}")
+
+    if not isinstance(table, dict):
+        raise fail("", "must be a table")
+    key_format = table.get("key_format", "rmw_zenoh")
+    if key_format not in KEY_FORMATS:
+        raise fail("key_format", f"expected one of {', '.join(KEY_FORMATS)}, got {key_format!r}")
+    domain = table.get("domain", 0)
+    if not _is_domain(domain):
+        raise fail("domain", f"expected an integer 0..232, got {domain!r}")
+    bridge_ns = table.get("bridge_namespace", "")
+    if not isinstance(bridge_ns, str):
+        raise fail("bridge_namespace", "expected a string")
+    robots: dict[str, RobotLink] = {}
+    for rid, entry in (table.get("robots") or {}).items():
+        robots[rid] = _parse_link(rid, entry, lambda key, problem, rid=rid: fail(f"robots.{rid}.{key}", problem))
+    return Ros2Config(key_format, domain, bridge_ns, robots, name)
+
+
+def _is_domain(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= 232
+
+
+def _parse_link(rid: str, entry: Any, fail: Any) -> RobotLink:
+    if not isinstance(entry, dict):
+        raise fail("", "must be a table")
+    known = set(_FLOATS) | set(_STRINGS) | {"map_to_odom", "key_format", "domain"}
+    for key in entry:
+        if key not in known:
+            raise fail(key, f"unknown key (known: {', '.join(sorted(known))})")
+    values: dict[str, Any] = {"namespace": f"/{rid}"}
+    for key in _STRINGS:
+        if key in entry:
+            if not isinstance(entry[key], str):
+                raise fail(key, f"expected a string, got {entry[key]!r}")
+            values[key] = entry[key]
+    for key in _FLOATS:
+        if key in entry:
+            value = entry[key]
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+                raise fail(key, f"expected a number > 0, got {value!r}")
+            values[key] = float(value)
+    if "map_to_odom" in entry:
+        value = entry["map_to_odom"]
+        if (not isinstance(value, list) or len(value) != 3
+                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)):
+            raise fail("map_to_odom", f"expected [x, y, yaw] (metres, radians), got {value!r}")
+        values["map_to_odom"] = tuple(float(v) for v in value)
+    if "key_format" in entry:
+        if entry["key_format"] not in KEY_FORMATS:
+            raise fail("key_format", f"expected one of {', '.join(KEY_FORMATS)}, got {entry['key_format']!r}")
+        values["key_format"] = entry["key_format"]
+    if "domain" in entry:
+        if not _is_domain(entry["domain"]):
+            raise fail("domain", f"expected an integer 0..232, got {entry['domain']!r}")
+        values["domain"] = entry["domain"]
+    if values.get("pose_type", "odometry") not in POSE_TYPES:
+        raise fail("pose_type", f"expected one of {', '.join(POSE_TYPES)}, got {values['pose_type']!r}")
+    link = RobotLink(rid, **values)
+    for key in ("cmd_vel", "pose_topic") + (("tf_topic",) if link.tf_topic else ()):
+        try:
+            link.topic(getattr(link, key))
+        except ValueError as exc:
+            raise fail(key, str(exc)) from None
+    return link
+
+
+def add_ros2_link_arguments(parser: Any) -> None:
+    """The ROS 2 options every ROS 2 facing command shares (robot driver, simulated bases, bridge)."""
+    parser.add_argument("--ros2-config", metavar="FILE", help="robot config file with [ros2] tables (docs/ros2.md); default: built-in defaults")
+    parser.add_argument("--key-format", choices=KEY_FORMATS, help="ROS 2 key format (overrides the config file; default rmw_zenoh)")
+    parser.add_argument("--domain", type=int, metavar="N", help="ROS domain id (overrides the config file; default 0)")
+
+
+def ros2_config_from(args: Any) -> Ros2Config:
+    """The config the options above name (raises RosConfigError, a ValueError, when it is bad)."""
+    return load_ros2_config(args.ros2_config).with_overrides(key_format=args.key_format, domain=args.domain)

@@ -1,0 +1,121 @@
+"""A stand-in ROS 2 mobile base and site clock for testing ``arroch robot --ros2`` on its own.
+
+:class:`FakeBase` runs in the test process: it publishes the site ``clock`` (realtime, so site
+time = wall seconds since it started) and the robot's ``nav_msgs/Odometry`` at 20 Hz, records
+every ``geometry_msgs/Twist`` the driver sends with the site time it arrived, and moves the robot
+by them (a unicycle, as a base would). Odometry can be paused to make the pose go stale.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass
+
+from protocol.messages import Clock, RobotCommand
+from protocol.pursuit import integrate
+from protocol.ros2 import types as ros
+from protocol.ros2.config import Ros2Config
+from protocol.ros2.node import RosNode
+from tests.conftest import TestClient
+
+PERIOD = 0.05  # s between odometry messages (and clock messages)
+
+
+@dataclass(frozen=True)
+class TwistSeen:
+    site_time: float
+    v: float
+    omega: float
+
+    @property
+    def zero(self) -> bool:
+        return self.v == 0.0 and self.omega == 0.0
+
+
+class FakeBase:
+    def __init__(self, client: TestClient, robot: str, start: tuple[float, float, float], config: Ros2Config, *,
+                 publish_clock: bool = True) -> None:
+        self.client = client
+        self.robot = robot
+        self.start = start
+        self.x, self.y, self.theta = 0.0, 0.0, 0.0  # odom frame: zero where the base booted (its start)
+        self.v = self.omega = 0.0
+        self.twists: list[TwistSeen] = []
+        self.odometry_sent: list[float] = []  # site times the odometry messages went out
+        self.odometry_on = True
+        self.publish_clock = publish_clock  # False: a simulator keeps the site clock
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        link = config.link(robot)
+        node = RosNode(client, config.naming(robot), f"fake_base_{robot}", link.namespace)
+        self._odom = node.publisher(link.pose_topic, ros.ODOMETRY)
+        key = config.naming(robot).subscription_key(link.topic(link.cmd_vel), ros.TWIST)
+        client.hold(client.session.declare_subscriber(key, self._on_twist))
+        self.t0 = time.monotonic()
+        self._thread = threading.Thread(target=self._run, name="fake-base", daemon=True)
+        self._thread.start()
+
+    def now(self) -> float:
+        """Site time (the clock this base publishes)."""
+        return time.monotonic() - self.t0
+
+    def _on_twist(self, sample) -> None:  # noqa: ANN001
+        msg = ros.deserialize(sample.payload.to_bytes(), ros.TWIST)
+        with self._lock:
+            self.v, self.omega = msg.linear.x, msg.angular.z
+            self.twists.append(TwistSeen(self.now(), msg.linear.x, msg.angular.z))
+
+    def _run(self) -> None:
+        seq = 0
+        while not self._stop.wait(PERIOD):
+            now = self.now()
+            seq += 1
+            if self.publish_clock:
+                self.client.publish(self.client.keys.clock(), Clock(time=now, mode="realtime", rate=1.0, world_version=1))
+            with self._lock:
+                self.x, self.y, self.theta = integrate(self.x, self.y, self.theta, self.v, self.omega, PERIOD)
+                x, y, theta, v, omega = self.x, self.y, self.theta, self.v, self.omega
+            if self.odometry_on:
+                self._odom.publish(ros.odometry(now, "odom", "base_link", x, y, theta, v, omega))
+                self.odometry_sent.append(now)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+
+    # ------------------------------------------------------------------ what the tests ask
+
+    def map_pose(self) -> tuple[float, float, float]:
+        ox, oy, oth = self.start
+        with self._lock:
+            x, y, th = self.x, self.y, self.theta
+        return ox + math.cos(oth) * x - math.sin(oth) * y, oy + math.sin(oth) * x + math.cos(oth) * y, oth + th
+
+    def wait_moving(self, timeout: float = 15.0) -> float:
+        """Site time of the first non-zero Twist (the driver drives the base)."""
+        return self._wait(lambda tw: not tw.zero, 0.0, timeout, "a non-zero Twist").site_time
+
+    def first_zero_after(self, t: float, timeout: float = 5.0) -> TwistSeen:
+        return self._wait(lambda tw: tw.zero, t, timeout, "a zero Twist")
+
+    def _wait(self, pred, after: float, timeout: float, what: str) -> TwistSeen:  # noqa: ANN001
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            with self._lock:
+                found = [tw for tw in self.twists if tw.site_time >= after and pred(tw)]
+            if found:
+                return found[0]
+            time.sleep(0.01)
+        raise AssertionError(f"no {what} after site time {after:.2f} within {timeout} s; last twists {self.twists[-5:]}")
+
+
+def straight_command(robot: str, start: tuple[float, float, float], length: float, *, action_id: int = 1, opening: str = "d_lab",
+                     offset: float = 0.0) -> RobotCommand:
+    """An ``approach`` whose trajectory runs ``length`` m straight ahead of ``start`` (shifted ``offset`` m
+    back along the heading: a trajectory that starts that far from the robot)."""
+    x, y, th = start
+    c, s = math.cos(th), math.sin(th)
+    rows = [[0.1 * i, x + c * (i * length / 20 - offset), y + s * (i * length / 20 - offset), th] for i in range(21)]
+    return RobotCommand(robot=robot, plan_id=1, action_id=action_id, action="approach", args=[opening], trajectory=rows)

@@ -1,0 +1,115 @@
+"""The ROS 2 wire helpers (protocol/ros2): type hashes against the values ROS 2 publishes, keys and
+tokens in rmw_zenoh's and zenoh-bridge-ros2dds's formats, the attachment layout, CDR round trips,
+the robot config file's checks."""
+
+from __future__ import annotations
+
+import math
+import struct
+
+import pytest
+
+from protocol.ros2 import types as ros
+from protocol.ros2.attachment import Attachment, gid_of
+from protocol.ros2.config import RosConfigError, load_ros2_config, parse_ros2_config
+from protocol.ros2.keys import TopicNaming, full_topic
+
+
+@pytest.mark.parametrize("typename", ros.USED_TYPES)
+def test_type_hashes_match_what_ros2_publishes(typename):
+    assert ros.type_hash(typename) == ros.PUBLISHED_HASHES[typename]
+
+
+def test_rmw_zenoh_keys_and_tokens():
+    naming = TopicNaming("rmw_zenoh", 3)
+    assert naming.data_key("/r0/cmd_vel", ros.TWIST) == f"3/r0/cmd_vel/geometry_msgs::msg::dds_::Twist_/{ros.PUBLISHED_HASHES[ros.TWIST]}"
+    assert naming.subscription_key("/r0/odom", ros.ODOMETRY) == "3/r0/odom/nav_msgs::msg::dds_::Odometry_/*"
+    assert naming.node_token("abcd", 0, "/", "talker") == "@ros2_lv/3/abcd/0/0/NN/%/%/talker"
+    token = naming.endpoint_token("abcd", 0, 10, "MP", "/", "talker", "/chatter", ros.STRING)
+    # The shape of rmw_zenoh's design document's example for the talker demo.
+    assert token == f"@ros2_lv/3/abcd/0/10/MP/%/%/talker/%chatter/std_msgs::msg::dds_::String_/{ros.PUBLISHED_HASHES[ros.STRING]}/1:2:1,10:,:,:,,"
+
+
+def test_ros2dds_keys_are_the_topic_names():
+    assert TopicNaming("ros2dds").data_key("/r0/cmd_vel", ros.TWIST) == "r0/cmd_vel"
+    assert TopicNaming("ros2dds", bridge_namespace="/fleet").data_key("/tf", ros.TF_MESSAGE) == "fleet/tf"
+
+
+def test_topic_names():
+    assert full_topic("/r0", "odom") == "/r0/odom"
+    assert full_topic("/r0", "/tf") == "/tf"
+    assert full_topic("/", "cmd_vel") == "/cmd_vel"
+    with pytest.raises(ValueError):
+        full_topic("/r0", "bad name")
+
+
+def test_attachment_layout():
+    gid = gid_of("@ros2_lv/0/x/0/1/MP/%/%/n/%t/std_msgs::msg::dds_::String_/h/::")
+    data = Attachment(42, 1_700_000_000_123_456_789, gid).encode()
+    # int64 sequence number, int64 timestamp (ns), then the 16-byte GID as a sequence (length 16).
+    assert len(data) == 33 and struct.unpack_from("<qq", data) == (42, 1_700_000_000_123_456_789) and data[16] == 16
+    assert Attachment.decode(data) == Attachment(42, 1_700_000_000_123_456_789, gid)
+    with pytest.raises(ValueError):
+        Attachment.decode(data[:-1])
+
+
+def test_cdr_round_trip_of_an_odometry():
+    msg = ros.odometry(12.5, "odom", "base_link", 1.25, -3.5, 2.9, 0.4, -0.2)
+    payload = ros.serialize(msg, ros.ODOMETRY)
+    assert payload[:4] == b"\x00\x01\x00\x00"  # CDR, little endian
+    p = ros.pose_2d(ros.deserialize(payload, ros.ODOMETRY), ros.ODOMETRY)
+    assert (p.x, p.y, p.v, p.omega, p.frame, p.child_frame) == (1.25, -3.5, 0.4, -0.2, "odom", "base_link")
+    assert math.isclose(p.theta, 2.9, abs_tol=1e-12) and math.isclose(p.stamp, 12.5)
+    with pytest.raises(Exception):
+        ros.deserialize(payload[:40], ros.ODOMETRY)
+
+
+def test_config_file(tmp_path):
+    f = tmp_path / "robots.toml"
+    f.write_text('[ros2]\nkey_format = "ros2dds"\ndomain = 5\n[ros2.robots.r0]\nnamespace = "/tb3"\npose_topic = "amcl_pose"\n'
+                 'pose_type = "pose"\nmap_to_odom = [1, 2, 0.5]\n')
+    config = load_ros2_config(f)
+    assert config.naming().key_format == "ros2dds" and config.domain == 5
+    link = config.link("r0")
+    assert link.topic(link.pose_topic) == "/tb3/amcl_pose" and link.pose_typename == ros.POSE_COV_STAMPED
+    assert link.map_to_odom == (1.0, 2.0, 0.5)
+    assert config.link("r9").topic("cmd_vel") == "/r9/cmd_vel"  # a robot without a table: defaults
+    f.write_text('[ros2]\ndomain = 5\n[ros2.robots.r1]\nkey_format = "ros2dds"\ndomain = 9\n')
+    mixed = load_ros2_config(f)
+    assert (mixed.naming("r1").key_format, mixed.naming("r1").domain) == ("ros2dds", 9)
+    assert (mixed.naming("r0").key_format, mixed.naming("r0").domain) == ("rmw_zenoh", 5)
+    assert mixed.with_overrides(domain=2).naming("r1").domain == 2  # the command line wins
+
+
+@pytest.mark.parametrize("table, where", [
+    ({"key_format": "dds"}, "ros2.key_format"),
+    ({"domain": 999}, "ros2.domain"),
+    ({"robots": {"r0": {"map_to_odom": [1, 2]}}}, "ros2.robots.r0.map_to_odom"),
+    ({"robots": {"r0": {"pose_type": "gps"}}}, "ros2.robots.r0.pose_type"),
+    ({"robots": {"r0": {"cmd_vel": "bad topic"}}}, "ros2.robots.r0.cmd_vel"),
+    ({"robots": {"r0": {"speed": 1}}}, "ros2.robots.r0.speed"),
+    ({"robots": {"r0": {"pose_timeout": -1}}}, "ros2.robots.r0.pose_timeout"),
+    ({"robots": {"r0": {"key_format": "fastdds"}}}, "ros2.robots.r0.key_format"),
+])
+def test_config_errors_name_the_key(table, where):
+    with pytest.raises(RosConfigError, match=f"robots.toml: {where}"):
+        parse_ros2_config(table, "robots.toml")
+
+
+def test_site_markers_follow_the_state():
+    from protocol.site import load_site
+    from services.ros2.markers import SiteState, site_markers
+
+    site = load_site()
+    state = SiteState(doors_open={"d_lab": True}, carried_by={"o0": "r0"}, delivered={"o1"}, object_at={"o1": (6.0, 2.0)})
+    msg = ros.deserialize(ros.serialize(site_markers(site, state, 3.0), ros.MARKER_ARRAY), ros.MARKER_ARRAY)
+    by = {(m.ns, m.id): m for m in msg.markers}
+    assert len([k for k in by if k[0] == "walls"]) == len(site.walls)
+    doors = list(site.door_leaves)
+    assert by[("doors", doors.index("d_lab"))].color.g > 0.5 and by[("doors", doors.index("d_storage"))].color.r > 0.5
+    objects = list(site.objects)
+    carried = by[("objects", objects.index("o0"))]
+    assert carried.header.frame_id == "r0/base_link" and carried.frame_locked
+    delivered = by[("objects", objects.index("o1"))]
+    assert (delivered.pose.position.x, delivered.pose.position.y) == (6.0, 2.0) and abs(delivered.color.a - 0.4) < 1e-6  # float32
+    assert {m.header.frame_id for m in msg.markers if m.ns == "robots"} == {f"{rid}/base_link" for rid in site.robots}

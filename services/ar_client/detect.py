@@ -41,6 +41,7 @@ import numpy as np
 from protocol.apriltag import apriltag_corners, opencv_corners
 
 from .refine import refine_corners
+from .smalltags import decode_quads
 
 log = logging.getLogger("arroch.ar.detect")
 
@@ -136,6 +137,7 @@ class TagDetector:
         decimate: float | None = None,
         max_hamming: int = 1,
         opencv_refine: str = "edges",
+        small_tags: bool = True,
     ) -> None:
         if method not in ("apriltag", "opencv"):
             raise ValueError(f"unknown detector {method!r} (expected 'apriltag' or 'opencv')")
@@ -146,6 +148,7 @@ class TagDetector:
         self.known_ids = None if known_ids is None else frozenset(int(i) for i in known_ids)
         self.decimate = decimate
         self.max_hamming = max_hamming
+        self.small_tags = small_tags  # OpenCV back end: read small tags from ArUco's rejected quads
         self._lock = threading.Lock()  # the pupil detector's decimation is per-call state
         if method == "apriltag":
             self._pupil = apriltag_detector()
@@ -185,14 +188,27 @@ class TagDetector:
                 if d.hamming <= self.max_hamming and self._keep(d.tag_id):
                     out.append(TagDetection(int(d.tag_id), apriltag_corners(d.corners), "apriltag", float(d.decision_margin), int(d.hamming)))
         else:
-            corners, ids, _ = self._aruco.detectMarkers(gray)
+            corners, ids, rejected = self._aruco.detectMarkers(gray)
             if ids is not None:
                 kept = [(int(i), opencv_corners(c)) for c, i in zip(corners, ids.ravel()) if self._keep(int(i))]
                 quads = [q for _, q in kept]
                 if self.refine == "edges":
                     quads = refine_corners(gray, quads)
                 out += [TagDetection(i, q, "opencv") for (i, _), q in zip(kept, quads)]
+            if self.small_tags and rejected:
+                out += self._small(gray, rejected, out)
         return out
+
+    def _small(self, gray: np.ndarray, rejected: Sequence[np.ndarray], found: list[TagDetection]) -> list[TagDetection]:
+        """Small tags read from ArUco's rejected quads (:mod:`smalltags`), away from tags already found."""
+        centres = np.array([d.corners.mean(axis=0) for d in found]).reshape(-1, 2)
+        quads = []
+        for r in rejected:
+            q = r.reshape(4, 2).astype(np.float64)
+            if len(centres) and (np.linalg.norm(centres - q.mean(axis=0), axis=1) < 4.0).any():
+                continue
+            quads.append(q)
+        return [TagDetection(i, opencv_corners(q), "opencv", score) for i, q, score in decode_quads(gray, quads, self.known_ids)]
 
     def detect(self, image: np.ndarray) -> list[TagDetection]:
         """All known tags in the frame, wholly inside it, one detection per id (the most confident)."""

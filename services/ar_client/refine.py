@@ -64,7 +64,7 @@ def refine_corners(gray: np.ndarray, quads: list[np.ndarray]) -> list[np.ndarray
     outward = np.einsum("tij,tij->ti", normals, q + edges / 2.0 - q.mean(axis=1, keepdims=True))
     normals = np.where((outward < 0)[..., None], -normals, normals)
     grid = bases[:, :, :, None, :] + steps[:, None, None, :, None] * normals[:, :, None, None, :]  # (T, 4, K, S, 2)
-    profile = _sample(gray, grid)
+    profile = sample_bilinear(gray, grid)
     # Crossing of each profile: gradient-weighted mean of its rising (dark inside → light outside) part.
     grad = np.clip(np.diff(profile, axis=-1), 0.0, None)
     mids = (steps[:, :-1] + steps[:, 1:]) / 2.0  # (T, S-1)
@@ -90,7 +90,7 @@ def refine_corners(gray: np.ndarray, quads: list[np.ndarray]) -> list[np.ndarray
     rp = r - p
     with np.errstate(invalid="ignore", divide="ignore"):
         s = (rp[..., 0] * (-v[..., 1]) - rp[..., 1] * (-v[..., 0])) / det
-    corners = p + s[..., None] * u
+        corners = p + s[..., None] * u  # parallel edges (a degenerate quad) give inf/nan: not accepted below
     ok_lines = enough & np.roll(enough, 1, axis=1) & (np.abs(det) > 1e-6)
     shift = np.linalg.norm(corners - q, axis=2)
     accept = usable[:, None] & ok_lines & np.isfinite(shift) & (shift <= MAX_SHIFT_MODULES * module[:, None] + 0.5)
@@ -98,7 +98,7 @@ def refine_corners(gray: np.ndarray, quads: list[np.ndarray]) -> list[np.ndarray
     return [c for c in refined]
 
 
-def _sample(gray: np.ndarray, grid: np.ndarray) -> np.ndarray:
+def sample_bilinear(gray: np.ndarray, grid: np.ndarray) -> np.ndarray:
     """Bilinear intensities at ``grid``'s (..., 2) pixel positions, in one ``cv2.remap`` call."""
     shape = grid.shape[:-1]
     coords = grid.reshape(-1, 2).astype(np.float32)

@@ -20,6 +20,13 @@ once):
    all tags, every leave-one-out subset is tried.
 4. No tag or no acceptable pose: the result is *lost*, carrying the age of the last good pose and the
    reason — never an extrapolated or invented pose.
+
+With gravity (the tablet's accelerometer, :mod:`gravity`), the candidates also include the minima of
+the gravity-constrained 4-DoF solve (yaw + position), every candidate is refined with gravity as a
+soft prior, a candidate tilted more than ``gravity_gate_deg`` from it is implausible, and the choice
+weighs the pixels and gravity together (chi-square: corner residuals at the best fit's RMSE, tilt at
+the prior's sigma). One tag's mirror solution tilts the camera differently from the true one, so
+gravity picks the right one where the pixels cannot. Without gravity nothing changes.
 """
 
 from __future__ import annotations
@@ -32,11 +39,16 @@ import numpy as np
 
 from .detect import TagDetection
 from protocol.frames import CameraPose, rotation_angle
+from .gravity import GravityPrior, gravity_error, refine as refine_with_gravity, yaw_scan
 from .project import Intrinsics
 
 #: Candidates within this factor (plus ``AMBIGUOUS_SLACK_PX``) of the best RMSE count as equally good fits.
 AMBIGUOUS_RATIO = 1.5
 AMBIGUOUS_SLACK_PX = 0.2
+#: With gravity: candidates whose chi-square exceeds the best one's by less than this are ambiguous.
+AMBIGUOUS_CHI2 = 9.0
+#: With gravity: the corner noise assumed is the best fit's RMSE, but never below this (pixels).
+MIN_SIGMA_PX = 0.3
 
 
 @dataclass
@@ -54,6 +66,7 @@ class Localization:
     candidates: int = 0
     reason: str = ""
     lost_age: float | None = None  # when lost: seconds since the last good pose (None: never had one)
+    gravity_error_deg: float | None = None  # when gravity was given: tilt between the pose and it
 
     def to_json(self) -> dict:
         """The ``arroch ar localize --json`` shape."""
@@ -68,6 +81,7 @@ class Localization:
             "per_tag_rmse_px": {str(k): float(v) for k, v in self.per_tag_rmse.items()},
             "rejected": self.rejected,
             "ambiguous": self.ambiguous,
+            "gravity_error_deg": None if self.gravity_error_deg is None else float(self.gravity_error_deg),
         }
 
 
@@ -77,6 +91,7 @@ class _Candidate:
     tvec: np.ndarray
     rmse: float
     pose: CameraPose
+    tilt: float = 0.0  # radians between the pose's vertical and gravity (0 without gravity)
 
 
 class Localizer:
@@ -91,6 +106,8 @@ class Localizer:
         height_range: tuple[float, float] = (0.3, 2.2),
         track_max_age: float = 1.0,
         room_margin: float = 0.2,
+        gravity_sigma_deg: float = 1.0,
+        gravity_gate_deg: float = 10.0,
     ) -> None:
         self.site = site
         self.landmarks: dict[int, np.ndarray] = {lm.tag: np.asarray(lm.corners(), dtype=np.float64) for lm in site.landmarks}
@@ -101,16 +118,23 @@ class Localizer:
         self.height_range = height_range
         self.track_max_age = track_max_age
         self.room_margin = room_margin
+        self.gravity_sigma_deg = gravity_sigma_deg
+        self.gravity_gate = np.radians(gravity_gate_deg)
         self.last: Localization | None = None  # last good result
         self._failure = ""  # why the last failed solve found nothing, for the "lost" reason
+        self._gravity: GravityPrior | None = None  # this frame's, while it is solved
 
     def reset(self) -> None:
         self.last = None
 
     # ------------------------------------------------------------------ public
 
-    def localize(self, detections: Sequence[TagDetection], intrinsics: Intrinsics, stamp: float) -> Localization:
-        """Solve this frame's pose and update the tracking state (only good poses are remembered)."""
+    def localize(self, detections: Sequence[TagDetection], intrinsics: Intrinsics, stamp: float, gravity=None) -> Localization:  # noqa: ANN001
+        """Solve this frame's pose and update the tracking state (only good poses are remembered).
+
+        ``gravity``: the measured gravity in the camera frame (pointing down, any magnitude), or None.
+        """
+        self._gravity = GravityPrior.from_vector(gravity, self.gravity_sigma_deg)
         known = [d for d in detections if d.tag_id in self.landmarks]
         if not known:
             why = "no landmark tag in view" if not detections else f"tags {sorted(d.tag_id for d in detections)} are not in the site"
@@ -180,31 +204,53 @@ class Localizer:
         if prior is not None:
             r, t = prior.rvec_tvec()
             seeds.append((r.reshape(3, 1).copy(), t.reshape(3, 1).copy()))
+        gravity = self._gravity
+        if gravity is not None:
+            seeds += yaw_scan(obj, img, Km, dist, gravity)
         cands: list[_Candidate] = []
         for rvec, tvec in seeds:
-            rvec, tvec = cv2.solvePnPRefineLM(obj, img, Km, dist, rvec.astype(np.float64).copy(), tvec.astype(np.float64).copy())
+            rvec, tvec = rvec.astype(np.float64).copy(), tvec.astype(np.float64).copy()
+            if gravity is None:
+                rvec, tvec = cv2.solvePnPRefineLM(obj, img, Km, dist, rvec, tvec)
+            else:
+                rvec, tvec = refine_with_gravity(obj, img, Km, dist, rvec, tvec, gravity)
             rmse = _rmse(obj, img, rvec, tvec, Km, dist)
             if not np.isfinite(rmse):
                 continue
             pose = CameraPose.from_rvec_tvec(rvec, tvec)
             if any(rotation_angle(pose.R_wc, c.pose.R_wc) < np.radians(0.5) and np.linalg.norm(pose.position - c.pose.position) < 0.01 for c in cands):
                 continue  # the same solution reached from another seed
-            cands.append(_Candidate(rvec, tvec, rmse, pose))
+            tilt = gravity_error(pose.R_wc, gravity) if gravity is not None else 0.0
+            cands.append(_Candidate(rvec, tvec, rmse, pose, tilt))
         n_cands = len(cands)
-        good = [c for c in cands if c.rmse <= self.max_rmse_px and self._plausible(c.pose, used)]
+        good = [c for c in cands if c.rmse <= self.max_rmse_px and c.tilt <= self.gravity_gate and self._plausible(c.pose, used)]
         if not good:
             # Say why the best-fitting candidate failed: that is what a user can act on.
             if cands:
                 top = min(cands, key=lambda c: c.rmse)
                 ids = [d.tag_id for d in used]
-                self._failure = f"best fit {top.rmse:.2f} px" if top.rmse > self.max_rmse_px else self.plausibility(top.pose, ids)
+                if top.rmse > self.max_rmse_px:
+                    self._failure = f"best fit {top.rmse:.2f} px"
+                elif top.tilt > self.gravity_gate:
+                    self._failure = f"camera tilt disagrees with gravity by {np.degrees(top.tilt):.1f}°"
+                else:
+                    self._failure = self.plausibility(top.pose, ids)
             return None
         # Solutions fitting nearly as well as the best are genuinely ambiguous on these pixels;
         # only there may the previous pose decide (never against a clearly better fit).
         floor = min(c.rmse for c in good)
-        contenders = [c for c in good if c.rmse <= AMBIGUOUS_RATIO * floor + AMBIGUOUS_SLACK_PX]
+        if gravity is None:
+            contenders = [c for c in good if c.rmse <= AMBIGUOUS_RATIO * floor + AMBIGUOUS_SLACK_PX]
+        else:
+            sigma_px = max(floor, MIN_SIGMA_PX)
+            sigma_tilt = np.radians(gravity.sigma_deg)
+            chi2 = {id(c): len(obj) * (c.rmse / sigma_px) ** 2 + (c.tilt / sigma_tilt) ** 2 for c in good}
+            least = min(chi2.values())
+            contenders = sorted((c for c in good if chi2[id(c)] <= least + AMBIGUOUS_CHI2), key=lambda c: chi2[id(c)])
         if prior is not None:
             best = min(contenders, key=lambda c: rotation_angle(c.pose.R_wc, prior.R_wc) + np.linalg.norm(c.pose.position - prior.position))
+        elif gravity is not None:
+            best = contenders[0]
         else:
             best = min(contenders, key=lambda c: c.rmse)
         ambiguous = len(contenders) > 1
@@ -222,6 +268,7 @@ class Localizer:
             per_tag_rmse=per_tag,
             ambiguous=ambiguous,
             candidates=n_cands,
+            gravity_error_deg=float(np.degrees(best.tilt)) if gravity is not None else None,
         )
 
     def plausibility(self, pose: CameraPose, tag_ids: Sequence[int]) -> str:

@@ -117,15 +117,17 @@ class Pipeline:
             raise BadFrame(f"frame of {len(frame)} bytes is not a decodable image")
         return image
 
-    def localize(self, gray: np.ndarray, intrinsics: Intrinsics, stamp: float) -> Localization:
+    def localize(self, gray: np.ndarray, intrinsics: Intrinsics, stamp: float, gravity=None) -> Localization:  # noqa: ANN001
         """Detect and localise, with the guided second pass for tags predicted but not found.
+
+        ``gravity``: the frame's measured gravity in the camera frame (pointing down), or None.
 
         Adds the time spent to ``timings.detect`` (both detection passes) and ``timings.pose``.
         """
         t0 = time.perf_counter()
         dets = self.detector.detect(gray)
         t1 = time.perf_counter()
-        loc = self.localizer.localize(dets, intrinsics, stamp)
+        loc = self.localizer.localize(dets, intrinsics, stamp, gravity)
         detect, pose = t1 - t0, time.perf_counter() - t1
         guide = loc.pose if loc.ok else self.localizer.prior(stamp)
         if self.guided and guide is not None:
@@ -136,7 +138,7 @@ class Pipeline:
             t4 = time.perf_counter()
             if extra:
                 dets = sorted(dets + extra, key=lambda d: d.tag_id)
-                loc = self.localizer.localize(dets, intrinsics, stamp)
+                loc = self.localizer.localize(dets, intrinsics, stamp, gravity)
             detect += t4 - t3
             pose += (t3 - t2) + (time.perf_counter() - t4)
         self.timings.detect += detect
@@ -188,13 +190,15 @@ class Pipeline:
         frame_seq: int = 0,
         annotate: bool = True,
         now: float | None = None,
+        gravity=None,  # noqa: ANN001
     ) -> tuple[Overlay, np.ndarray | None]:
         """The Overlay for a frame captured at ``timestamp`` (site clock), and the annotated image.
 
         ``now`` is the site-clock time the world is drawn at (intent time marks); default
         ``timestamp``. Latency in the Overlay is the clock's now minus ``timestamp`` when the
         pipeline has a clock and that difference is plausible (between this call's processing time
-        and :data:`MAX_PLAUSIBLE_LATENCY`), else this call's processing time.
+        and :data:`MAX_PLAUSIBLE_LATENCY`), else this call's processing time. ``gravity``: the
+        frame's measured gravity (camera frame, pointing down; ``CameraFrame.gravity``), or None.
         """
         started = time.perf_counter()
         image = self.decode(frame, colour=annotate)
@@ -203,7 +207,7 @@ class Pipeline:
         gray = to_gray(image)
         t_decoded = time.perf_counter()
         self.timings = Timings(decode=t_decoded - started)
-        loc = self.localize(gray, intrinsics, timestamp)
+        loc = self.localize(gray, intrinsics, timestamp, gravity)
 
         t_proj = time.perf_counter()
         world = self.world.snapshot(timestamp if now is None else now)

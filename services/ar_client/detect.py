@@ -49,6 +49,8 @@ log = logging.getLogger("arroch.ar.detect")
 BORDER_MARGIN_PX = 2.0
 #: Frames up to this many pixels are searched at full resolution by the AprilTag back end.
 FULL_RES_MAX_PIXELS = 500_000
+#: Edge-fit passes over ArUco's corners (a second pass re-centres the profiles on small tags' edges).
+REFINE_PASSES = 2
 #: Crops whose predicted tag is smaller than this (pixels across) are upscaled ×2 before the search.
 UPSCALE_BELOW_PX = 40.0
 
@@ -148,6 +150,7 @@ class TagDetector:
         self.known_ids = None if known_ids is None else frozenset(int(i) for i in known_ids)
         self.decimate = decimate
         self.max_hamming = max_hamming
+        self.refine_passes = REFINE_PASSES
         self.small_tags = small_tags  # OpenCV back end: read small tags from ArUco's rejected quads
         self._lock = threading.Lock()  # the pupil detector's decimation is per-call state
         if method == "apriltag":
@@ -193,7 +196,7 @@ class TagDetector:
                 kept = [(int(i), opencv_corners(c)) for c, i in zip(corners, ids.ravel()) if self._keep(int(i))]
                 quads = [q for _, q in kept]
                 if self.refine == "edges":
-                    quads = refine_corners(gray, quads)
+                    quads = refine_corners(gray, quads, self.refine_passes)
                 out += [TagDetection(i, q, "opencv") for (i, _), q in zip(kept, quads)]
             if self.small_tags and rejected:
                 out += self._small(gray, rejected, out)

@@ -146,7 +146,7 @@ def refine(
     prior: GravityPrior,
     *,
     sigma_px: float = 0.5,
-    iterations: int = 12,
+    iterations: int = 10,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Levenberg–Marquardt over (rvec, tvec): reprojection residuals plus gravity at ``sigma_deg``.
 
@@ -186,11 +186,12 @@ def refine(
         r2, _ = residuals(trial, False)
         c2 = float(r2 @ r2)
         if c2 < cost:
+            converged = cost - c2 < 1e-10 * cost + 1e-12
             x, cost = trial, c2
+            if converged:
+                break
             r, J = residuals(x, True)
             lam = max(lam / 10.0, 1e-9)
-            if np.linalg.norm(step) < 1e-10:
-                break
         else:
             lam *= 10.0
             if lam > 1e6:

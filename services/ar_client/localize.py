@@ -47,8 +47,9 @@ AMBIGUOUS_RATIO = 1.5
 AMBIGUOUS_SLACK_PX = 0.2
 #: With gravity: candidates whose chi-square exceeds the best one's by less than this are ambiguous.
 AMBIGUOUS_CHI2 = 9.0
-#: With gravity: the corner noise assumed is the best fit's RMSE, but never below this (pixels).
-MIN_SIGMA_PX = 0.3
+#: With gravity: the corner noise (pixels per coordinate) is estimated from the best fit, within these bounds.
+MIN_SIGMA_PX = 0.1
+MAX_SIGMA_PX = 1.0
 
 
 @dataclass
@@ -204,24 +205,18 @@ class Localizer:
         if prior is not None:
             r, t = prior.rvec_tvec()
             seeds.append((r.reshape(3, 1).copy(), t.reshape(3, 1).copy()))
+        cands = self._refined(obj, img, Km, dist, seeds)
         gravity = self._gravity
-        if gravity is not None:
-            seeds += yaw_scan(obj, img, Km, dist, gravity)
-        cands: list[_Candidate] = []
-        for rvec, tvec in seeds:
-            rvec, tvec = rvec.astype(np.float64).copy(), tvec.astype(np.float64).copy()
-            if gravity is None:
-                rvec, tvec = cv2.solvePnPRefineLM(obj, img, Km, dist, rvec, tvec)
-            else:
-                rvec, tvec = refine_with_gravity(obj, img, Km, dist, rvec, tvec, gravity)
-            rmse = _rmse(obj, img, rvec, tvec, Km, dist)
-            if not np.isfinite(rmse):
-                continue
-            pose = CameraPose.from_rvec_tvec(rvec, tvec)
-            if any(rotation_angle(pose.R_wc, c.pose.R_wc) < np.radians(0.5) and np.linalg.norm(pose.position - c.pose.position) < 0.01 for c in cands):
-                continue  # the same solution reached from another seed
-            tilt = gravity_error(pose.R_wc, gravity) if gravity is not None else 0.0
-            cands.append(_Candidate(rvec, tvec, rmse, pose, tilt))
+        sigma_px = MIN_SIGMA_PX
+        if gravity is not None and cands:
+            # Corner noise from the best unconstrained fit (per coordinate, 6 parameters fitted),
+            # then every fitting minimum and every gravity-consistent one (the 4-DoF scan) refined
+            # with gravity as a prior at that noise.
+            n = 2 * len(obj)
+            best_rmse = min(c.rmse for c in cands)
+            sigma_px = float(np.clip(best_rmse * np.sqrt(len(obj) / max(n - 6, 1)), MIN_SIGMA_PX, MAX_SIGMA_PX))
+            seeds = [(c.rvec, c.tvec) for c in cands if c.rmse <= self.max_rmse_px] + yaw_scan(obj, img, Km, dist, gravity)
+            cands = self._refined(obj, img, Km, dist, seeds, gravity, sigma_px)
         n_cands = len(cands)
         good = [c for c in cands if c.rmse <= self.max_rmse_px and c.tilt <= self.gravity_gate and self._plausible(c.pose, used)]
         if not good:
@@ -242,7 +237,6 @@ class Localizer:
         if gravity is None:
             contenders = [c for c in good if c.rmse <= AMBIGUOUS_RATIO * floor + AMBIGUOUS_SLACK_PX]
         else:
-            sigma_px = max(floor, MIN_SIGMA_PX)
             sigma_tilt = np.radians(gravity.sigma_deg)
             chi2 = {id(c): len(obj) * (c.rmse / sigma_px) ** 2 + (c.tilt / sigma_tilt) ** 2 for c in good}
             least = min(chi2.values())
@@ -270,6 +264,26 @@ class Localizer:
             candidates=n_cands,
             gravity_error_deg=float(np.degrees(best.tilt)) if gravity is not None else None,
         )
+
+    def _refined(self, obj: np.ndarray, img: np.ndarray, Km: np.ndarray, dist: np.ndarray, seeds, gravity: GravityPrior | None = None,  # noqa: ANN001
+                 sigma_px: float = MIN_SIGMA_PX) -> list[_Candidate]:
+        """Each seed refined (Levenberg–Marquardt; with gravity as a prior when given), duplicates dropped."""
+        cands: list[_Candidate] = []
+        for rvec, tvec in seeds:
+            rvec, tvec = np.asarray(rvec, np.float64).reshape(3, 1).copy(), np.asarray(tvec, np.float64).reshape(3, 1).copy()
+            if gravity is None:
+                rvec, tvec = cv2.solvePnPRefineLM(obj, img, Km, dist, rvec, tvec)
+            else:
+                rvec, tvec = refine_with_gravity(obj, img, Km, dist, rvec, tvec, gravity, sigma_px=sigma_px)
+            rmse = _rmse(obj, img, rvec, tvec, Km, dist)
+            if not np.isfinite(rmse):
+                continue
+            pose = CameraPose.from_rvec_tvec(rvec, tvec)
+            if any(rotation_angle(pose.R_wc, c.pose.R_wc) < np.radians(0.5) and np.linalg.norm(pose.position - c.pose.position) < 0.01 for c in cands):
+                continue  # the same solution reached from another seed
+            tilt = gravity_error(pose.R_wc, gravity) if gravity is not None else 0.0
+            cands.append(_Candidate(rvec, tvec, rmse, pose, tilt))
+        return cands
 
     def plausibility(self, pose: CameraPose, tag_ids: Sequence[int]) -> str:
         """Empty when a pose is plausible for a hand-held tablet seeing ``tag_ids``; else why not."""

@@ -38,7 +38,15 @@ MIN_CONTRAST = 20.0
 _ROW = 1024
 
 
-def refine_corners(gray: np.ndarray, quads: list[np.ndarray]) -> list[np.ndarray]:
+def refine_corners(gray: np.ndarray, quads: list[np.ndarray], passes: int = 1) -> list[np.ndarray]:
+    """:func:`refine_once` ``passes`` times: a corner far off (a blurred small tag's, 1-2 px) moves
+    up to a module per pass, each pass starting from the previous one's corners."""
+    for _ in range(passes):
+        quads = refine_once(gray, quads)
+    return list(quads)
+
+
+def refine_once(gray: np.ndarray, quads: list[np.ndarray]) -> list[np.ndarray]:
     """Refined TL, TR, BR, BL corners (OpenCV pixel convention) for each quad in ``quads``.
 
     ``quads`` hold approximate corners (4, 2) of dark squares on a light border, in that order

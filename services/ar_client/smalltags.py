@@ -107,10 +107,7 @@ def decode_quads(gray: np.ndarray, quads: Iterable[np.ndarray], known_ids: froze
         kept.append(q)
     if not kept:
         return []
-    quads_arr = kept
-    for _ in range(REFINE_PASSES):
-        quads_arr = refine_corners(gray, quads_arr)
-    quads_arr = np.array(quads_arr)  # (Q, 4, 2)
+    quads_arr = np.array(refine_corners(gray, kept, REFINE_PASSES))  # (Q, 4, 2)
     # Sample points of all quads in all four corner orders (rolls), one remap.
     rolls = np.stack([np.roll(quads_arr, -k, axis=1) for k in range(4)], axis=1)  # (Q, 4, 4, 2)
     Hs = np.array([[cv2.getPerspectiveTransform(_SQUARE.astype(np.float32), r.astype(np.float32)) for r in rq] for rq in rolls])  # (Q, 4, 3, 3)

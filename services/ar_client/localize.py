@@ -73,7 +73,7 @@ class Localization:
         """The ``arroch ar localize --json`` shape."""
         if not self.ok or self.pose is None:
             return {"ok": False, "reason": self.reason, "tags": self.tags, "lost_age": self.lost_age}
-        return {
+        out = {
             "ok": True,
             "position": [float(v) for v in self.pose.position],
             "quaternion": [float(v) for v in self.pose.quaternion()],
@@ -82,8 +82,10 @@ class Localization:
             "per_tag_rmse_px": {str(k): float(v) for k, v in self.per_tag_rmse.items()},
             "rejected": self.rejected,
             "ambiguous": self.ambiguous,
-            "gravity_error_deg": None if self.gravity_error_deg is None else float(self.gravity_error_deg),
         }
+        if self.gravity_error_deg is not None:  # gravity was given: how far the pose's vertical is from it
+            out["gravity_error_deg"] = float(self.gravity_error_deg)
+        return out
 
 
 @dataclass

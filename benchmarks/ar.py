@@ -210,7 +210,7 @@ def run_pipeline(site, frames: list[Frame]) -> dict:  # noqa: ANN001
     # Warm-up (caches, first-call allocations) on the first frame, not measured.
     pipeline.process(frames[0].jpeg, frames[0].K, -100.0)
     for i, f in enumerate(frames):
-        pipeline.localizer.reset()  # independent views: no tracking across them
+        pipeline.reset()  # independent views: no tracking or filtering across them
         c0 = time.process_time()
         overlay, _ = pipeline.process(f.jpeg, f.K, 10.0 * i)
         cpu.append(time.process_time() - c0)
@@ -405,7 +405,7 @@ def hard_ours(site, frames: list[HardFrame], use_gravity: bool) -> dict:  # noqa
     cpu, ambiguous, wall = [], 0, []
     pipeline.process(frames[0].jpeg, frames[0].K, -100.0)
     for i, f in enumerate(frames):
-        pipeline.localizer.reset()  # independent views: no tracking across them
+        pipeline.reset()  # independent views: no tracking or filtering across them
         c0, w0 = time.process_time(), time.perf_counter()
         pipeline.process(f.jpeg, f.K, 10.0 * i, gravity=f.gravity if use_gravity else None)
         cpu.append(time.process_time() - c0)

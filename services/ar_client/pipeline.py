@@ -25,7 +25,9 @@ from .detect import TagDetection, TagDetector, to_gray
 from .draw import draw
 from .feedback import FeedbackPanel
 from protocol.frames import CameraPose
+from .gravity import GravityPrior
 from .localize import Localization, Localizer
+from .posefilter import FilteredPose, PoseFilter
 from .overlay import OverlayBuilder, status_primitives
 from .project import Intrinsics, Projector
 from .world import WorldSnapshot, WorldView
@@ -73,6 +75,7 @@ class Pipeline:
         panel: FeedbackPanel | None = None,
         clock: Callable[[], float] | None = None,
         guided: bool = True,
+        pose_filter: PoseFilter | None | bool = True,
     ) -> None:
         self.site = site
         self.world = world if world is not None else WorldView()
@@ -87,6 +90,9 @@ class Pipeline:
         self.last_localization: Localization | None = None
         self.last_world: WorldSnapshot | None = None  # what the last frame's overlay was drawn from
         self.last_detections: list[TagDetection] = []
+        # The pose drawn goes through a gated constant-velocity filter (posefilter.py); False: raw poses.
+        self.pose_filter = PoseFilter() if pose_filter is True else (pose_filter or None)
+        self.last_filtered: FilteredPose | None = None
         # Landmark geometry as arrays, for predicting which tags a pose should see.
         lms = site.landmarks
         normals = np.array([lm.normal for lm in lms], dtype=np.float64).reshape(-1, 3)
@@ -179,6 +185,22 @@ class Pipeline:
             out.append((int(lm["tags"][i]), black))
         return out
 
+    def _drawn_pose(self, loc: Localization, stamp: float, gravity) -> CameraPose | None:  # noqa: ANN001
+        """The pose the overlay is drawn from: the filter's (None when lost: nothing is drawn)."""
+        self.last_filtered = None
+        if not loc.ok or loc.pose is None:
+            return None
+        if self.pose_filter is None:
+            return loc.pose
+        self.last_filtered = self.pose_filter.update(loc.pose, stamp, GravityPrior.from_vector(gravity))
+        return self.last_filtered.pose
+
+    def reset(self) -> None:
+        """Forget tracking and filtering state (the next frame is unrelated to the last)."""
+        self.localizer.reset()
+        if self.pose_filter is not None:
+            self.pose_filter.reset()
+
     # ------------------------------------------------------------------ the whole frame
 
     def process(
@@ -213,8 +235,9 @@ class Pipeline:
         world = self.world.snapshot(timestamp if now is None else now)
         self.last_world = world
         prims = []
-        if loc.ok and loc.pose is not None:
-            prims = self.builder.world_primitives(Projector(loc.pose, intrinsics), world)
+        drawn = self._drawn_pose(loc, timestamp, gravity)
+        if drawn is not None:
+            prims = self.builder.world_primitives(Projector(drawn, intrinsics), world)
         processing = time.perf_counter() - started
         latency = processing
         if self.clock is not None:
@@ -241,8 +264,8 @@ class Pipeline:
             width=intrinsics.width,
             height=intrinsics.height,
             ok=loc.ok,
-            position=[float(v) for v in loc.pose.position] if loc.ok and loc.pose is not None else [],
-            quaternion=[float(v) for v in loc.pose.quaternion()] if loc.ok and loc.pose is not None else [],
+            position=[float(v) for v in drawn.position] if drawn is not None else [],
+            quaternion=[float(v) for v in drawn.quaternion()] if drawn is not None else [],
             tags=list(loc.tags),
             reprojection_rmse=float(loc.rmse_px) if loc.ok else 0.0,
             lost_age=float(loc.lost_age or 0.0) if not loc.ok else 0.0,

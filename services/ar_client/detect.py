@@ -40,7 +40,7 @@ import numpy as np
 
 from protocol.apriltag import apriltag_corners, opencv_corners
 
-from .refine import refine_corners
+from .refine import Lens, refine_corners
 from .smalltags import decode_quads
 
 log = logging.getLogger("arroch.ar.detect")
@@ -180,8 +180,8 @@ class TagDetector:
     def _keep(self, tag_id: int) -> bool:
         return self.known_ids is None or tag_id in self.known_ids
 
-    def _run(self, gray: np.ndarray, decimate: float) -> list[TagDetection]:
-        """Raw detections of one image (no border filtering)."""
+    def _run(self, gray: np.ndarray, decimate: float, lens: Lens | None = None) -> list[TagDetection]:
+        """Raw detections of one image (no border filtering); ``lens``: the frame's distortion, for the edge fit."""
         out: list[TagDetection] = []
         if self.method == "apriltag":
             with self._lock:
@@ -196,13 +196,13 @@ class TagDetector:
                 kept = [(int(i), opencv_corners(c)) for c, i in zip(corners, ids.ravel()) if self._keep(int(i))]
                 quads = [q for _, q in kept]
                 if self.refine == "edges":
-                    quads = refine_corners(gray, quads, self.refine_passes)
+                    quads = refine_corners(gray, quads, self.refine_passes, lens)
                 out += [TagDetection(i, q, "opencv") for (i, _), q in zip(kept, quads)]
             if self.small_tags and rejected:
-                out += self._small(gray, rejected, out)
+                out += self._small(gray, rejected, out, lens)
         return out
 
-    def _small(self, gray: np.ndarray, rejected: Sequence[np.ndarray], found: list[TagDetection]) -> list[TagDetection]:
+    def _small(self, gray: np.ndarray, rejected: Sequence[np.ndarray], found: list[TagDetection], lens: Lens | None) -> list[TagDetection]:
         """Small tags read from ArUco's rejected quads (:mod:`smalltags`), away from tags already found."""
         centres = np.array([d.corners.mean(axis=0) for d in found]).reshape(-1, 2)
         quads = []
@@ -211,16 +211,19 @@ class TagDetector:
             if len(centres) and (np.linalg.norm(centres - q.mean(axis=0), axis=1) < 4.0).any():
                 continue
             quads.append(q)
-        return [TagDetection(i, opencv_corners(q), "opencv", score) for i, q, score in decode_quads(gray, quads, self.known_ids)]
+        return [TagDetection(i, opencv_corners(q), "opencv", score) for i, q, score in decode_quads(gray, quads, self.known_ids, lens)]
 
-    def detect(self, image: np.ndarray) -> list[TagDetection]:
-        """All known tags in the frame, wholly inside it, one detection per id (the most confident)."""
+    def detect(self, image: np.ndarray, lens: Lens | None = None) -> list[TagDetection]:
+        """All known tags in the frame, wholly inside it, one detection per id (the most confident).
+
+        ``lens``: the camera's distortion, when it has any; the edge fit then runs where the tag's
+        edges are straight (:class:`refine.Lens`)."""
         gray = to_gray(image)
         h, w = gray.shape
-        found = [d for d in self._run(gray, self._decimation_for(gray)) if not touches_border(d.corners, w, h)]
+        found = [d for d in self._run(gray, self._decimation_for(gray), lens) if not touches_border(d.corners, w, h)]
         return _one_per_id(found)
 
-    def detect_regions(self, image: np.ndarray, regions: Sequence[tuple[int, np.ndarray]]) -> list[TagDetection]:
+    def detect_regions(self, image: np.ndarray, regions: Sequence[tuple[int, np.ndarray]], lens: Lens | None = None) -> list[TagDetection]:
         """Search crops for specific tags: ``regions`` holds ``(tag_id, predicted corners (4, 2))``.
 
         Each crop is the predicted quad's bounding box grown by its own size, searched at full
@@ -250,6 +253,8 @@ class TagDetector:
                     continue
                 # Back to frame pixels: crop pixel centre U ↔ frame (U + 0.5)/scale − 0.5 + offset.
                 corners = (d.corners + 0.5) / scale - 0.5 + np.array([x0, y0], dtype=np.float64)
+                if lens is not None and self.method == "opencv":
+                    corners = refine_corners(gray, [corners], 1, lens)[0]  # the crop's fit knew no distortion
                 if not touches_border(corners, w, h):
                     out.append(TagDetection(d.tag_id, corners, d.detector, d.decision_margin, d.hamming))
                 break

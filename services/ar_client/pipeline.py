@@ -30,6 +30,7 @@ from .localize import Localization, Localizer
 from .posefilter import FilteredPose, PoseFilter
 from .overlay import OverlayBuilder, status_primitives
 from .project import Intrinsics, Projector
+from .refine import Lens
 from .world import WorldSnapshot, WorldView
 
 #: Guided second pass: at most this many crops per frame, for predicted tags at least this big.
@@ -131,7 +132,8 @@ class Pipeline:
         Adds the time spent to ``timings.detect`` (both detection passes) and ``timings.pose``.
         """
         t0 = time.perf_counter()
-        dets = self.detector.detect(gray)
+        lens = Lens(intrinsics.K, intrinsics.dist) if intrinsics.has_distortion else None
+        dets = self.detector.detect(gray, lens)
         t1 = time.perf_counter()
         loc = self.localizer.localize(dets, intrinsics, stamp, gravity)
         detect, pose = t1 - t0, time.perf_counter() - t1
@@ -140,7 +142,7 @@ class Pipeline:
             t2 = time.perf_counter()
             regions = self._missing(guide, intrinsics, {d.tag_id for d in dets})
             t3 = time.perf_counter()
-            extra = self.detector.detect_regions(gray, regions) if regions else []
+            extra = self.detector.detect_regions(gray, regions, lens) if regions else []
             t4 = time.perf_counter()
             if extra:
                 dets = sorted(dets + extra, key=lambda d: d.tag_id)

@@ -30,7 +30,7 @@ from typing import Iterable
 import cv2
 import numpy as np
 
-from .refine import refine_corners, sample_bilinear
+from .refine import Lens, refine_corners, sample_bilinear
 
 MIN_SIDE_PX = 7.0
 MAX_SIDE_PX = 48.0
@@ -89,7 +89,8 @@ _POINTS = np.concatenate([_DATA, _FRAME, _QUIET])  # 36 + 28 + 36
 _SQUARE = np.array([[0.0, 0.0], [8.0, 0.0], [8.0, 8.0], [0.0, 8.0]])
 
 
-def decode_quads(gray: np.ndarray, quads: Iterable[np.ndarray], known_ids: frozenset[int] | None = None) -> list[tuple[int, np.ndarray, float]]:
+def decode_quads(gray: np.ndarray, quads: Iterable[np.ndarray], known_ids: frozenset[int] | None = None,
+                 lens: Lens | None = None) -> list[tuple[int, np.ndarray, float]]:
     """Tags read from candidate quads: ``(tag id, corners in ArUco's order, correlation)``.
 
     ``quads`` are (4, 2) pixel corners in any order. The corners returned are refined and in the
@@ -107,7 +108,8 @@ def decode_quads(gray: np.ndarray, quads: Iterable[np.ndarray], known_ids: froze
         kept.append(q)
     if not kept:
         return []
-    quads_arr = np.array(refine_corners(gray, kept, REFINE_PASSES))  # (Q, 4, 2)
+    # (The module grid is then laid by a homography: over a small tag the distortion is negligible.)
+    quads_arr = np.array(refine_corners(gray, kept, REFINE_PASSES, lens))  # (Q, 4, 2)
     # Sample points of all quads in all four corner orders (rolls), one remap.
     rolls = np.stack([np.roll(quads_arr, -k, axis=1) for k in range(4)], axis=1)  # (Q, 4, 4, 2)
     Hs = np.array([[cv2.getPerspectiveTransform(_SQUARE.astype(np.float32), r.astype(np.float32)) for r in rq] for rq in rolls])  # (Q, 4, 3, 3)

@@ -163,6 +163,10 @@ class TagDetector:
             # Adaptive-threshold windows 3 and 23 px instead of 3, 13 and 23: a third less time for
             # the same detection rate on our frames (benchmarks/ar.py).
             params.adaptiveThreshWinSizeStep = 20
+            # Candidates may reach the image edge: a tag near it has only a sliver of quiet zone
+            # inside, and ArUco's default 3-px margin then loses it (AprilTag 3 does not). Tags
+            # actually cut by the edge are dropped by touches_border on the black square's corners.
+            params.minDistanceToBorder = 0
             params.cornerRefinementMethod = {
                 "edges": cv2.aruco.CORNER_REFINE_NONE,  # ours runs afterwards (refine.py)
                 "none": cv2.aruco.CORNER_REFINE_NONE,

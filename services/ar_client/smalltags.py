@@ -110,21 +110,25 @@ def decode_quads(gray: np.ndarray, quads: Iterable[np.ndarray], known_ids: froze
         return []
     # (The module grid is then laid by a homography: over a small tag the distortion is negligible.)
     quads_arr = np.array(refine_corners(gray, kept, REFINE_PASSES, lens))  # (Q, 4, 2)
-    # Sample points of all quads in all four corner orders (rolls), one remap.
-    rolls = np.stack([np.roll(quads_arr, -k, axis=1) for k in range(4)], axis=1)  # (Q, 4, 4, 2)
-    Hs = np.array([[cv2.getPerspectiveTransform(_SQUARE.astype(np.float32), r.astype(np.float32)) for r in rq] for rq in rolls])  # (Q, 4, 3, 3)
+    # Sample every quad once (corner order as given), in one remap; the other three corner orders are
+    # the same samples with the 6 x 6 data grid turned (frame and quiet rings do not change).
+    Hs = _homographies(quads_arr)  # (Q, 3, 3): module square -> image
     pts = (_POINTS[:, None, :] + _SUB[None, :, :]).reshape(-1, 2)  # (P*4, 2)
     homog = np.concatenate([pts, np.ones((len(pts), 1))], axis=1)
-    mapped = np.einsum("qkij,pj->qkpi", Hs, homog)
+    mapped = np.einsum("qij,pj->qpi", Hs, homog)
     with np.errstate(divide="ignore", invalid="ignore"):
         uv = mapped[..., :2] / mapped[..., 2:3]
     uv = np.where(np.isfinite(uv), uv, -10.0)
-    values = sample_bilinear(gray, uv).reshape(len(kept), 4, len(_POINTS), 4).mean(axis=-1)  # (Q, 4, P)
-    data, frame, quiet = values[..., :36], values[..., 36:64], values[..., 64:]
+    values = sample_bilinear(gray, uv).reshape(len(kept), len(_POINTS), 4).mean(axis=-1)  # (Q, P)
+    grid, frame, quiet = values[:, :36].reshape(-1, 6, 6), values[:, 36:64], values[:, 64:]
+    # Corner order rolled by k (corner k first) <=> the grid turned by k quarter turns clockwise.
+    data = np.stack([np.rot90(grid, -k, axes=(1, 2)).reshape(-1, 36) for k in range(4)], axis=1)  # (Q, 4, 36)
+    rolls = np.stack([np.roll(quads_arr, -k, axis=1) for k in range(4)], axis=1)  # (Q, 4, 4, 2)
     black, white = np.median(frame, axis=-1), np.median(quiet, axis=-1)
     threshold = (black + white) / 2.0
-    contrast_ok = (white - black) >= MIN_CONTRAST
-    shape_ok = ((frame > threshold[..., None]).sum(axis=-1) <= MAX_BAD_FRAME) & ((quiet < threshold[..., None]).sum(axis=-1) <= MAX_BAD_QUIET)
+    contrast_ok = np.repeat(((white - black) >= MIN_CONTRAST)[:, None], 4, axis=1)
+    shape = ((frame > threshold[:, None]).sum(axis=-1) <= MAX_BAD_FRAME) & ((quiet < threshold[:, None]).sum(axis=-1) <= MAX_BAD_QUIET)
+    shape_ok = np.repeat(shape[:, None], 4, axis=1)
     codes = _blurred_patterns()
     ids = np.arange(len(codes)) if known_ids is None else np.array(sorted(i for i in known_ids if 0 <= i < len(codes)), int)
     if len(ids) == 0:
@@ -146,6 +150,26 @@ def decode_quads(gray: np.ndarray, quads: Iterable[np.ndarray], known_ids: froze
             continue
         out.append((int(ids[j]), rolls[qi, k].copy(), best))
     return out
+
+
+def _homographies(quads: np.ndarray) -> np.ndarray:
+    """(Q, 3, 3) homographies taking the module square ``_SQUARE`` to each quad (batched 8 x 8 solves)."""
+    n = len(quads)
+    A = np.zeros((n, 8, 8))
+    b = np.zeros((n, 8))
+    for i, (x, y) in enumerate(_SQUARE):
+        u, v = quads[:, i, 0], quads[:, i, 1]
+        A[:, 2 * i, 0:3] = [x, y, 1.0]
+        A[:, 2 * i, 6], A[:, 2 * i, 7] = -u * x, -u * y
+        A[:, 2 * i + 1, 3:6] = [x, y, 1.0]
+        A[:, 2 * i + 1, 6], A[:, 2 * i + 1, 7] = -v * x, -v * y
+        b[:, 2 * i], b[:, 2 * i + 1] = u, v
+    h = np.full((n, 9), np.nan)
+    ok = np.isfinite(A).all(axis=(1, 2)) & (np.abs(np.linalg.det(A)) > 1e-9)
+    if ok.any():
+        h[ok, :8] = np.linalg.solve(A[ok], b[ok][..., None])[..., 0]
+        h[ok, 8] = 1.0
+    return h.reshape(n, 3, 3)
 
 
 def _signed_area(q: np.ndarray) -> float:

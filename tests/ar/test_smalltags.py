@@ -44,6 +44,23 @@ def test_small_tags_found_at_least_as_often_as_apriltag3(pupil):
     assert counts["ours"] >= counts["plain"] + 0.3 * counts["in_view"], counts  # the decoding is what finds them
 
 
+def test_the_corner_order_is_found_whatever_corner_the_quad_starts_at():
+    """A quad handed over starting at any of its corners, either winding: the tag's own TL, TR, BR, BL come back."""
+    from protocol.apriltag import opencv_corners
+
+    hall = site("hall")
+    pose = look_at([7.0, CLUSTER_CENTRE[1] + 0.5, 1.3], CLUSTER_CENTRE)
+    frame = render(hall, pose, VGA, seed=3, noise_sigma=2.0, blur_sigma=0.7)
+    tag = frame.in_view[0]
+    truth = frame.corners[tag]
+    for k in range(4):
+        for quad in (np.roll(truth, k, axis=0), np.roll(truth, k, axis=0)[::-1]):
+            noisy = quad + np.random.default_rng(k).normal(0.0, 0.5, quad.shape)
+            found = decode_quads(frame.image, [noisy], frozenset(lm.tag for lm in hall.landmarks))
+            assert [f[0] for f in found] == [tag]
+            assert np.abs(opencv_corners(found[0][1]) - truth).max() < 0.7, k
+
+
 def test_noise_and_texture_decode_to_nothing():
     rng = np.random.default_rng(0)
     det = TagDetector("opencv")  # every one of the 587 codes allowed: the hardest case for false positives

@@ -47,6 +47,9 @@ AMBIGUOUS_RATIO = 1.5
 AMBIGUOUS_SLACK_PX = 0.2
 #: With gravity: candidates whose chi-square exceeds the best one's by less than this are ambiguous.
 AMBIGUOUS_CHI2 = 9.0
+#: With gravity: a 4-DoF seed this close to an unconstrained candidate is not refined again.
+SAME_SEED_RAD = np.radians(4.0)
+SAME_SEED_M = 0.1
 #: With gravity: the corner noise (pixels per coordinate) is estimated from the best fit, within these bounds.
 MIN_SIGMA_PX = 0.1
 MAX_SIGMA_PX = 1.0
@@ -217,7 +220,13 @@ class Localizer:
             n = 2 * len(obj)
             best_rmse = min(c.rmse for c in cands)
             sigma_px = float(np.clip(best_rmse * np.sqrt(len(obj) / max(n - 6, 1)), MIN_SIGMA_PX, MAX_SIGMA_PX))
-            seeds = [(c.rvec, c.tvec) for c in cands if c.rmse <= self.max_rmse_px] + yaw_scan(obj, img, Km, dist, gravity)
+            seeds = [(c.rvec, c.tvec) for c in cands if c.rmse <= self.max_rmse_px]
+            # A gravity-consistent minimum next to an unconstrained one would refine to the same pose.
+            for rvec, tvec in yaw_scan(obj, img, Km, dist, gravity):
+                pose = CameraPose.from_rvec_tvec(rvec, tvec)
+                if not any(rotation_angle(pose.R_wc, c.pose.R_wc) < SAME_SEED_RAD and np.linalg.norm(pose.position - c.pose.position) < SAME_SEED_M
+                           for c in cands):
+                    seeds.append((rvec, tvec))
             cands = self._refined(obj, img, Km, dist, seeds, gravity, sigma_px)
         n_cands = len(cands)
         good = [c for c in cands if c.rmse <= self.max_rmse_px and c.tilt <= self.gravity_gate and self._plausible(c.pose, used)]

@@ -472,6 +472,42 @@ def hard_checks(entries: dict) -> dict:
     return checks
 
 
+def hard_plot(result: dict, path: str) -> None:
+    """Detection rate per tag-size bucket and position error (median, p90), per frame size, as a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sizes = list(result["sizes"])
+    fig, axes = plt.subplots(2, len(sizes), figsize=(6 * len(sizes), 7), squeeze=False)
+    for col, key in enumerate(sizes):
+        e = result["sizes"][key]
+        ours, ref = e["ours_with_gravity"]["detection_rate_by_size"], e["apriltag3"]["detection_rate_by_size"]
+        buckets = [b for b in ours if ours[b]["tags"]]
+        x = np.arange(len(buckets))
+        ax = axes[0][col]
+        ax.bar(x - 0.2, [ours[b]["rate"] for b in buckets], 0.4, label="ours (pipeline)")
+        ax.bar(x + 0.2, [ref[b]["rate"] for b in buckets], 0.4, label="AprilTag 3, decimate 1")
+        ax.set_xticks(x, [f"{b}\n({ours[b]['tags']} tags)" for b in buckets], fontsize=8)
+        ax.set_ylim(0, 1.05)
+        ax.set_title(f"{key}: tags detected, by size")
+        ax.legend(fontsize=8)
+        ax = axes[1][col]
+        names = {"ours_with_gravity": "ours + gravity", "ours_without_gravity": "ours", "apriltag3": "AprilTag 3 + SQPnP"}
+        for i, (name, label) in enumerate(names.items()):
+            st = e[name]["position_error_fraction_of_distance"]
+            ax.bar([i - 0.2, i + 0.2], [100 * st["median"], 100 * st["p90"]], 0.4, color=["C0", "C1"],
+                   label=None if i else ["median", "p90"])
+        ax.set_xticks(range(len(names)), list(names.values()), fontsize=8)
+        ax.set_ylabel("position error, % of distance")
+        ax.legend(fontsize=8)
+        ax.set_title(f"{key}: pose error")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def hard_main(args: argparse.Namespace) -> int:
     site = hard_site()
     result: dict = {"benchmark": "ar --hard", "command": " ".join(["benchmarks/ar.py", *sys.argv[1:]]), "site": site.name,
@@ -493,6 +529,9 @@ def hard_main(args: argparse.Namespace) -> int:
         result["sizes"][key] = entry
     result["checks"] = hard_checks(result["sizes"])
     result["all_checks_ok"] = all(c["ok"] for c in result["checks"].values())
+    if args.plot:
+        hard_plot(result, args.plot)
+        log(f"figure written to {args.plot}")
     print(json.dumps(result, indent=2))
     return 0
 
@@ -501,6 +540,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--frames", type=int, default=None, help="sampled poses (default 150; --hard: 120 per size)")
     parser.add_argument("--hard", action="store_true", help="the hard set (far, small, few tags; with and without gravity)")
+    parser.add_argument("--plot", metavar="FILE.png", help="--hard: also draw detection by tag size and pose errors")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--site", help="site file (default: the packaged office site)")
     parser.add_argument("--sim", type=int, default=0, metavar="N", help="also N frames rendered by the simulator's pybullet camera, at both sizes")

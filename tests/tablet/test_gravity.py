@@ -62,4 +62,9 @@ def test_gravity_from_devicemotion_rides_with_the_frames_and_fixes_a_single_tag_
         " return o.ok && o.gravity && d < 0.15 && o; })()", timeout=20)
     assert right["tags"] == [SINGLE_TAG]
     page.evaluate("clearInterval(window.__motion)")
+    # The turn by the screen angle: at 90 (device turned counter-clockwise, its top to the left) the
+    # device's y axis is the screen's -x and its x axis the screen's y.
+    turned = page.evaluate("import('/static/gravity.js').then((m) => [m.screenAligned([1, 2, 3], 0), m.screenAligned([1, 2, 3], 90),"
+                           " m.screenAligned([1, 2, 3], 180), m.screenAligned([1, 2, 3], 270)])")
+    np.testing.assert_allclose(turned, [[1, 2, 3], [-2, 1, 3], [-1, -2, 3], [2, -1, 3]], atol=1e-9)
     assert server.proc.alive()

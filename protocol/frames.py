@@ -114,3 +114,21 @@ def camera_from_yaw_pitch(position, yaw: float, pitch: float, roll: float = 0.0)
     c, s = np.cos(roll), np.sin(roll)
     R_roll = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])  # about the camera's z
     return CameraPose(R_wc=pose.R_wc @ R_roll, position=pose.position)
+
+
+#: Standard gravity (m/s²).
+GRAVITY = 9.80665
+
+
+def gravity_in_camera(R_wc: np.ndarray, sigma_deg: float = 0.0, rng: np.random.Generator | None = None) -> np.ndarray:
+    """What a tablet's accelerometer reports as gravity, in the camera frame (OpenCV axes, pointing down).
+
+    The truth ``R_cw · (0, 0, −g)``, turned by a random small rotation whose components are
+    N(0, ``sigma_deg``) about each camera axis (an IMU's tilt error) when ``sigma_deg`` > 0.
+    """
+    g = np.asarray(R_wc, dtype=np.float64).T @ np.array([0.0, 0.0, -GRAVITY])
+    if sigma_deg > 0.0:
+        rng = rng if rng is not None else np.random.default_rng()
+        noise, _ = cv2.Rodrigues(rng.normal(0.0, np.radians(sigma_deg), 3).reshape(3, 1))
+        g = noise @ g
+    return g

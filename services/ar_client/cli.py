@@ -89,17 +89,19 @@ def _run_service(args: argparse.Namespace) -> int:
 
 def _localize(args: argparse.Namespace) -> int:
     from .detect import TagDetector, to_gray
+    from .gravity import parse_gravity
     from .pipeline import Pipeline
 
     try:
         site = _load_site(args.site)
         image = _read_image(args.image)
         K = _intrinsics_for(args, image)
+        gravity = parse_gravity(args.gravity) if args.gravity else None
     except (ValueError, FileNotFoundError) as exc:
         return _error(exc)
     # The same detection and pose steps as the service (guided second pass included).
     pipeline = Pipeline(site, detector=TagDetector(args.detector, known_ids=[lm.tag for lm in site.landmarks]))
-    result = pipeline.localize(to_gray(image), K, 0.0)
+    result = pipeline.localize(to_gray(image), K, 0.0, gravity)
     data = result.to_json()
     data.pop("lost_age", None)  # a single image has no history
     if args.json:
@@ -208,6 +210,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                             "or {ok: false, reason}. Exit 1 when there is no pose.")
     _add_image_args(loc)
     loc.add_argument("--json", action="store_true", help="print JSON")
+    loc.add_argument("--gravity", metavar="GX,GY,GZ", help="gravity measured at capture, in the camera frame (OpenCV axes: x right, "
+                     "y down, z forward; pointing down, any unit): picks a single tag's right planar solution, adds gravity_error_deg")
     loc.set_defaults(func=_localize)
 
     ren = ar_sub.add_parser("render", help="draw a given world state over an image",

@@ -40,7 +40,8 @@ import numpy as np
 
 from protocol.apriltag import apriltag_corners, opencv_corners
 
-from .refine import refine_corners
+from .refine import Lens, refine_corners
+from .smalltags import decode_quads
 
 log = logging.getLogger("arroch.ar.detect")
 
@@ -48,6 +49,8 @@ log = logging.getLogger("arroch.ar.detect")
 BORDER_MARGIN_PX = 2.0
 #: Frames up to this many pixels are searched at full resolution by the AprilTag back end.
 FULL_RES_MAX_PIXELS = 500_000
+#: Edge-fit passes over ArUco's corners (a second pass re-centres the profiles on small tags' edges).
+REFINE_PASSES = 2
 #: Crops whose predicted tag is smaller than this (pixels across) are upscaled ×2 before the search.
 UPSCALE_BELOW_PX = 40.0
 
@@ -136,6 +139,7 @@ class TagDetector:
         decimate: float | None = None,
         max_hamming: int = 1,
         opencv_refine: str = "edges",
+        small_tags: bool = True,
     ) -> None:
         if method not in ("apriltag", "opencv"):
             raise ValueError(f"unknown detector {method!r} (expected 'apriltag' or 'opencv')")
@@ -146,6 +150,8 @@ class TagDetector:
         self.known_ids = None if known_ids is None else frozenset(int(i) for i in known_ids)
         self.decimate = decimate
         self.max_hamming = max_hamming
+        self.refine_passes = REFINE_PASSES
+        self.small_tags = small_tags  # OpenCV back end: read small tags from ArUco's rejected quads
         self._lock = threading.Lock()  # the pupil detector's decimation is per-call state
         if method == "apriltag":
             self._pupil = apriltag_detector()
@@ -157,6 +163,10 @@ class TagDetector:
             # Adaptive-threshold windows 3 and 23 px instead of 3, 13 and 23: a third less time for
             # the same detection rate on our frames (benchmarks/ar.py).
             params.adaptiveThreshWinSizeStep = 20
+            # Candidates may reach the image edge: a tag near it has only a sliver of quiet zone
+            # inside, and ArUco's default 3-px margin then loses it (AprilTag 3 does not). Tags
+            # actually cut by the edge are dropped by touches_border on the black square's corners.
+            params.minDistanceToBorder = 0
             params.cornerRefinementMethod = {
                 "edges": cv2.aruco.CORNER_REFINE_NONE,  # ours runs afterwards (refine.py)
                 "none": cv2.aruco.CORNER_REFINE_NONE,
@@ -174,8 +184,8 @@ class TagDetector:
     def _keep(self, tag_id: int) -> bool:
         return self.known_ids is None or tag_id in self.known_ids
 
-    def _run(self, gray: np.ndarray, decimate: float) -> list[TagDetection]:
-        """Raw detections of one image (no border filtering)."""
+    def _run(self, gray: np.ndarray, decimate: float, lens: Lens | None = None) -> list[TagDetection]:
+        """Raw detections of one image (no border filtering); ``lens``: the frame's distortion, for the edge fit."""
         out: list[TagDetection] = []
         if self.method == "apriltag":
             with self._lock:
@@ -185,23 +195,39 @@ class TagDetector:
                 if d.hamming <= self.max_hamming and self._keep(d.tag_id):
                     out.append(TagDetection(int(d.tag_id), apriltag_corners(d.corners), "apriltag", float(d.decision_margin), int(d.hamming)))
         else:
-            corners, ids, _ = self._aruco.detectMarkers(gray)
+            corners, ids, rejected = self._aruco.detectMarkers(gray)
             if ids is not None:
                 kept = [(int(i), opencv_corners(c)) for c, i in zip(corners, ids.ravel()) if self._keep(int(i))]
                 quads = [q for _, q in kept]
                 if self.refine == "edges":
-                    quads = refine_corners(gray, quads)
+                    quads = refine_corners(gray, quads, self.refine_passes, lens)
                 out += [TagDetection(i, q, "opencv") for (i, _), q in zip(kept, quads)]
+            if self.small_tags and rejected:
+                out += self._small(gray, rejected, out, lens)
         return out
 
-    def detect(self, image: np.ndarray) -> list[TagDetection]:
-        """All known tags in the frame, wholly inside it, one detection per id (the most confident)."""
+    def _small(self, gray: np.ndarray, rejected: Sequence[np.ndarray], found: list[TagDetection], lens: Lens | None) -> list[TagDetection]:
+        """Small tags read from ArUco's rejected quads (:mod:`smalltags`), away from tags already found."""
+        centres = np.array([d.corners.mean(axis=0) for d in found]).reshape(-1, 2)
+        quads = []
+        for r in rejected:
+            q = r.reshape(4, 2).astype(np.float64)
+            if len(centres) and (np.linalg.norm(centres - q.mean(axis=0), axis=1) < 4.0).any():
+                continue
+            quads.append(q)
+        return [TagDetection(i, opencv_corners(q), "opencv", score) for i, q, score in decode_quads(gray, quads, self.known_ids, lens)]
+
+    def detect(self, image: np.ndarray, lens: Lens | None = None) -> list[TagDetection]:
+        """All known tags in the frame, wholly inside it, one detection per id (the most confident).
+
+        ``lens``: the camera's distortion, when it has any; the edge fit then runs where the tag's
+        edges are straight (:class:`refine.Lens`)."""
         gray = to_gray(image)
         h, w = gray.shape
-        found = [d for d in self._run(gray, self._decimation_for(gray)) if not touches_border(d.corners, w, h)]
+        found = [d for d in self._run(gray, self._decimation_for(gray), lens) if not touches_border(d.corners, w, h)]
         return _one_per_id(found)
 
-    def detect_regions(self, image: np.ndarray, regions: Sequence[tuple[int, np.ndarray]]) -> list[TagDetection]:
+    def detect_regions(self, image: np.ndarray, regions: Sequence[tuple[int, np.ndarray]], lens: Lens | None = None) -> list[TagDetection]:
         """Search crops for specific tags: ``regions`` holds ``(tag_id, predicted corners (4, 2))``.
 
         Each crop is the predicted quad's bounding box grown by its own size, searched at full
@@ -231,6 +257,8 @@ class TagDetector:
                     continue
                 # Back to frame pixels: crop pixel centre U ↔ frame (U + 0.5)/scale − 0.5 + offset.
                 corners = (d.corners + 0.5) / scale - 0.5 + np.array([x0, y0], dtype=np.float64)
+                if lens is not None and self.method == "opencv":
+                    corners = refine_corners(gray, [corners], 1, lens)[0]  # the crop's fit knew no distortion
                 if not touches_border(corners, w, h):
                     out.append(TagDetection(d.tag_id, corners, d.detector, d.decision_margin, d.hamming))
                 break

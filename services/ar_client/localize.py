@@ -20,6 +20,13 @@ once):
    all tags, every leave-one-out subset is tried.
 4. No tag or no acceptable pose: the result is *lost*, carrying the age of the last good pose and the
    reason — never an extrapolated or invented pose.
+
+With gravity (the tablet's accelerometer, :mod:`gravity`), the candidates also include the minima of
+the gravity-constrained 4-DoF solve (yaw + position), every candidate is refined with gravity as a
+soft prior, a candidate tilted more than ``gravity_gate_deg`` from it is implausible, and the choice
+weighs the pixels and gravity together (chi-square: corner residuals at the best fit's RMSE, tilt at
+the prior's sigma). One tag's mirror solution tilts the camera differently from the true one, so
+gravity picks the right one where the pixels cannot. Without gravity nothing changes.
 """
 
 from __future__ import annotations
@@ -32,11 +39,20 @@ import numpy as np
 
 from .detect import TagDetection
 from protocol.frames import CameraPose, rotation_angle
+from .gravity import GravityPrior, gravity_error, refine as refine_with_gravity, yaw_scan
 from .project import Intrinsics
 
 #: Candidates within this factor (plus ``AMBIGUOUS_SLACK_PX``) of the best RMSE count as equally good fits.
 AMBIGUOUS_RATIO = 1.5
 AMBIGUOUS_SLACK_PX = 0.2
+#: With gravity: candidates whose chi-square exceeds the best one's by less than this are ambiguous.
+AMBIGUOUS_CHI2 = 9.0
+#: With gravity: a 4-DoF seed this close to an unconstrained candidate is not refined again.
+SAME_SEED_RAD = np.radians(4.0)
+SAME_SEED_M = 0.1
+#: With gravity: the corner noise (pixels per coordinate) is estimated from the best fit, within these bounds.
+MIN_SIGMA_PX = 0.1
+MAX_SIGMA_PX = 1.0
 
 
 @dataclass
@@ -54,12 +70,13 @@ class Localization:
     candidates: int = 0
     reason: str = ""
     lost_age: float | None = None  # when lost: seconds since the last good pose (None: never had one)
+    gravity_error_deg: float | None = None  # when gravity was given: tilt between the pose and it
 
     def to_json(self) -> dict:
         """The ``arroch ar localize --json`` shape."""
         if not self.ok or self.pose is None:
             return {"ok": False, "reason": self.reason, "tags": self.tags, "lost_age": self.lost_age}
-        return {
+        out = {
             "ok": True,
             "position": [float(v) for v in self.pose.position],
             "quaternion": [float(v) for v in self.pose.quaternion()],
@@ -69,6 +86,9 @@ class Localization:
             "rejected": self.rejected,
             "ambiguous": self.ambiguous,
         }
+        if self.gravity_error_deg is not None:  # gravity was given: how far the pose's vertical is from it
+            out["gravity_error_deg"] = float(self.gravity_error_deg)
+        return out
 
 
 @dataclass
@@ -77,6 +97,7 @@ class _Candidate:
     tvec: np.ndarray
     rmse: float
     pose: CameraPose
+    tilt: float = 0.0  # radians between the pose's vertical and gravity (0 without gravity)
 
 
 class Localizer:
@@ -91,6 +112,8 @@ class Localizer:
         height_range: tuple[float, float] = (0.3, 2.2),
         track_max_age: float = 1.0,
         room_margin: float = 0.2,
+        gravity_sigma_deg: float = 1.0,
+        gravity_gate_deg: float = 10.0,
     ) -> None:
         self.site = site
         self.landmarks: dict[int, np.ndarray] = {lm.tag: np.asarray(lm.corners(), dtype=np.float64) for lm in site.landmarks}
@@ -101,16 +124,23 @@ class Localizer:
         self.height_range = height_range
         self.track_max_age = track_max_age
         self.room_margin = room_margin
+        self.gravity_sigma_deg = gravity_sigma_deg
+        self.gravity_gate = np.radians(gravity_gate_deg)
         self.last: Localization | None = None  # last good result
         self._failure = ""  # why the last failed solve found nothing, for the "lost" reason
+        self._gravity: GravityPrior | None = None  # this frame's, while it is solved
 
     def reset(self) -> None:
         self.last = None
 
     # ------------------------------------------------------------------ public
 
-    def localize(self, detections: Sequence[TagDetection], intrinsics: Intrinsics, stamp: float) -> Localization:
-        """Solve this frame's pose and update the tracking state (only good poses are remembered)."""
+    def localize(self, detections: Sequence[TagDetection], intrinsics: Intrinsics, stamp: float, gravity=None) -> Localization:  # noqa: ANN001
+        """Solve this frame's pose and update the tracking state (only good poses are remembered).
+
+        ``gravity``: the measured gravity in the camera frame (pointing down, any magnitude), or None.
+        """
+        self._gravity = GravityPrior.from_vector(gravity, self.gravity_sigma_deg)
         known = [d for d in detections if d.tag_id in self.landmarks]
         if not known:
             why = "no landmark tag in view" if not detections else f"tags {sorted(d.tag_id for d in detections)} are not in the site"
@@ -180,31 +210,52 @@ class Localizer:
         if prior is not None:
             r, t = prior.rvec_tvec()
             seeds.append((r.reshape(3, 1).copy(), t.reshape(3, 1).copy()))
-        cands: list[_Candidate] = []
-        for rvec, tvec in seeds:
-            rvec, tvec = cv2.solvePnPRefineLM(obj, img, Km, dist, rvec.astype(np.float64).copy(), tvec.astype(np.float64).copy())
-            rmse = _rmse(obj, img, rvec, tvec, Km, dist)
-            if not np.isfinite(rmse):
-                continue
-            pose = CameraPose.from_rvec_tvec(rvec, tvec)
-            if any(rotation_angle(pose.R_wc, c.pose.R_wc) < np.radians(0.5) and np.linalg.norm(pose.position - c.pose.position) < 0.01 for c in cands):
-                continue  # the same solution reached from another seed
-            cands.append(_Candidate(rvec, tvec, rmse, pose))
+        cands = self._refined(obj, img, Km, dist, seeds)
+        gravity = self._gravity
+        sigma_px = MIN_SIGMA_PX
+        if gravity is not None and cands:
+            # Corner noise from the best unconstrained fit (per coordinate, 6 parameters fitted),
+            # then every fitting minimum and every gravity-consistent one (the 4-DoF scan) refined
+            # with gravity as a prior at that noise.
+            n = 2 * len(obj)
+            best_rmse = min(c.rmse for c in cands)
+            sigma_px = float(np.clip(best_rmse * np.sqrt(len(obj) / max(n - 6, 1)), MIN_SIGMA_PX, MAX_SIGMA_PX))
+            seeds = [(c.rvec, c.tvec) for c in cands if c.rmse <= self.max_rmse_px]
+            # A gravity-consistent minimum next to an unconstrained one would refine to the same pose.
+            for rvec, tvec in yaw_scan(obj, img, Km, dist, gravity):
+                pose = CameraPose.from_rvec_tvec(rvec, tvec)
+                if not any(rotation_angle(pose.R_wc, c.pose.R_wc) < SAME_SEED_RAD and np.linalg.norm(pose.position - c.pose.position) < SAME_SEED_M
+                           for c in cands):
+                    seeds.append((rvec, tvec))
+            cands = self._refined(obj, img, Km, dist, seeds, gravity, sigma_px)
         n_cands = len(cands)
-        good = [c for c in cands if c.rmse <= self.max_rmse_px and self._plausible(c.pose, used)]
+        good = [c for c in cands if c.rmse <= self.max_rmse_px and c.tilt <= self.gravity_gate and self._plausible(c.pose, used)]
         if not good:
             # Say why the best-fitting candidate failed: that is what a user can act on.
             if cands:
                 top = min(cands, key=lambda c: c.rmse)
                 ids = [d.tag_id for d in used]
-                self._failure = f"best fit {top.rmse:.2f} px" if top.rmse > self.max_rmse_px else self.plausibility(top.pose, ids)
+                if top.rmse > self.max_rmse_px:
+                    self._failure = f"best fit {top.rmse:.2f} px"
+                elif top.tilt > self.gravity_gate:
+                    self._failure = f"camera tilt disagrees with gravity by {np.degrees(top.tilt):.1f}°"
+                else:
+                    self._failure = self.plausibility(top.pose, ids)
             return None
         # Solutions fitting nearly as well as the best are genuinely ambiguous on these pixels;
         # only there may the previous pose decide (never against a clearly better fit).
         floor = min(c.rmse for c in good)
-        contenders = [c for c in good if c.rmse <= AMBIGUOUS_RATIO * floor + AMBIGUOUS_SLACK_PX]
+        if gravity is None:
+            contenders = [c for c in good if c.rmse <= AMBIGUOUS_RATIO * floor + AMBIGUOUS_SLACK_PX]
+        else:
+            sigma_tilt = np.radians(gravity.sigma_deg)
+            chi2 = {id(c): len(obj) * (c.rmse / sigma_px) ** 2 + (c.tilt / sigma_tilt) ** 2 for c in good}
+            least = min(chi2.values())
+            contenders = sorted((c for c in good if chi2[id(c)] <= least + AMBIGUOUS_CHI2), key=lambda c: chi2[id(c)])
         if prior is not None:
             best = min(contenders, key=lambda c: rotation_angle(c.pose.R_wc, prior.R_wc) + np.linalg.norm(c.pose.position - prior.position))
+        elif gravity is not None:
+            best = contenders[0]
         else:
             best = min(contenders, key=lambda c: c.rmse)
         ambiguous = len(contenders) > 1
@@ -222,7 +273,28 @@ class Localizer:
             per_tag_rmse=per_tag,
             ambiguous=ambiguous,
             candidates=n_cands,
+            gravity_error_deg=float(np.degrees(best.tilt)) if gravity is not None else None,
         )
+
+    def _refined(self, obj: np.ndarray, img: np.ndarray, Km: np.ndarray, dist: np.ndarray, seeds, gravity: GravityPrior | None = None,  # noqa: ANN001
+                 sigma_px: float = MIN_SIGMA_PX) -> list[_Candidate]:
+        """Each seed refined (Levenberg–Marquardt; with gravity as a prior when given), duplicates dropped."""
+        cands: list[_Candidate] = []
+        for rvec, tvec in seeds:
+            rvec, tvec = np.asarray(rvec, np.float64).reshape(3, 1).copy(), np.asarray(tvec, np.float64).reshape(3, 1).copy()
+            if gravity is None:
+                rvec, tvec = cv2.solvePnPRefineLM(obj, img, Km, dist, rvec, tvec)
+            else:
+                rvec, tvec = refine_with_gravity(obj, img, Km, dist, rvec, tvec, gravity, sigma_px=sigma_px)
+            rmse = _rmse(obj, img, rvec, tvec, Km, dist)
+            if not np.isfinite(rmse):
+                continue
+            pose = CameraPose.from_rvec_tvec(rvec, tvec)
+            if any(rotation_angle(pose.R_wc, c.pose.R_wc) < np.radians(0.5) and np.linalg.norm(pose.position - c.pose.position) < 0.01 for c in cands):
+                continue  # the same solution reached from another seed
+            tilt = gravity_error(pose.R_wc, gravity) if gravity is not None else 0.0
+            cands.append(_Candidate(rvec, tvec, rmse, pose, tilt))
+        return cands
 
     def plausibility(self, pose: CameraPose, tag_ids: Sequence[int]) -> str:
         """Empty when a pose is plausible for a hand-held tablet seeing ``tag_ids``; else why not."""

@@ -25,9 +25,12 @@ from .detect import TagDetection, TagDetector, to_gray
 from .draw import draw
 from .feedback import FeedbackPanel
 from protocol.frames import CameraPose
+from .gravity import GravityPrior
 from .localize import Localization, Localizer
+from .posefilter import FilteredPose, PoseFilter
 from .overlay import OverlayBuilder, status_primitives
 from .project import Intrinsics, Projector
+from .refine import Lens
 from .world import WorldSnapshot, WorldView
 
 #: Guided second pass: at most this many crops per frame, for predicted tags at least this big.
@@ -73,6 +76,7 @@ class Pipeline:
         panel: FeedbackPanel | None = None,
         clock: Callable[[], float] | None = None,
         guided: bool = True,
+        pose_filter: PoseFilter | None | bool = True,
     ) -> None:
         self.site = site
         self.world = world if world is not None else WorldView()
@@ -87,6 +91,9 @@ class Pipeline:
         self.last_localization: Localization | None = None
         self.last_world: WorldSnapshot | None = None  # what the last frame's overlay was drawn from
         self.last_detections: list[TagDetection] = []
+        # The pose drawn goes through a gated constant-velocity filter (posefilter.py); False: raw poses.
+        self.pose_filter = PoseFilter() if pose_filter is True else (pose_filter or None)
+        self.last_filtered: FilteredPose | None = None
         # Landmark geometry as arrays, for predicting which tags a pose should see.
         lms = site.landmarks
         normals = np.array([lm.normal for lm in lms], dtype=np.float64).reshape(-1, 3)
@@ -117,26 +124,29 @@ class Pipeline:
             raise BadFrame(f"frame of {len(frame)} bytes is not a decodable image")
         return image
 
-    def localize(self, gray: np.ndarray, intrinsics: Intrinsics, stamp: float) -> Localization:
+    def localize(self, gray: np.ndarray, intrinsics: Intrinsics, stamp: float, gravity=None) -> Localization:  # noqa: ANN001
         """Detect and localise, with the guided second pass for tags predicted but not found.
+
+        ``gravity``: the frame's measured gravity in the camera frame (pointing down), or None.
 
         Adds the time spent to ``timings.detect`` (both detection passes) and ``timings.pose``.
         """
         t0 = time.perf_counter()
-        dets = self.detector.detect(gray)
+        lens = Lens(intrinsics.K, intrinsics.dist) if intrinsics.has_distortion else None
+        dets = self.detector.detect(gray, lens)
         t1 = time.perf_counter()
-        loc = self.localizer.localize(dets, intrinsics, stamp)
+        loc = self.localizer.localize(dets, intrinsics, stamp, gravity)
         detect, pose = t1 - t0, time.perf_counter() - t1
         guide = loc.pose if loc.ok else self.localizer.prior(stamp)
         if self.guided and guide is not None:
             t2 = time.perf_counter()
             regions = self._missing(guide, intrinsics, {d.tag_id for d in dets})
             t3 = time.perf_counter()
-            extra = self.detector.detect_regions(gray, regions) if regions else []
+            extra = self.detector.detect_regions(gray, regions, lens) if regions else []
             t4 = time.perf_counter()
             if extra:
                 dets = sorted(dets + extra, key=lambda d: d.tag_id)
-                loc = self.localizer.localize(dets, intrinsics, stamp)
+                loc = self.localizer.localize(dets, intrinsics, stamp, gravity)
             detect += t4 - t3
             pose += (t3 - t2) + (time.perf_counter() - t4)
         self.timings.detect += detect
@@ -177,6 +187,22 @@ class Pipeline:
             out.append((int(lm["tags"][i]), black))
         return out
 
+    def _drawn_pose(self, loc: Localization, stamp: float, gravity) -> CameraPose | None:  # noqa: ANN001
+        """The pose the overlay is drawn from: the filter's (None when lost: nothing is drawn)."""
+        self.last_filtered = None
+        if not loc.ok or loc.pose is None:
+            return None
+        if self.pose_filter is None:
+            return loc.pose
+        self.last_filtered = self.pose_filter.update(loc.pose, stamp, GravityPrior.from_vector(gravity))
+        return self.last_filtered.pose
+
+    def reset(self) -> None:
+        """Forget tracking and filtering state (the next frame is unrelated to the last)."""
+        self.localizer.reset()
+        if self.pose_filter is not None:
+            self.pose_filter.reset()
+
     # ------------------------------------------------------------------ the whole frame
 
     def process(
@@ -188,13 +214,15 @@ class Pipeline:
         frame_seq: int = 0,
         annotate: bool = True,
         now: float | None = None,
+        gravity=None,  # noqa: ANN001
     ) -> tuple[Overlay, np.ndarray | None]:
         """The Overlay for a frame captured at ``timestamp`` (site clock), and the annotated image.
 
         ``now`` is the site-clock time the world is drawn at (intent time marks); default
         ``timestamp``. Latency in the Overlay is the clock's now minus ``timestamp`` when the
         pipeline has a clock and that difference is plausible (between this call's processing time
-        and :data:`MAX_PLAUSIBLE_LATENCY`), else this call's processing time.
+        and :data:`MAX_PLAUSIBLE_LATENCY`), else this call's processing time. ``gravity``: the
+        frame's measured gravity (camera frame, pointing down; ``CameraFrame.gravity``), or None.
         """
         started = time.perf_counter()
         image = self.decode(frame, colour=annotate)
@@ -203,14 +231,15 @@ class Pipeline:
         gray = to_gray(image)
         t_decoded = time.perf_counter()
         self.timings = Timings(decode=t_decoded - started)
-        loc = self.localize(gray, intrinsics, timestamp)
+        loc = self.localize(gray, intrinsics, timestamp, gravity)
 
         t_proj = time.perf_counter()
         world = self.world.snapshot(timestamp if now is None else now)
         self.last_world = world
         prims = []
-        if loc.ok and loc.pose is not None:
-            prims = self.builder.world_primitives(Projector(loc.pose, intrinsics), world)
+        drawn = self._drawn_pose(loc, timestamp, gravity)
+        if drawn is not None:
+            prims = self.builder.world_primitives(Projector(drawn, intrinsics), world)
         processing = time.perf_counter() - started
         latency = processing
         if self.clock is not None:
@@ -237,8 +266,8 @@ class Pipeline:
             width=intrinsics.width,
             height=intrinsics.height,
             ok=loc.ok,
-            position=[float(v) for v in loc.pose.position] if loc.ok and loc.pose is not None else [],
-            quaternion=[float(v) for v in loc.pose.quaternion()] if loc.ok and loc.pose is not None else [],
+            position=[float(v) for v in drawn.position] if drawn is not None else [],
+            quaternion=[float(v) for v in drawn.quaternion()] if drawn is not None else [],
             tags=list(loc.tags),
             reprojection_rmse=float(loc.rmse_px) if loc.ok else 0.0,
             lost_age=float(loc.lost_age or 0.0) if not loc.ok else 0.0,

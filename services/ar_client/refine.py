@@ -14,7 +14,8 @@ precisely and intersecting the lines — the idea behind the AprilTag library's 
 4. fit a line to each edge's crossings (weighted total least squares) and intersect neighbours.
 
 All tags of a frame are processed together (one ``remap`` call, batched numpy), so this costs a\nfraction of a millisecond.
-A corner that moves implausibly far (more than :data:`MAX_SHIFT_MODULES` of a module) keeps its
+With lens distortion (:class:`Lens`) the same runs in undistorted coordinates, where the edges are
+straight. A corner that moves implausibly far (more than :data:`MAX_SHIFT_MODULES` of a module) keeps its
 original position: a refinement must never make a detection worse.
 """
 
@@ -38,16 +39,52 @@ MIN_CONTRAST = 20.0
 _ROW = 1024
 
 
-def refine_corners(gray: np.ndarray, quads: list[np.ndarray]) -> list[np.ndarray]:
+def refine_corners(gray: np.ndarray, quads: list[np.ndarray], passes: int = 1, lens: Lens | None = None) -> list[np.ndarray]:
+    """:func:`refine_once` ``passes`` times: a corner far off (a blurred small tag's, 1-2 px) moves
+    up to a module per pass, each pass starting from the previous one's corners."""
+    for _ in range(passes):
+        quads = refine_once(gray, quads, lens)
+    return list(quads)
+
+
+class Lens:
+    """A camera's lens distortion (OpenCV's model): a tag's edges are straight only once undistorted.
+
+    The edge fit then runs in undistorted pixel coordinates (same K, no distortion): its sample points
+    are mapped through the distortion to read the image, the crossings found are undistorted, the
+    lines fitted and intersected there, and the corners distorted back to image pixels.
+    """
+
+    def __init__(self, K: np.ndarray, dist: np.ndarray) -> None:
+        self.K = np.asarray(K, np.float64)
+        self.dist = np.asarray(dist, np.float64).reshape(-1)
+
+    def undistort(self, points: np.ndarray) -> np.ndarray:
+        pts = np.asarray(points, np.float64)
+        flat = cv2.undistortPoints(pts.reshape(-1, 1, 2), self.K, self.dist, R=None, P=self.K,
+                                   criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 1e-8))
+        return flat.reshape(pts.shape)
+
+    def distort(self, points: np.ndarray) -> np.ndarray:
+        pts = np.asarray(points, np.float64)
+        flat = pts.reshape(-1, 2)
+        norm = np.column_stack([(flat[:, 0] - self.K[0, 2]) / self.K[0, 0], (flat[:, 1] - self.K[1, 2]) / self.K[1, 1], np.ones(len(flat))])
+        image, _ = cv2.projectPoints(norm, np.zeros(3), np.zeros(3), self.K, self.dist)
+        return image.reshape(pts.shape)
+
+
+def refine_once(gray: np.ndarray, quads: list[np.ndarray], lens: Lens | None = None) -> list[np.ndarray]:
     """Refined TL, TR, BR, BL corners (OpenCV pixel convention) for each quad in ``quads``.
 
     ``quads`` hold approximate corners (4, 2) of dark squares on a light border, in that order
     (any consistent winding works). Returns new arrays; unrefinable corners are returned unchanged.
+    With a ``lens``, the fit runs in undistorted coordinates (see :class:`Lens`).
     Every array below has a leading tag axis T, then edge (4), sample (K) and step (S) axes.
     """
     if not quads:
         return []
-    q = np.asarray(quads, dtype=np.float64).reshape(-1, 4, 2)
+    original = np.asarray(quads, dtype=np.float64).reshape(-1, 4, 2)
+    q = original if lens is None else lens.undistort(original)
     edges = np.roll(q, -1, axis=1) - q  # (T, 4, 2): edge i runs from corner i to corner i+1
     lengths = np.linalg.norm(edges, axis=2)
     module = lengths.mean(axis=1) / 8.0  # (T,)
@@ -64,7 +101,7 @@ def refine_corners(gray: np.ndarray, quads: list[np.ndarray]) -> list[np.ndarray
     outward = np.einsum("tij,tij->ti", normals, q + edges / 2.0 - q.mean(axis=1, keepdims=True))
     normals = np.where((outward < 0)[..., None], -normals, normals)
     grid = bases[:, :, :, None, :] + steps[:, None, None, :, None] * normals[:, :, None, None, :]  # (T, 4, K, S, 2)
-    profile = _sample(gray, grid)
+    profile = sample_bilinear(gray, grid if lens is None else lens.distort(grid))
     # Crossing of each profile: gradient-weighted mean of its rising (dark inside → light outside) part.
     grad = np.clip(np.diff(profile, axis=-1), 0.0, None)
     mids = (steps[:, :-1] + steps[:, 1:]) / 2.0  # (T, S-1)
@@ -90,15 +127,17 @@ def refine_corners(gray: np.ndarray, quads: list[np.ndarray]) -> list[np.ndarray
     rp = r - p
     with np.errstate(invalid="ignore", divide="ignore"):
         s = (rp[..., 0] * (-v[..., 1]) - rp[..., 1] * (-v[..., 0])) / det
-    corners = p + s[..., None] * u
+        corners = p + s[..., None] * u  # parallel edges (a degenerate quad) give inf/nan: not accepted below
     ok_lines = enough & np.roll(enough, 1, axis=1) & (np.abs(det) > 1e-6)
     shift = np.linalg.norm(corners - q, axis=2)
     accept = usable[:, None] & ok_lines & np.isfinite(shift) & (shift <= MAX_SHIFT_MODULES * module[:, None] + 0.5)
-    refined = np.where(accept[..., None], corners, q)
+    if lens is not None:
+        corners = lens.distort(np.where(accept[..., None], corners, q))
+    refined = np.where(accept[..., None], corners, original)
     return [c for c in refined]
 
 
-def _sample(gray: np.ndarray, grid: np.ndarray) -> np.ndarray:
+def sample_bilinear(gray: np.ndarray, grid: np.ndarray) -> np.ndarray:
     """Bilinear intensities at ``grid``'s (..., 2) pixel positions, in one ``cv2.remap`` call."""
     shape = grid.shape[:-1]
     coords = grid.reshape(-1, 2).astype(np.float32)

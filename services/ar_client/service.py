@@ -76,6 +76,8 @@ class ArService(Service):
             detector=TagDetector(detector, known_ids=[lm.tag for lm in site.landmarks]),
             panel=self.panel,
             clock=self.clock.now,
+            # A folder of stills is not a stream: each image's own pose is drawn, unfiltered.
+            pose_filter=source.kind != "images",
         )
         self.record_path = record
         self.snapshots = snapshots
@@ -126,7 +128,7 @@ class ArService(Service):
         fx, fy, cx, cy = msg.intrinsics
         distortion = tuple(msg.distortion) if len(msg.distortion) == 5 else (0.0,) * 5
         K = Intrinsics(fx, fy, cx, cy, msg.width, msg.height, distortion)
-        self._process(msg.jpeg, K, msg.stamp, msg.seq)
+        self._process(msg.jpeg, K, msg.stamp, msg.seq, msg.gravity or None)
 
     def _pull(self) -> None:
         assert self.source is not None
@@ -137,7 +139,7 @@ class ArService(Service):
             return
         self._process(frame.image, frame.intrinsics, frame.stamp, frame.seq)
 
-    def _process(self, frame: bytes | np.ndarray, K: Intrinsics, stamp: float, seq: int) -> None:
+    def _process(self, frame: bytes | np.ndarray, K: Intrinsics, stamp: float, seq: int, gravity: list[float] | None = None) -> None:
         if not self.clock.synced:
             # No site clock yet (no sim clock messages): time frames on the wall clock, so tracking
             # and the "lost for N s" age still measure real intervals.
@@ -151,13 +153,16 @@ class ArService(Service):
         # Drawing costs time: only when recording, or when a kept frame may be due.
         annotate = self.record_path is not None or (self.snapshots is not None and self.snapshots.wanted(now))
         try:
-            overlay, annotated = self.pipeline.process(frame, K, stamp, frame_seq=seq, annotate=annotate, now=now)
+            overlay, annotated = self.pipeline.process(frame, K, stamp, frame_seq=seq, annotate=annotate, now=now, gravity=gravity)
         except BadFrame as exc:
             self._bad_frame(str(exc))
             return
         self.count("frames")
         if not overlay.ok:
             self.count("lost")
+        filtered = self.pipeline.last_filtered
+        if filtered is not None and not filtered.accepted:
+            self.count("poses_rejected")  # a jump against the motion or gravity: the prediction was drawn
         loc = self.pipeline.last_localization
         extra: dict[str, object] = {"reason": loc.reason} if loc is not None and not loc.ok else {}
         world = self.pipeline.last_world

@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from protocol.messages import CameraFrame, CameraTruth
-from protocol.frames import camera_from_yaw_pitch, quat_from_matrix
+from protocol.frames import camera_from_yaw_pitch, gravity_in_camera, quat_from_matrix
 
 #: Near and far clipping planes of the rendering (m). Near is small so a tablet held close to a
 #: wall still sees it; far covers any site this project generates. Depth precision is no issue:
@@ -184,12 +184,26 @@ def encode_jpeg(rgb: np.ndarray, quality: int = 90) -> bytes:
     return buf.tobytes()
 
 
-def frame_message(camera_id: str, rgb: np.ndarray, camera: CameraSpec, *, quality: int = 90) -> CameraFrame:
-    """A CameraFrame of a rendered image (envelope left to the publisher, which stamps it)."""
+def frame_message(
+    camera_id: str,
+    rgb: np.ndarray,
+    camera: CameraSpec,
+    *,
+    quality: int = 90,
+    gravity_noise_deg: float | None = 1.0,
+    rng: np.random.Generator | None = None,
+) -> CameraFrame:
+    """A CameraFrame of a rendered image (envelope left to the publisher, which stamps it).
+
+    Its ``gravity`` is what the tablet's accelerometer would report: the true gravity in the camera
+    frame turned by N(0, ``gravity_noise_deg``) about each axis; ``None`` sends no gravity.
+    """
     height, width = rgb.shape[:2]
     if (width, height) != (camera.width, camera.height):
         raise ValueError(f"image is {width}x{height} but the camera is {camera.width}x{camera.height}")
-    return CameraFrame(camera=camera_id, jpeg=encode_jpeg(rgb, quality), width=width, height=height, intrinsics=camera.intrinsics[:4], distortion=[0.0] * 5)
+    gravity = [] if gravity_noise_deg is None else [float(v) for v in gravity_in_camera(camera.R_world_camera, gravity_noise_deg, rng)]
+    return CameraFrame(camera=camera_id, jpeg=encode_jpeg(rgb, quality), width=width, height=height, intrinsics=camera.intrinsics[:4],
+                       distortion=[0.0] * 5, gravity=gravity)
 
 
 def truth_message(camera_id: str, camera: CameraSpec, frame_seq: int) -> CameraTruth:

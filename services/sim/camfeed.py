@@ -23,6 +23,10 @@ the wall rate did (the demo's lockstep runs at ~60x). After :data:`MAX_MISSED` h
 AR client on this camera, or a dead one), the camera falls back to the wall rate, so such a run
 loses only that many timeouts; the first overlay seen again brings the holds back.
 
+Each frame carries gravity in the camera frame as the tablet's accelerometer would measure it (the
+truth turned by ``--camera-gravity-noise`` degrees about each axis, default 1; ``--camera-no-gravity``
+sends none), which the AR client uses to tell a single tag's two planar poses apart.
+
 ``--camera tablet``: the human's tablet, at her position, ``--camera-height`` above the floor,
 looking where she faces (toward her door while at her desk, along her walk otherwise), pitched by
 ``--camera-pitch``. ``--camera X,Y,Z,YAW,PITCH``: a fixed camera (degrees; YAW counter-clockwise
@@ -35,6 +39,8 @@ import argparse
 import math
 from dataclasses import dataclass
 from typing import Any
+
+import numpy as np
 
 
 @dataclass(frozen=True)
@@ -50,6 +56,7 @@ class CameraOptions:
     tablet_pitch: float = 0.0  # radians
     hold: float = 30.0  # lockstep: site seconds between held frames (0: wall-rate frames as in the other modes)
     hold_timeout: float = 1.5  # wall seconds a held frame waits for its overlay
+    gravity_noise: float | None = 1.0  # degrees per axis on the gravity sent with each frame (None: none sent)
 
 
 def add_camera_arguments(group: Any) -> None:
@@ -65,6 +72,10 @@ def add_camera_arguments(group: Any) -> None:
                             "(default 30; 0: frames at --camera-rate per wall second instead)")
     group.add_argument("--camera-hold-timeout", type=float, default=1.5, metavar="S",
                        help="lockstep: wall seconds a held frame waits for its overlay before time goes on (default 1.5)")
+    group.add_argument("--camera-gravity-noise", type=float, default=1.0, metavar="DEG",
+                       help="each frame carries gravity in the camera frame as an IMU measures it: the truth turned by "
+                            "N(0, DEG) about each axis (default 1)")
+    group.add_argument("--camera-no-gravity", action="store_true", help="send frames without gravity (a camera without an IMU)")
 
 
 def camera_options_from(args: argparse.Namespace) -> CameraOptions | None:
@@ -86,9 +97,13 @@ def camera_options_from(args: argparse.Namespace) -> CameraOptions | None:
         raise ValueError(f"--camera-hold must be >= 0 site seconds (0: no held frames), got {args.camera_hold}")
     if not (math.isfinite(args.camera_hold_timeout) and args.camera_hold_timeout > 0):
         raise ValueError(f"--camera-hold-timeout must be > 0 wall seconds, got {args.camera_hold_timeout}")
+    noise = getattr(args, "camera_gravity_noise", 1.0)
+    if not (math.isfinite(noise) and 0.0 <= noise <= 90.0):
+        raise ValueError(f"--camera-gravity-noise must be within [0, 90] degrees, got {noise}")
     common = dict(id=args.camera_id, rate=args.camera_rate, width=width, height=height, fov=args.camera_fov,
                   tablet_height=args.camera_height, tablet_pitch=math.radians(args.camera_pitch),
-                  hold=args.camera_hold, hold_timeout=args.camera_hold_timeout)
+                  hold=args.camera_hold, hold_timeout=args.camera_hold_timeout,
+                  gravity_noise=None if getattr(args, "camera_no_gravity", False) else getattr(args, "camera_gravity_noise", 1.0))
     if spec == "tablet":
         options = CameraOptions(follow_human=True, **common)
     else:
@@ -223,6 +238,7 @@ class CameraFeed:
         self.hold = FrameHold(options.hold, options.hold_timeout) if lockstep and options.hold > 0 else None
         self._next = 0.0
         self.frames = 0
+        self._rng = np.random.default_rng()  # the IMU noise on each frame's gravity
 
     @property
     def at_wall_rate(self) -> bool:
@@ -241,7 +257,7 @@ class CameraFeed:
         self._next = wall + 1.0 / self.options.rate
         self.mirror.sync()
         spec = camera_spec(self.options, self.engine.human_pose())
-        frame = frame_message(self.options.id, self.world.render(spec), spec)
+        frame = frame_message(self.options.id, self.world.render(spec), spec, gravity_noise_deg=self.options.gravity_noise, rng=self._rng)
         service.publish(service.keys.camera_frame(self.options.id), frame)
         service.publish(service.keys.camera_truth(self.options.id), truth_message(self.options.id, spec, frame.seq))
         self.frames += 1

@@ -96,3 +96,22 @@ def test_tags_sheet_png_pages_decode_upright_at_true_size(tmp_path):
             assert c[0][0] < c[1][0] and c[0][1] < c[3][1]  # TL left of TR and above BL: upright
             edge_px = np.mean(np.linalg.norm(np.roll(c, -1, axis=0) - c, axis=1))
             assert edge_px / dpi * 0.0254 == pytest.approx(lm.size, rel=0.01)
+
+
+def test_localize_takes_gravity_and_picks_a_single_tags_right_solution(tmp_path):
+    from protocol.frames import gravity_in_camera
+    from tests.ar.helpers import VGA, only_tags
+    from tests.ar.test_gravity import single_tag_view
+
+    truth = single_tag_view(-30.0)
+    path = tmp_path / "one-tag.png"
+    cv2.imwrite(str(path), render(only_tags("hall", (10,)), truth, VGA, seed=430).image)
+    common = ("ar", "localize", "--site", str(HALL_FILE), "--image", str(path), "--intrinsics", ",".join(f"{v:g}" for v in VGA.as_list()), "--json")
+    blind = json.loads(_run(*common).stdout)
+    assert blind["ok"] and blind["ambiguous"] and "gravity_error_deg" not in blind
+    g = ",".join(f"{v:.4f}" for v in gravity_in_camera(truth.R_wc))
+    seen = json.loads(_run(*common, "--gravity", g).stdout)
+    assert seen["ok"] and seen["gravity_error_deg"] < 2.0
+    assert np.linalg.norm(np.array(seen["position"]) - truth.position) < 0.1 < np.linalg.norm(np.array(blind["position"]) - truth.position)
+    bad = _run(*common, "--gravity", "1,2")
+    assert bad.returncode == 2 and "gravity" in bad.stderr

@@ -61,7 +61,7 @@ def test_single_tag_oblique_and_frontal(detector, d):
             assert loc.ok and loc.tags == [SINGLE_TAG], (d, ob, loc.reason)
             pe, re = errors(loc.pose, truth)
             if ob >= 30.0:
-                assert pe <= 0.01 * d and re <= 0.5, (d, ob, pe, re)
+                assert pe <= 0.01 * d and re <= 0.55, (d, ob, pe, re)
             else:
                 assert pe <= 0.04 * d and re <= 2.5, (d, ob, pe, re)
                 if pe > 0.01 * d:

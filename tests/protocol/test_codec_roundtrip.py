@@ -115,3 +115,18 @@ def test_encode_with_extra_fields_is_decoded_as_without():
         encode(pose, {"x": 1.0})
     with pytest.raises(ValueError, match="shadow"):
         encode(pose, {"type": "Intent"})
+
+
+def test_camera_frame_gravity_is_optional_and_old_frames_still_decode():
+    from protocol.messages import CameraFrame
+
+    old = msgpack.packb({"v": CameraFrame.VERSION, "type": "CameraFrame", "src": "sim", "seq": 3, "stamp": 1.0, "camera": "tablet",
+                         "jpeg": b"\xff\xd8", "width": 640, "height": 480, "intrinsics": [500.0, 500.0, 320.0, 240.0],
+                         "distortion": [0.0] * 5})
+    frame = decode(old, CameraFrame)
+    assert frame.gravity == [] and frame.width == 640
+    new = CameraFrame(camera="tablet", jpeg=b"\xff\xd8", width=640, height=480, intrinsics=[500.0, 500.0, 320.0, 240.0], gravity=[0.1, 9.8, 0.2])
+    assert decode(encode(new), CameraFrame).gravity == [0.1, 9.8, 0.2]
+    bad = dataclasses.replace(new, gravity=[0.0, 9.8])
+    with pytest.raises(Exception, match="gravity"):
+        decode(encode(bad), CameraFrame)

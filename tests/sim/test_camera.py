@@ -275,6 +275,31 @@ def test_frame_and_truth_messages(world: World) -> None:
         frame_message("tablet", image[:100], cam)
 
 
+def test_frames_carry_gravity_as_an_imu_measures_it(world: World) -> None:
+    """Gravity in the camera frame (pointing down): the truth without noise, about 1 deg off with the
+    default noise, none when asked for none; the command line option is checked."""
+    import argparse
+
+    from services.sim.camfeed import add_camera_arguments, camera_options_from
+
+    cam = CameraSpec.from_degrees(*SOUTH_OBLIQUE, 64, 48, 60.0)
+    image = np.zeros((48, 64, 3), np.uint8)
+    exact = decode(encode(frame_message("tablet", image, cam, gravity_noise_deg=0.0)), CameraFrame).gravity
+    np.testing.assert_allclose(exact, cam.R_world_camera.T @ [0.0, 0.0, -9.80665], atol=1e-9)
+    assert exact[1] > 9.0  # a camera pitched a little: gravity mostly along the image's "down"
+    rng = np.random.default_rng(0)
+    angles = [math.degrees(math.acos(np.clip(np.dot(frame_message("t", image, cam, rng=rng).gravity, exact) / 9.80665**2, -1, 1)))
+              for _ in range(200)]
+    assert 0.8 < float(np.median(angles)) < 2.0  # two tilt axes at N(0, 1 deg) each: median ~1.2 deg
+    assert frame_message("t", image, cam, gravity_noise_deg=None).gravity == []
+    parser = argparse.ArgumentParser()
+    add_camera_arguments(parser)
+    assert camera_options_from(parser.parse_args(["--camera", "tablet"])).gravity_noise == 1.0
+    assert camera_options_from(parser.parse_args(["--camera", "tablet", "--camera-no-gravity"])).gravity_noise is None
+    with pytest.raises(ValueError, match="--camera-gravity-noise"):
+        camera_options_from(parser.parse_args(["--camera", "tablet", "--camera-gravity-noise", "-1"]))
+
+
 # ---------------------------------------------------------------------- the command
 
 

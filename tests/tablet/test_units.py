@@ -130,3 +130,17 @@ def test_token_bucket_limits_bursts_then_refills():
     assert all(bucket.take() for _ in range(5))
     slow = TokenBucket(rate=0.001, burst=3)
     assert [slow.take() for _ in range(4)] == [True, True, True, False]
+
+
+def test_frames_carry_gravity_and_old_frames_still_parse():
+    ok = cv2.imencode(".jpg", np.zeros((48, 64, 3), np.uint8))[1].tobytes()
+    frame = wire.parse_frame(wire.pack_frame(9, ok, gravity=(0.5, 9.7, -1.0)))
+    assert frame.seq == 9 and frame.jpeg == ok and frame.gravity == pytest.approx((0.5, 9.7, -1.0))
+    assert wire.parse_frame(wire.pack_frame(9, ok)).gravity is None  # ARF1: no gravity
+    unknown = wire.HEADER.pack(wire.GRAVITY_FRAME_MAGIC, 3) + wire.GRAVITY.pack(float("nan"), 0.0, 0.0) + ok
+    assert wire.parse_frame(unknown).gravity is None and wire.parse_frame(unknown).jpeg == ok
+    with pytest.raises(wire.Violation) as absurd:
+        wire.parse_frame(wire.pack_frame(1, ok, gravity=(0.0, 500.0, 0.0)))
+    assert absurd.value.code == wire.CLOSE_POLICY and "gravity" in absurd.value.reason
+    with pytest.raises(wire.Violation):
+        wire.parse_frame(wire.GRAVITY_FRAME_MAGIC + b"\x01\x00\x00\x00\x00")  # cut inside the gravity

@@ -308,11 +308,12 @@ class TabletServer:
         if self._viewer_pipeline is None:
             self._viewer_pipeline = self.new_pipeline(msg.camera)
         now = self.bridge.now()
-        overlay, _ = self._viewer_pipeline.process(msg.jpeg, K, now, frame_seq=msg.seq, annotate=False, now=now)
+        gravity = msg.gravity or None
+        overlay, _ = self._viewer_pipeline.process(msg.jpeg, K, now, frame_seq=msg.seq, annotate=False, now=now, gravity=gravity)
         loc = self._viewer_pipeline.last_localization
         reason = loc.reason if loc is not None and not loc.ok else ""
         return wire.overlay_json(overlay, reason=reason, intrinsics="from the sim camera", source="sim",
-                                 server_ms=(time.perf_counter() - started) * 1000.0)
+                                 server_ms=(time.perf_counter() - started) * 1000.0, gravity=gravity)
 
     # ------------------------------------------------------------------ lifecycle
 

@@ -160,11 +160,12 @@ class ClientSession:
             self.pipeline = self.server.new_pipeline(self.camera_id)
         intrinsics, source = self.server.camera_model.for_size(frame.width, frame.height)
         now = self.server.bridge.now()
-        overlay, _ = self.pipeline.process(frame.jpeg, intrinsics, now, frame_seq=frame.seq, annotate=False, now=now)
+        overlay, _ = self.pipeline.process(frame.jpeg, intrinsics, now, frame_seq=frame.seq, annotate=False, now=now, gravity=frame.gravity)
         loc = self.pipeline.last_localization
         reason = loc.reason if loc is not None and not loc.ok else ""
         self.server.publish_overlay(overlay, reason)
-        return wire.overlay_json(overlay, reason=reason, intrinsics=source, server_ms=(time.perf_counter() - started) * 1000.0)
+        return wire.overlay_json(overlay, reason=reason, intrinsics=source, server_ms=(time.perf_counter() - started) * 1000.0,
+                                 gravity=frame.gravity)
 
     # ------------------------------------------------------------------ feedback
 

@@ -4,8 +4,10 @@ Binary messages carry images; text messages are JSON objects with a ``type``.
 
 Page → server:
 
-- a camera frame: ``b"ARF1"``, the frame's sequence number (uint32, little-endian), then a baseline
-  or progressive JPEG of at most :data:`MAX_FRAME_BYTES` bytes and :data:`MAX_SIDE` pixels a side;
+- a camera frame: ``b"ARF2"``, the frame's sequence number (uint32, little-endian), the device's
+  gravity at capture in the camera frame (three float32, little-endian, OpenCV axes, pointing down,
+  m/s²; NaN when unknown), then a baseline or progressive JPEG of at most :data:`MAX_FRAME_BYTES`
+  bytes and :data:`MAX_SIDE` pixels a side. ``b"ARF1"`` frames (seq, JPEG: no gravity) are still taken;
 - ``{"type": "feedback", "id": n, "kind": "<library entry>", "params": {name: value}}``: one choice
   from the constraint library (values: integers, short strings or finite numbers);
 - ``{"type": "ping", "t": x}``: answered with ``{"type": "pong", "t": x}`` (link round trip).
@@ -35,8 +37,12 @@ from typing import Any, Callable
 from protocol.messages import Overlay
 
 FRAME_MAGIC = b"ARF1"
+GRAVITY_FRAME_MAGIC = b"ARF2"
 VIEWER_MAGIC = b"ARV1"
 HEADER = struct.Struct("<4sI")
+GRAVITY = struct.Struct("<3f")
+#: A gravity reading longer than this (m/s²) is not an accelerometer's: the frame is refused.
+MAX_GRAVITY = 100.0
 MAX_FRAME_BYTES = 2 * 1024 * 1024
 MAX_SIDE = 1920
 MIN_SIDE = 16
@@ -70,6 +76,7 @@ class Frame:
     jpeg: bytes
     width: int
     height: int
+    gravity: tuple[float, float, float] | None = None  # camera frame, pointing down; None: unknown
 
 
 def jpeg_size(data: bytes) -> tuple[int, int]:
@@ -111,18 +118,36 @@ def parse_frame(message: bytes, magic: bytes = FRAME_MAGIC) -> Frame:
     if len(message) < HEADER.size:
         raise Violation(CLOSE_UNSUPPORTED, f"binary message of {len(message)} bytes is not a frame")
     tag, seq = HEADER.unpack_from(message)
-    if tag != magic:
+    start, gravity = HEADER.size, None
+    if magic == FRAME_MAGIC and tag == GRAVITY_FRAME_MAGIC:
+        if len(message) < HEADER.size + GRAVITY.size:
+            raise Violation(CLOSE_UNSUPPORTED, f"binary message of {len(message)} bytes is not a frame")
+        gravity = _gravity(GRAVITY.unpack_from(message, HEADER.size))
+        start += GRAVITY.size
+    elif tag != magic:
         raise Violation(CLOSE_UNSUPPORTED, "binary message is not a frame (bad magic)")
-    jpeg = bytes(message[HEADER.size:])
+    jpeg = bytes(message[start:])
     if len(jpeg) > MAX_FRAME_BYTES:
         raise Violation(CLOSE_TOO_BIG, f"frame of {len(jpeg)} bytes exceeds {MAX_FRAME_BYTES}")
     width, height = jpeg_size(jpeg)
     if not (MIN_SIDE <= width <= MAX_SIDE and MIN_SIDE <= height <= MAX_SIDE):
         raise Violation(CLOSE_TOO_BIG, f"frame of {width}x{height} pixels is outside {MIN_SIDE}..{MAX_SIDE} a side")
-    return Frame(seq=seq, jpeg=jpeg, width=width, height=height)
+    return Frame(seq=seq, jpeg=jpeg, width=width, height=height, gravity=gravity)
 
 
-def pack_frame(seq: int, jpeg: bytes, magic: bytes = FRAME_MAGIC) -> bytes:
+def _gravity(values: tuple[float, float, float]) -> tuple[float, float, float] | None:
+    """A frame's gravity: None when unknown (NaN, or all zero); a :class:`Violation` when absurd."""
+    if not all(math.isfinite(v) for v in values) or not any(values):
+        return None
+    if math.sqrt(sum(v * v for v in values)) > MAX_GRAVITY:
+        raise Violation(CLOSE_POLICY, f"frame gravity {values} is longer than {MAX_GRAVITY} m/s²")
+    return (float(values[0]), float(values[1]), float(values[2]))
+
+
+def pack_frame(seq: int, jpeg: bytes, magic: bytes = FRAME_MAGIC, gravity: tuple[float, float, float] | None = None) -> bytes:
+    """A frame message as the page sends it (``ARF2`` with gravity when given, else ``ARF1``)."""
+    if gravity is not None and magic == FRAME_MAGIC:
+        return HEADER.pack(GRAVITY_FRAME_MAGIC, seq & 0xFFFFFFFF) + GRAVITY.pack(*gravity) + jpeg
     return HEADER.pack(magic, seq & 0xFFFFFFFF) + jpeg
 
 
@@ -185,7 +210,8 @@ def _r(value: float) -> float:
     return round(float(value), 1)
 
 
-def overlay_json(overlay: Overlay, *, reason: str = "", intrinsics: str = "", server_ms: float = 0.0, source: str = "browser") -> str:
+def overlay_json(overlay: Overlay, *, reason: str = "", intrinsics: str = "", server_ms: float = 0.0, source: str = "browser",
+                 gravity: tuple[float, float, float] | list[float] | None = None) -> str:
     """An Overlay as the page's ``overlay`` message (primitives rounded to 0.1 px, short keys)."""
     prims = []
     for p in overlay.primitives:
@@ -215,6 +241,7 @@ def overlay_json(overlay: Overlay, *, reason: str = "", intrinsics: str = "", se
         "reason": reason,
         "intrinsics": intrinsics,
         "server_ms": round(server_ms, 1),
+        "gravity": [round(float(v), 3) for v in gravity] if gravity else None,  # what the pose was solved with
         "primitives": prims,
     }, separators=(",", ":"))
 

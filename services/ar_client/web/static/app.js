@@ -6,6 +6,7 @@
 // last pose and the reason; link latency is the measured round trip of the last frames.
 
 import { clearCanvas, drawMap, drawPrimitives, letterbox } from "./draw.js";
+import { GravitySource } from "./gravity.js";
 import { FrameSender, parseViewerFrame } from "./link.js";
 import { FeedbackPanel } from "./panel.js";
 
@@ -36,7 +37,10 @@ const state = {
   reconnectDelay: 500,
 };
 
-const sender = new FrameSender(() => state.ws);
+const gravity = new GravitySource();
+const sender = new FrameSender(() => state.ws, { getGravity: () => gravity.current() });
+// iOS gives motion data only after the user allowed it, from a tap.
+window.addEventListener("pointerdown", () => gravity.ask(), { once: true });
 const panel = new FeedbackPanel($("entries"), sendFeedback);
 
 // ------------------------------------------------------------------------------- connection
@@ -318,7 +322,9 @@ window.arroch = {
     client: state.hello ? state.hello.client : null, stale: state.stale, stream_frames: state.stream.frames,
     overlay: state.overlay ? { seq: state.overlay.seq, ok: state.overlay.ok, tags: state.overlay.tags, rmse: state.overlay.rmse,
       width: state.overlay.width, height: state.overlay.height, primitives: state.overlay.primitives.length,
-      reason: state.overlay.reason, intrinsics: state.overlay.intrinsics } : null,
+      reason: state.overlay.reason, intrinsics: state.overlay.intrinsics, position: state.overlay.position,
+      gravity: state.overlay.gravity } : null,
+    gravity: gravity.current(), gravity_source: gravity.kind,
     video: [$("video").videoWidth, $("video").videoHeight],
     robots: state.world ? Object.keys(state.world.robots) : [],
     acks: panel.results.slice(),

@@ -4,11 +4,13 @@
 //   came back (or was given up after GIVE_UP_MS), so frames never queue up in the network and every
 //   overlay answers a recent picture.
 // - At most `maxFps` frames per second (the server's limit, 15 by default).
+// - Each frame carries the device's gravity at capture (gravity.js), NaN when unknown.
 // - Size and JPEG quality follow the round trip: when its running average grows past SLOW_MS the
 //   frames shrink (and lose some quality), when it stays under FAST_MS they grow back.
 // The <video> element shows the camera itself, so none of this ever delays the live picture.
 
-const MAGIC = [0x41, 0x52, 0x46, 0x31]; // "ARF1"
+const MAGIC = [0x41, 0x52, 0x46, 0x32]; // "ARF2": seq, then gravity (3 float32, NaN when unknown), then the JPEG
+const HEADER = 20;
 const GIVE_UP_MS = 2000;
 const SLOW_MS = 180;
 const FAST_MS = 90;
@@ -17,8 +19,9 @@ const MIN_WIDTH = 240;
 const STEP = 0.8;
 
 export class FrameSender {
-  constructor(getSocket, { maxFps = 15, maxSide = 1920, maxBytes = 2 * 1024 * 1024, startSide = 1280 } = {}) {
+  constructor(getSocket, { maxFps = 15, maxSide = 1920, maxBytes = 2 * 1024 * 1024, startSide = 1280, getGravity = () => null } = {}) {
     this.getSocket = getSocket;
+    this.getGravity = getGravity; // gravity in the camera frame at capture (gravity.js), or null
     this.maxFps = maxFps;
     this.maxSide = maxSide;
     this.maxBytes = maxBytes;
@@ -89,6 +92,7 @@ export class FrameSender {
     }
     const captured = (this.lastStart = performance.now());
     this.ctx.drawImage(video, 0, 0, w, h);
+    const gravity = this.getGravity(); // read at capture, not after the JPEG encoding
     const blob = await new Promise((resolve) => this.canvas.toBlob(resolve, "image/jpeg", this.quality));
     if (!blob) return;
     if (blob.size > this.maxBytes) {
@@ -97,14 +101,16 @@ export class FrameSender {
     }
     const body = new Uint8Array(await blob.arrayBuffer());
     const seq = (this.seq = (this.seq + 1) >>> 0);
-    const message = new Uint8Array(8 + body.length);
+    const message = new Uint8Array(HEADER + body.length);
     message.set(MAGIC, 0);
-    new DataView(message.buffer).setUint32(4, seq, true);
-    message.set(body, 8);
+    const view = new DataView(message.buffer);
+    view.setUint32(4, seq, true);
+    for (let i = 0; i < 3; i++) view.setFloat32(8 + 4 * i, gravity ? gravity[i] : NaN, true);
+    message.set(body, HEADER);
     if (ws.readyState !== WebSocket.OPEN) return;
     ws.send(message.buffer);
     const sent = performance.now();
-    this.inFlight = { seq, captured, sent, w, h, bytes: body.length };
+    this.inFlight = { seq, captured, sent, w, h, bytes: body.length, gravity };
     this.sent += 1;
     this.size = [w, h];
   }

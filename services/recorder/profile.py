@@ -59,6 +59,11 @@ class FoxgloveProfile:
     def start(self, t: float) -> None:
         self.sink.message(topics.SCENE, to_foxglove(self.scene.entities(), t), t)
 
+    def resend(self, topic: str, t: float) -> None:
+        """A viewer subscribed to ``topic``: the scene, sent whole only at the start, goes out again as it is now."""
+        if topic == topics.SCENE:
+            self.start(t)
+
     def handle(self, msg: Message, key: str) -> None:
         self._raw(msg, key)
         handler = self._handlers.get(type(msg))

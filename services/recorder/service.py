@@ -37,6 +37,19 @@ class Recorder(Service):
         self.messages = 0
         self._lock = threading.Lock()
         self._closed = False
+        for profile in profiles:
+            sink = getattr(profile, "sink", None)
+            if getattr(sink, "server", None) is not None:
+                sink.on_subscribe = self._viewer_subscribed
+
+    def _viewer_subscribed(self, topic: str) -> None:
+        with self._lock:
+            if self._closed:
+                return
+            for profile in self.profiles:
+                resend = getattr(profile, "resend", None)
+                if resend is not None:
+                    resend(topic, self._now())
 
     def setup(self) -> None:
         with self._lock:

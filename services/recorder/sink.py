@@ -15,6 +15,7 @@ from typing import Any, Callable
 import foxglove
 import foxglove.channels
 from foxglove import Channel, Context, Schema
+from foxglove.websocket import ServerListener
 
 from .topics import RAW_ENCODING, RAW_SCHEMA_PREFIX
 
@@ -36,6 +37,9 @@ class FoxgloveSink:
         self._writer = None
         self.server = None
         self.path = mcap_path
+        # Called with a topic when a viewer subscribes to it (on the SDK's thread): state sent once
+        # (the site scene) is sent again for it.
+        self.on_subscribe: Callable[[str], None] | None = None
         if mcap_path is not None:
             mcap_path.parent.mkdir(parents=True, exist_ok=True)
             self._writer = foxglove.open_mcap(mcap_path, allow_overwrite=True, context=self.context)
@@ -43,7 +47,8 @@ class FoxgloveSink:
                 self._writer.write_metadata("arroch", metadata)
         if serve is not None:
             host, port = serve
-            self.server = foxglove.start_server(name="arroch", host=host, port=port, context=self.context)
+            self.server = foxglove.start_server(name="arroch", host=host, port=port, context=self.context,
+                                                server_listener=_Listener(self))
             log.info("Foxglove WebSocket server on ws://%s:%d (open it in Foxglove: Open connection)", host, self.server.port)
 
     @property
@@ -83,6 +88,15 @@ class FoxgloveSink:
         if self.server is not None:
             self.server.stop()
             self.server = None
+
+
+class _Listener(ServerListener):
+    def __init__(self, sink: FoxgloveSink) -> None:
+        self.sink = sink
+
+    def on_subscribe(self, client: Any, channel: Any) -> None:
+        if self.sink.on_subscribe is not None:
+            self.sink.on_subscribe(channel.topic)
 
 
 def _jsonable(value: Any) -> Any:

@@ -4,8 +4,9 @@ Each message goes out as it was recorded (same bytes: ``src``, ``seq`` and ``sta
 its key in the chosen namespace (default: the recorded one), so the AR client, the tablet page or the
 planner can be fed a recorded mission. Pace: the recording's own (site seconds = wall seconds),
 ``--rate K`` times faster, ``--fast`` (no waiting), or ``--step`` (Enter publishes the next
-``--step-size`` site seconds). ``--hold-camera`` waits, after each camera frame, for the AR
-client's overlay of it (as the lockstep sim does), so overlays are drawn over the world they show.
+``--step-size`` site seconds). ``--hold-camera`` lets what came before each camera frame land
+(``--settle``), publishes the frame and waits for the AR client's overlay of it (as the lockstep sim
+does), so overlays are drawn over the world they show.
 
 Examples:
   arroch replay runs/20260101-120000/run.mcap --only 'robot/*/pose' --only 'intent/*' --only clock
@@ -74,9 +75,10 @@ def selected(topic: str, only: list[str], skip: list[str]) -> bool:
 class Replayer(Service):
     """Publishes recorded payloads; with ``hold_camera``, waits for each frame's overlay."""
 
-    def __init__(self, namespace: str, options: ZenohOptions, *, hold_camera: float | None = None) -> None:
+    def __init__(self, namespace: str, options: ZenohOptions, *, hold_camera: float | None = None, settle: float = 0.05) -> None:
         super().__init__("replay", namespace, options)
         self.hold_camera = hold_camera
+        self.settle = settle
         self.published = 0
         self.holds_timed_out = 0
         self._answered: dict[str, int] = {}  # camera -> newest frame_seq with an overlay
@@ -93,6 +95,10 @@ class Replayer(Service):
 
     def put(self, record: Recorded) -> None:
         key = key_of(self.keys, record.topic)
+        if self.hold_camera is not None and isinstance(record.message, CameraFrame):
+            # Receivers take each key on a thread of its own: let what went before the frame (poses,
+            # intents) land first, as it had in the recorded run, where time stood still meanwhile.
+            time.sleep(self.settle)
         if key not in self._publishers:
             self.advertise(key, express=not isinstance(record.message, CameraFrame))
         self._publishers[key].put(record.payload)
@@ -137,7 +143,8 @@ def replay_main(args: argparse.Namespace) -> int:
         return 2
     rate = None if args.fast else (args.rate or 1.0)
     pacer = Pacer(rate, args.step_size if args.step else None)
-    replayer = Replayer(namespace, zenoh_options(args), hold_camera=args.hold_timeout if args.hold_camera else None)
+    replayer = Replayer(namespace, zenoh_options(args), hold_camera=args.hold_timeout if args.hold_camera else None,
+                        settle=args.settle)
     replayer.install_signal_handlers()
     try:
         replayer.open()
@@ -174,4 +181,5 @@ def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--end", type=float, metavar="T", help="up to site time T")
     parser.add_argument("--hold-camera", action="store_true", help="after each camera frame, wait for its overlay (ar/<cid>/overlay)")
     parser.add_argument("--hold-timeout", type=float, default=3.0, metavar="S", help="longest wait for an overlay (default 3 s)")
+    parser.add_argument("--settle", type=float, default=0.05, metavar="S", help="with --hold-camera: wall seconds before each frame (default 0.05)")
     parser.add_argument("--delay", type=float, default=0.5, metavar="S", help="wall seconds between joining Zenoh and the first message (default 0.5)")

@@ -19,6 +19,7 @@ from .logtail import LogFollower
 from .topics import recorded_keys
 
 LOG_POLL = 0.25  # wall seconds between two looks at the followed log file
+RESEND_TICK = 0.2  # wall seconds between a viewer's subscription and the state sent again for it
 
 
 class RecordingProfile(Protocol):
@@ -37,19 +38,27 @@ class Recorder(Service):
         self.messages = 0
         self._lock = threading.Lock()
         self._closed = False
+        self._resend: set[str] = set()  # topics a viewer subscribed to since the last tick
         for profile in profiles:
             sink = getattr(profile, "sink", None)
             if getattr(sink, "server", None) is not None:
                 sink.on_subscribe = self._viewer_subscribed
 
     def _viewer_subscribed(self, topic: str) -> None:
+        # Called before the subscription takes effect: what is sent for it goes out on the next timer tick.
         with self._lock:
+            self._resend.add(topic)
+
+    def _resend_pending(self) -> None:
+        with self._lock:
+            topics, self._resend = self._resend, set()
             if self._closed:
                 return
-            for profile in self.profiles:
-                resend = getattr(profile, "resend", None)
-                if resend is not None:
-                    resend(topic, self._now())
+            for topic in topics:
+                for profile in self.profiles:
+                    resend = getattr(profile, "resend", None)
+                    if resend is not None:
+                        resend(topic, self._now())
 
     def setup(self) -> None:
         with self._lock:
@@ -59,6 +68,7 @@ class Recorder(Service):
             self.subscribe(key, msg_type, self._on_message, inline=True)
         if self.follower is not None:
             self.every(LOG_POLL, self._follow_log, first=0.0)
+        self.every(RESEND_TICK, self._resend_pending)
 
     def _now(self) -> float:
         return self.clock.now() if getattr(self.clock, "synced", True) else 0.0

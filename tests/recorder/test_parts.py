@@ -1,0 +1,87 @@
+"""The recorder's parts without processes: how ``arroch up`` adds it, the log follower, the JSON
+Schemas of the wire records, the scene's live door state."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import pytest
+
+from protocol.messages import TeamPlan
+from protocol.site import load_site
+from services.recorder.jsonschema import record_schema
+from services.recorder.logtail import LogFollower, parse
+from services.recorder.scene import DOOR_CLOSED, DOOR_OPEN, SiteScene
+from services.supervisor.catalog import RECORDER_NAME, SERVICES, Launch, MissionOptions, service_argv
+from services.supervisor.cli import add_up_arguments, build_config
+
+
+def up_config(tmp_path: Path, *args: str):
+    parser = argparse.ArgumentParser()
+    add_up_arguments(parser)
+    config, _options = build_config(parser.parse_args(["--namespace", "n", "--run-dir", str(tmp_path), *args]))
+    return config
+
+
+@pytest.mark.parametrize("args, recorder", [
+    ((), "record"),  # the default services include the sim: recorded
+    (("--services", "planner,sim", "--no-record"), None),
+    (("--services", "ping"), None),  # no mission, nothing recorded unless asked
+    (("--services", "ping", "--record"), "record"),
+    (("--services", "sim", "--no-record", "--view"), "view"),
+])
+def test_up_records_runs_with_a_sim_unless_told_otherwise(tmp_path, args, recorder):
+    config = up_config(tmp_path, *args)
+    specs = [s for s in config.services if s.name == RECORDER_NAME]
+    assert [s.command[0] for s in specs] == ([recorder] if recorder else [])
+
+
+def test_the_recorder_writes_into_the_run_folder_and_the_sim_waits_for_it(tmp_path):
+    config = up_config(tmp_path, "--view", "--view-port", "9999")
+    (recorder,) = [s for s in config.services if s.name == RECORDER_NAME]
+    config.launch.run_dir = tmp_path / "20260101-000000"
+    argv = service_argv(recorder, config.launch)
+    assert argv[argv.index("--out") + 1] == str(config.launch.run_dir / "run.mcap")
+    assert argv[argv.index("--logs") + 1] == str(config.launch.run_dir / "supervisor.log")
+    assert argv[argv.index("--view-port") + 1] == "9999"
+    assert RECORDER_NAME in SERVICES["sim"].after
+    # In the secure profile it reads as the supervisor's role (every key but robot commands).
+    secure = Launch(namespace="n", zenoh_config_dir=tmp_path, mission=MissionOptions())
+    argv = service_argv(recorder, secure)
+    assert argv[argv.index("--zenoh-config") + 1] == str(tmp_path / "supervisor.json5")
+
+
+def test_the_log_follower_returns_whole_lines_only(tmp_path):
+    log = tmp_path / "supervisor.log"
+    follower = LogFollower(log)
+    assert follower.poll() == []  # not there yet
+    log.write_text("[planner] 2026-01-01 12:00:00,000 WARNING arroch.planner: slow solve\n[sim] half a li")
+    (line,) = follower.poll()
+    assert (line.name, line.level, line.text) == ("planner", "WARNING", "arroch.planner: slow solve")
+    with open(log, "a") as f:
+        f.write("ne\n")
+    (rest,) = follower.poll()
+    assert (rest.name, rest.level, rest.text) == ("sim", "INFO", "half a line")
+    assert parse("no prefix at all").text == "no prefix at all"
+
+
+def test_json_schemas_follow_the_message_types():
+    schema = record_schema(TeamPlan)
+    props = schema["properties"]
+    assert schema["title"] == "TeamPlan" and props["type"]["const"] == "TeamPlan"
+    assert props["makespan"] == {"type": "number"} and props["plan_id"] == {"type": "integer"}
+    step = props["robots"]["additionalProperties"]["items"]
+    assert step["title"] == "PlanStep" and step["properties"]["args"] == {"type": "array", "items": {"type": "string"}}
+
+
+def test_the_scene_follows_door_states_and_carried_objects():
+    scene = SiteScene(load_site())
+    assert scene.door_changed("d_storage", False).shapes[0].color == DOOR_CLOSED
+    assert scene.door_changed("d_storage", False) is None  # no change, nothing to send
+    assert scene.door_changed("d_storage", True).shapes[0].color == DOOR_OPEN
+    assert scene.door_changed("no_such_door", True) is None
+    carried = scene.object_loaded("o0", "r0")
+    assert carried.frame == "robot/r0" and carried.locked
+    dropped = scene.object_delivered("o0", (1.0, 2.0))
+    assert dropped.frame == "world" and dropped.shapes[0].center[:2] == (1.0, 2.0)

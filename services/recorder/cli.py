@@ -27,7 +27,6 @@ def _build_recorder(args: argparse.Namespace, *, serve: tuple[str, int] | None):
     from protocol.site import load_site
 
     from .profile import FoxgloveProfile
-    from .ros2 import Ros2Profile
     from .service import Recorder
     from .sink import FoxgloveSink
 
@@ -38,6 +37,8 @@ def _build_recorder(args: argparse.Namespace, *, serve: tuple[str, int] | None):
     out = Path(args.out) if args.out else None
     profiles = []
     if args.profile == "ros2":
+        from .ros2 import Ros2Profile  # rosbags: only for this profile
+
         profiles.append(Ros2Profile(out or Path(time.strftime("recording-%Y%m%d-%H%M%S")), site))
         if serve is not None:
             profiles.append(FoxgloveProfile(FoxgloveSink(None, serve=serve), keys, site))
@@ -58,6 +59,12 @@ def run_record(args: argparse.Namespace) -> int:
 
 
 def run_view(args: argparse.Namespace) -> int:
+    if args.write_layout:
+        from .layout import layout_json
+
+        Path(args.write_layout).write_text(layout_json(), encoding="utf-8")
+        print(f"Foxglove layout written to {args.write_layout} (Foxglove: Layouts -> Import from file)")
+        return 0
     args.profile = "foxglove"
     return run_service(lambda: _build_recorder(args, serve=(args.host, args.port)))
 
@@ -96,6 +103,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     view.add_argument("--port", type=int, default=8765, help="port (default 8765; 0 = any free)")
     view.add_argument("--out", metavar="FILE", help="also record to this .mcap file")
     view.add_argument("--logs", metavar="FILE", help="also show the lines of this log as it grows")
+    view.add_argument("--write-layout", metavar="FILE", help="write the Foxglove layout (as docs/foxglove-layout.json) to FILE and exit")
     view.set_defaults(func=run_view)
 
     from . import replay as replay_module

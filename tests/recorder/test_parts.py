@@ -4,6 +4,7 @@ Schemas of the wire records, the scene's live door state."""
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 import pytest
@@ -85,3 +86,17 @@ def test_the_scene_follows_door_states_and_carried_objects():
     assert carried.frame == "robot/r0" and carried.locked
     dropped = scene.object_delivered("o0", (1.0, 2.0))
     assert dropped.frame == "world" and dropped.shapes[0].center[:2] == (1.0, 2.0)
+
+
+def test_the_layout_in_the_repository_is_the_one_the_code_builds(tmp_path):
+    from services.cli import main
+    from services.recorder.layout import layout_json
+
+    kept = (Path(__file__).resolve().parents[2] / "docs" / "foxglove-layout.json").read_text()
+    assert kept == layout_json()
+    assert main(["view", "--write-layout", str(tmp_path / "layout.json")]) == 0
+    layout = json.loads((tmp_path / "layout.json").read_text())
+    panels = json.dumps(layout)
+    for needed in ('"panelType": "ThreeDee"', '"panelType": "Image"', '"panelType": "Plot"', "/camera/tablet/overlay",
+                   "/progress.door_openings", "/camera/tablet/calibration"):
+        assert needed in panels, needed

@@ -10,7 +10,11 @@ Usage::
    ``wall_seconds``: start-up, mission, shut-down). The figure is the median over pairs of each
    pair's ratio, so both runs of a pair meet about the same load on this shared machine.
 2. ``recording``: the recorded mission's file: size, messages, channels.
-3. ``realtime_30min``: the same mission in real time (``--mode realtime``, camera at its default
+3. ``processing``: the recorder's own work on that mission, timed in this process: every recorded
+   message through the default profile into a new MCAP file (median of 5 passes), as a share of the
+   recorded run's wall time — what recording adds to the machine's load, free of the other
+   processes' noise.
+4. ``realtime_30min``: the same mission in real time (``--mode realtime``, camera at its default
    2 frames per wall second, 640x480 JPEG) for ``--realtime-seconds`` wall seconds; its bytes per
    second, per kind of channel, times 1800 is the size of a 30-minute real-time recording.
 
@@ -64,6 +68,31 @@ def bytes_per_kind(path: Path) -> tuple[dict[str, int], dict[str, int], float]:
     return sizes, counts, ((last or 0) - (first or 0)) / 1e9
 
 
+def processing(recording: Path, wall: float) -> dict:
+    from protocol.keys import Keys
+    from protocol.site import load_site
+    from services.recorder.profile import FoxgloveProfile
+    from services.recorder.reading import messages, metadata
+    from services.recorder.sink import FoxgloveSink
+
+    keys = Keys(metadata(recording)["namespace"])
+    site = load_site()
+    recorded = list(messages(recording))
+    times = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for k in range(5):
+            profile = FoxgloveProfile(FoxgloveSink(Path(tmp) / f"{k}.mcap"), keys, site)
+            start = time.perf_counter()
+            profile.start(0.0)
+            for rec in recorded:
+                profile.handle(rec.message, f"{keys.prefix}/{rec.topic[len('/arroch/'):]}")
+            profile.close()
+            times.append(time.perf_counter() - start)
+    cpu = statistics.median(times)
+    return {"messages": len(recorded), "seconds": round(cpu, 4), "us_per_message": round(cpu / len(recorded) * 1e6, 1),
+            "share_of_run_wall": round(cpu / wall, 4)}
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--pairs", type=int, default=3, help="interleaved pairs of missions (default 3)")
@@ -105,6 +134,7 @@ def main() -> int:
         out["recording"] = {"bytes": recording.stat().st_size, "messages": sum(counts.values()),
                             "channels": len(summary.channels), "site_seconds": round(span, 1),
                             "payload_bytes_by_kind": sizes, "messages_by_kind": counts}
+        out["processing"] = processing(recording, float(statistics.median(walls["recorded"])))
         if args.realtime_seconds > 0:
             print(f"real-time mission for {args.realtime_seconds:g} s", file=sys.stderr, flush=True)
             run = up(base / "realtime", "--mode", "realtime", "--timeout", f"{args.realtime_seconds:g}",

@@ -37,9 +37,11 @@ def metrics_rows(m: dict[str, Any]) -> list[tuple[str, str, str]]:
         rows.append((f"  {agent}", _seconds(t), "last delivery" if agent != "human" else "her own task done"))
     rows.append(("human door openings", str(m.get("human_door_openings", 0)),
                  "times the human walked to a door and opened it for the robots (her a1 actions; the paper's figure)"))
+    note = "openings per door: by the human, or for a robot (doors that open as a robot approaches)"
     for door, by in sorted((m.get("door_openings") or {}).items()):
         parts = [f"{n} by {who}" for who, n in sorted(by.items())]
-        rows.append((f"  {door}", ", ".join(parts), "openings of this door: by the human, or by a robot (doors that open for an approaching robot)"))
+        rows.append((f"  {door}", ", ".join(parts), note))
+        note = ""
     fb = m.get("feedback") or {}
     rows.append(("feedback", f"{fb.get('sent', 0)} sent", f"{fb.get('accepted', 0)} accepted, {fb.get('refused', 0)} refused, "
                                                              f"{fb.get('unanswered', 0)} unanswered (the human's declarations)"))

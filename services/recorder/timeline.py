@@ -92,7 +92,7 @@ def draw_timeline(tl: Timeline, out: Path, title: str = "") -> Path:
         ax.broken_barh([(start, end - start)], (y["human"] - 0.35, 0.7), facecolors="#9467bd", alpha=0.6)
     for t, text in tl.declarations:
         ax.plot([t], [y["human"]], marker="v", color="black", markersize=8)
-        ax.text(t, y["human"] + 0.42, text, fontsize=6, rotation=20, ha="left", va="bottom")
+        ax.text(t + 0.005 * max(tl.end, 1.0), y["human"] - 0.12, text, fontsize=7, ha="left", va="top")
     for did in doors:
         for start, end, by in tl.doors[did]:
             ax.broken_barh([(start, max(end - start, 0.01))], (y[did] - 0.3, 0.6),
@@ -103,12 +103,14 @@ def draw_timeline(tl: Timeline, out: Path, title: str = "") -> Path:
     ax.set_xlim(0, max(tl.end, 1.0))
     ax.set_xlabel("site time (s)")
     ax.grid(axis="x", alpha=0.3)
-    ax.set_title(title or "timeline")
+    params = (tl.metrics or {}).get("params") or {}
+    what = ", ".join(f"{k} {params[k]}" for k in ("site", "method", "seed") if k in params)
+    ax.set_title(f"{title or 'timeline'}{f' ({what})' if what else ''}")
     legend = [Patch(facecolor="#888888", label="moving (robot's colour)"), Patch(facecolor=STATE_COLOURS["waiting_at_door"], label="waiting at door"),
               Patch(facecolor=STATE_COLOURS["loading"], label="loading"), Patch(facecolor=STATE_COLOURS["unloading"], label="unloading"),
               Patch(facecolor=STATE_COLOURS["done"], label="done"), Patch(facecolor="#9467bd", alpha=0.6, label="human: focus interval"),
               Patch(facecolor="#2ca02c", label="door open (by the human)"), Patch(facecolor="#98df8a", label="door open (robot/sensor)")]
-    ax.legend(handles=legend, loc="upper center", bbox_to_anchor=(0.5, -0.14 - 0.6 / len(rows)), ncol=4, fontsize=8, frameon=False)
+    ax.legend(handles=legend, loc="upper center", bbox_to_anchor=(0.5, -0.06 - 0.5 / len(rows)), ncol=4, fontsize=8, frameon=False)
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)

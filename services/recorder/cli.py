@@ -47,6 +47,8 @@ def _build_recorder(args: argparse.Namespace, *, serve: tuple[str, int] | None):
                     "clock": args.clock, "recorded": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
         if out is not None and out.suffix != ".mcap":
             raise ValueError(f"--out {out}: a recording is an .mcap file")
+        if out is not None and out.exists():
+            raise ValueError(f"--out {out}: the file exists already (a recording is never overwritten)")
         profiles.append(FoxgloveProfile(FoxgloveSink(out, serve=serve, metadata=metadata), keys, site))
     return Recorder(namespace, zenoh_options(args), profiles, log_file=logs, clock=make_clock(args.clock))
 

@@ -99,9 +99,8 @@ class Replayer(Service):
             # Receivers take each key on a thread of its own: let what went before the frame (poses,
             # intents) land first, as it had in the recorded run, where time stood still meanwhile.
             time.sleep(self.settle)
-        if key not in self._publishers:
-            self.advertise(key, express=not isinstance(record.message, CameraFrame))
-        self._publishers[key].put(record.payload)
+        # advertise() declares a key's publisher once; camera frames are bulk (batched), the rest go as they come.
+        self.advertise(key, express=not isinstance(record.message, CameraFrame)).put(record.payload)
         self.published += 1
         if self.hold_camera is not None and isinstance(record.message, CameraFrame):
             frame = record.message

@@ -100,3 +100,20 @@ def test_the_layout_in_the_repository_is_the_one_the_code_builds(tmp_path):
     for needed in ('"panelType": "ThreeDee"', '"panelType": "Image"', '"panelType": "Plot"', "/camera/tablet/overlay",
                    "/progress.door_openings", "/camera/tablet/calibration"):
         assert needed in panels, needed
+
+
+@pytest.mark.parametrize("args, problem", [
+    (["--out", "x.txt"], "a recording is an .mcap file"),
+    (["--out", "{existing}"], "the file exists already"),
+])
+def test_record_refuses_bad_output_paths_clearly(tmp_path, args, problem):
+    import subprocess
+
+    from tests.procs import arroch
+
+    existing = tmp_path / "old.mcap"
+    existing.write_bytes(b"kept")
+    argv = arroch("record", *[a.replace("{existing}", str(existing)) for a in args], "--connect", "tcp/127.0.0.1:9")
+    result = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and problem in result.stderr, result.stderr
+    assert existing.read_bytes() == b"kept"

@@ -32,7 +32,7 @@ def test_the_mission_recording_has_every_channel_with_schemas(mission):
         schemas = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
         counts = {summary.channels[cid].topic: n for cid, n in summary.statistics.channel_message_counts.items()}
         decoded = {}
-        for _schema, channel, _message, proto in reader.iter_decoded_messages(topics=["/tf", "/site", "/camera/tablet/overlay"]):
+        for _schema, channel, _message, proto in reader.iter_decoded_messages(topics=["/tf", "/site", "/camera/tablet/overlay", "/log"]):
             decoded.setdefault(channel.topic, []).append(proto)
     for topic, schema in VIEW_CHANNELS.items():
         assert schemas.get(topic) == schema, (topic, schemas.get(topic))
@@ -52,6 +52,10 @@ def test_the_mission_recording_has_every_channel_with_schemas(mission):
     door_updates = [e for msg in decoded["/site"][1:] for e in msg.entities if e.id == "door/d_storage"]
     assert len(door_updates) >= 2
     assert any(len(msg.points) > 0 for msg in decoded["/camera/tablet/overlay"])
+    # Log: the services' own log lines (from the merged log) beside events and acks.
+    names = {entry.name for entry in decoded["/log"]}
+    assert {"planner", "sim", "up"} <= names, names
+    assert any(entry.name.startswith("restrictor-") and "accepted" in entry.message for entry in decoded["/log"])
     # Camera frames: the raw frame's JPEG is stored once (in the image channel) and paired back on reading.
     frames_read = [r.message for r in messages(mission.recording) if r.topic == "/arroch/camera/tablet/frame"]
     assert len(frames_read) == counts["/camera/tablet/image"] and all(f.jpeg[:2] == b"\xff\xd8" for f in frames_read)

@@ -16,7 +16,8 @@ Usage::
    processes' noise.
 4. ``realtime_30min``: the same mission in real time (``--mode realtime``, camera at its default
    2 frames per wall second, 640x480 JPEG) for ``--realtime-seconds`` wall seconds; its bytes per
-   second, per kind of channel, times 1800 is the size of a 30-minute real-time recording.
+   second, per kind of channel, times 1800 is the size of a 30-minute real-time recording; the same
+   messages recorded again with ``--image-scale 0.5`` give the size with frames kept at half size.
 
 Prints one JSON document on stdout; progress on stderr.
 """
@@ -68,7 +69,8 @@ def bytes_per_kind(path: Path) -> tuple[dict[str, int], dict[str, int], float]:
     return sizes, counts, ((last or 0) - (first or 0)) / 1e9
 
 
-def processing(recording: Path, wall: float) -> dict:
+def rerecord(recording: Path, image_scale: float = 1.0, passes: int = 5) -> tuple[float, int, int]:
+    """Every recorded message through the default profile into a new file: (median seconds, messages, bytes)."""
     from protocol.keys import Keys
     from protocol.site import load_site
     from services.recorder.profile import FoxgloveProfile
@@ -80,16 +82,22 @@ def processing(recording: Path, wall: float) -> dict:
     recorded = list(messages(recording))
     times = []
     with tempfile.TemporaryDirectory() as tmp:
-        for k in range(5):
-            profile = FoxgloveProfile(FoxgloveSink(Path(tmp) / f"{k}.mcap"), keys, site)
+        for k in range(passes):
+            path = Path(tmp) / f"{k}.mcap"
+            profile = FoxgloveProfile(FoxgloveSink(path), keys, site, image_scale=image_scale)
             start = time.perf_counter()
             profile.start(0.0)
             for rec in recorded:
                 profile.handle(rec.message, f"{keys.prefix}/{rec.topic[len('/arroch/'):]}")
             profile.close()
             times.append(time.perf_counter() - start)
-    cpu = statistics.median(times)
-    return {"messages": len(recorded), "seconds": round(cpu, 4), "us_per_message": round(cpu / len(recorded) * 1e6, 1),
+            size = path.stat().st_size
+    return statistics.median(times), len(recorded), size
+
+
+def processing(recording: Path, wall: float) -> dict:
+    cpu, count, _size = rerecord(recording)
+    return {"messages": count, "seconds": round(cpu, 4), "us_per_message": round(cpu / count * 1e6, 1),
             "share_of_run_wall": round(cpu / wall, 4)}
 
 
@@ -148,6 +156,10 @@ def main() -> int:
                 "payload_bytes_per_second_by_kind": {k: round(v / span) for k, v in sizes.items()},
                 "messages_per_second_by_kind": {k: round(v / span, 1) for k, v in counts.items()},
                 "estimate_30min_mb": round(per_s * 1800 / 1e6, 1),
+                # Frames kept at half size (arroch record --image-scale 0.5): the file shrinks as the same
+                # messages recorded again at 0.5 do against recorded again at 1.
+                "estimate_30min_mb_image_scale_0.5": round(
+                    per_s * 1800 / 1e6 * rerecord(path, 0.5, passes=1)[2] / rerecord(path, 1.0, passes=1)[2], 1),
                 "camera": "640x480 JPEG at 2 frames per wall second (the sim's defaults)",
             }
     print(json.dumps(out, indent=2))

@@ -41,7 +41,7 @@ def _build_recorder(args: argparse.Namespace, *, serve: tuple[str, int] | None):
 
         profiles.append(Ros2Profile(out or Path(time.strftime("recording-%Y%m%d-%H%M%S")), site))
         if serve is not None:
-            profiles.append(FoxgloveProfile(FoxgloveSink(None, serve=serve), keys, site))
+            profiles.append(FoxgloveProfile(FoxgloveSink(None, serve=serve), keys, site, image_scale=args.image_scale))
     elif out is not None or serve is not None:
         metadata = {"namespace": namespace, "site": site.name, "site_source": str(site.source), "profile": "foxglove",
                     "clock": args.clock, "recorded": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
@@ -49,7 +49,10 @@ def _build_recorder(args: argparse.Namespace, *, serve: tuple[str, int] | None):
             raise ValueError(f"--out {out}: a recording is an .mcap file")
         if out is not None and out.exists():
             raise ValueError(f"--out {out}: the file exists already (a recording is never overwritten)")
-        profiles.append(FoxgloveProfile(FoxgloveSink(out, serve=serve, metadata=metadata), keys, site))
+        if args.image_scale != 1.0:
+            metadata["image_scale"] = f"{args.image_scale:g}"
+        profile = FoxgloveProfile(FoxgloveSink(out, serve=serve, metadata=metadata), keys, site, image_scale=args.image_scale)
+        profiles.append(profile)
     return Recorder(namespace, zenoh_options(args), profiles, log_file=logs, clock=make_clock(args.clock))
 
 
@@ -90,6 +93,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     record.add_argument("--out", metavar="PATH", help="the .mcap file (profile ros2: the bag folder); default recording-<time>")
     record.add_argument("--profile", choices=("foxglove", "ros2"), default="foxglove",
                         help="foxglove (default): ARROCH messages and Foxglove schemas; ros2: ROS 2 CDR messages")
+    record.add_argument("--image-scale", type=float, default=1.0, metavar="F",
+                        help="keep camera frames scaled by F (0 < F <= 1; JPEG re-encoded, calibration and overlay scaled alike; default 1)")
     record.add_argument("--logs", metavar="FILE", help="also record the lines of this log (arroch up's supervisor.log) as it grows")
     record.add_argument("--view", action="store_true", help="also serve the channels live (Foxglove WebSocket)")
     record.add_argument("--view-host", default="127.0.0.1", help="with --view: address to serve on (default 127.0.0.1)")
@@ -105,6 +110,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     view.add_argument("--port", type=int, default=8765, help="port (default 8765; 0 = any free)")
     view.add_argument("--out", metavar="FILE", help="also record to this .mcap file")
     view.add_argument("--logs", metavar="FILE", help="also show the lines of this log as it grows")
+    view.add_argument("--image-scale", type=float, default=1.0, metavar="F", help="serve camera frames scaled by F (default 1)")
     view.add_argument("--write-layout", metavar="FILE", help="write the Foxglove layout (as docs/foxglove-layout.json) to FILE and exit")
     view.set_defaults(func=run_view)
 

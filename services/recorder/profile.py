@@ -21,6 +21,7 @@ from protocol.schema import record_to_wire
 from protocol.site import Site
 
 from . import convert, topics
+from .images import scale_frame, scale_overlay
 from .jsonschema import record_schema
 from .scene import SiteScene, to_foxglove
 from .sink import FoxgloveSink
@@ -40,8 +41,11 @@ MAX_FRAME_STAMPS = 256  # camera frames remembered for their overlays' timestamp
 
 
 class FoxgloveProfile:
-    def __init__(self, sink: FoxgloveSink, keys: Keys, site: Site) -> None:
+    def __init__(self, sink: FoxgloveSink, keys: Keys, site: Site, *, image_scale: float = 1.0) -> None:
+        if not 0.0 < image_scale <= 1.0:
+            raise ValueError(f"--image-scale must be in (0, 1], got {image_scale:g}")
         self.sink = sink
+        self.image_scale = image_scale
         self.keys = keys
         self.scene = SiteScene(site)
         self.poses: dict[str, RobotPose] = {}
@@ -65,6 +69,11 @@ class FoxgloveProfile:
             self.start(t)
 
     def handle(self, msg: Message, key: str) -> None:
+        if self.image_scale < 1.0:  # frames kept smaller, everything drawn on them alike
+            if isinstance(msg, CameraFrame):
+                msg = scale_frame(msg, self.image_scale)
+            elif isinstance(msg, Overlay):
+                msg = scale_overlay(msg, self.image_scale)
         self._raw(msg, key)
         handler = self._handlers.get(type(msg))
         if handler is not None:

@@ -117,3 +117,46 @@ def test_record_refuses_bad_output_paths_clearly(tmp_path, args, problem):
     result = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and problem in result.stderr, result.stderr
     assert existing.read_bytes() == b"kept"
+
+
+def test_frames_kept_smaller_keep_their_pixels_calibration_and_overlay_in_step(tmp_path):
+    import cv2
+    import numpy as np
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory
+
+    from protocol.keys import Keys
+    from protocol.messages import CameraFrame, Overlay, Primitive
+    from services.recorder.profile import FoxgloveProfile
+    from services.recorder.reading import messages
+    from services.recorder.sink import FoxgloveSink
+
+    image = np.zeros((480, 640, 3), np.uint8)
+    cv2.circle(image, (401, 201), 6, (255, 255, 255), -1)  # a bright disc centred on pixel (401, 201)
+    jpeg = cv2.imencode(".jpg", image)[1].tobytes()
+    frame = CameraFrame(src="sim-1", seq=7, stamp=12.0, camera="tablet", jpeg=jpeg, width=640, height=480,
+                        intrinsics=[500.0, 500.0, 319.5, 239.5])
+    overlay = Overlay(src="ar-1", seq=1, stamp=12.0, camera="tablet", frame_seq=7, width=640, height=480,
+                      primitives=[Primitive(kind="circle", points=[[401.0, 201.0]], radius=6.0, width=0.0, layer="robot:r0")])
+    keys = Keys("t")
+    path = tmp_path / "small.mcap"
+    profile = FoxgloveProfile(FoxgloveSink(path), keys, load_site(), image_scale=0.5)
+    profile.handle(frame, keys.camera_frame("tablet"))
+    profile.handle(overlay, keys.overlay("tablet"))
+    profile.close()
+
+    (kept_frame, kept_overlay) = [r.message for r in messages(path)]
+    assert (kept_frame.width, kept_frame.height) == (320, 240)
+    assert kept_frame.intrinsics == [250.0, 250.0, 159.5, 119.5]
+    small = cv2.imdecode(np.frombuffer(kept_frame.jpeg, np.uint8), cv2.IMREAD_GRAYSCALE)
+    v, u = np.unravel_index(np.argmax(cv2.GaussianBlur(small, (5, 5), 0)), small.shape)
+    assert abs(u - 200.25) <= 1 and abs(v - 100.25) <= 1  # (401 + 0.5) * 0.5 - 0.5
+    assert kept_overlay.primitives[0].points == [[200.25, 100.25]] and kept_overlay.primitives[0].radius == 3.0
+    with open(path, "rb") as f:
+        decoded = {c.topic: m for _s, c, _r, m in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages(
+            topics=["/camera/tablet/calibration", "/camera/tablet/overlay"])}
+    assert decoded["/camera/tablet/calibration"].width == 320 and decoded["/camera/tablet/calibration"].K[0] == 250.0
+    circle = decoded["/camera/tablet/overlay"].circles[0]
+    assert (circle.position.x, circle.position.y, circle.diameter) == (200.25, 100.25, 6.0)
+    with pytest.raises(ValueError, match="--image-scale"):
+        FoxgloveProfile(FoxgloveSink(None), keys, load_site(), image_scale=1.5)

@@ -15,6 +15,7 @@ import pytest
 from mcap.records import Schema
 from mcap_protobuf.decoder import DecoderFactory
 
+from protocol.messages import Event
 from protocol.transport import free_tcp_port
 from tests.procs import ROOT, arroch
 
@@ -71,10 +72,14 @@ async def watch(url: str, replay_argv: list[str]) -> tuple[dict[str, list], dict
     return received, {c["topic"]: c for c in channels.values()}, code
 
 
-def test_the_live_view_serves_decodable_channels_to_a_websocket_client(mission, spawn, router, namespace):
+def test_the_live_view_serves_decodable_channels_to_a_websocket_client(mission, spawn, router, namespace, client):
     port = free_tcp_port()
     view = spawn(arroch("view", "--port", str(port), "--namespace", namespace, "--connect", router), name="view")
     view.wait_for("Foxglove WebSocket server", timeout=60)
+    view.wait_for("up on namespace", timeout=30)
+    # Garbage on a recorded key is dropped and counted; the recorder goes on.
+    for payload in (b"\x00garbage", b"\x81\xa4type\xa9RobotPose"):
+        client.session.put(client.keys.robot_pose("r0"), payload)
     replay = [sys.executable, "-m", "services.cli", "replay", str(mission.recording), "--fast", "--namespace", namespace,
               "--connect", router, "--delay", "1.0"]
     received, channels, code = asyncio.run(watch(f"ws://127.0.0.1:{port}", replay))
@@ -92,3 +97,5 @@ def test_the_live_view_serves_decodable_channels_to_a_websocket_client(mission, 
     assert received["/camera/tablet/calibration"][0].width > 0
     assert any(event["kind"] == "mission_done" for event in received["/events"])
     assert received["/progress"][-1]["delivered"] == 9
+    (stats,) = client.query(client.keys.stats("recorder", "*"), Event, timeout=5.0)
+    assert stats.data["bad_messages"] == 2 and view.alive()

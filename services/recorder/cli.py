@@ -30,6 +30,8 @@ def _build_recorder(args: argparse.Namespace, *, serve: tuple[str, int] | None):
     from .service import Recorder
     from .sink import FoxgloveSink
 
+    if not 0.0 < args.image_scale <= 1.0:
+        raise ValueError(f"--image-scale must be in (0, 1], got {args.image_scale:g}")
     namespace = namespace_from(args)
     keys = Keys(namespace)
     site = load_site(args.site)

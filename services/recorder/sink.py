@@ -40,16 +40,19 @@ class FoxgloveSink:
         # Called with a topic when a viewer subscribes to it (on the SDK's thread): state sent once
         # (the site scene) is sent again for it.
         self.on_subscribe: Callable[[str], None] | None = None
+        if serve is not None:  # first: a port that cannot be had must not leave a file behind
+            host, port = serve
+            try:
+                self.server = foxglove.start_server(name="arroch", host=host, port=port, context=self.context,
+                                                    server_listener=_Listener(self))
+            except Exception as exc:
+                raise ValueError(f"cannot serve the live view on {host}:{port}: {exc}") from None
+            log.info("Foxglove WebSocket server on ws://%s:%d (open it in Foxglove: Open connection)", host, self.server.port)
         if mcap_path is not None:
             mcap_path.parent.mkdir(parents=True, exist_ok=True)
-            self._writer = foxglove.open_mcap(mcap_path, allow_overwrite=True, context=self.context)
+            self._writer = foxglove.open_mcap(mcap_path, allow_overwrite=False, context=self.context)
             if metadata:
                 self._writer.write_metadata("arroch", metadata)
-        if serve is not None:
-            host, port = serve
-            self.server = foxglove.start_server(name="arroch", host=host, port=port, context=self.context,
-                                                server_listener=_Listener(self))
-            log.info("Foxglove WebSocket server on ws://%s:%d (open it in Foxglove: Open connection)", host, self.server.port)
 
     @property
     def port(self) -> int | None:

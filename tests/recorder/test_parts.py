@@ -5,17 +5,30 @@ from __future__ import annotations
 
 import argparse
 import json
+import socket
+import subprocess
 from pathlib import Path
 
+import cv2
+import numpy as np
 import pytest
+from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
 
-from protocol.messages import TeamPlan
+from protocol.keys import Keys
+from protocol.messages import CameraFrame, Overlay, Primitive, TeamPlan
 from protocol.site import load_site
+from services.cli import main
+from services.recorder.layout import layout_json
+from services.recorder.profile import FoxgloveProfile
+from services.recorder.reading import messages
 from services.recorder.jsonschema import record_schema
 from services.recorder.logtail import LogFollower, parse
 from services.recorder.scene import DOOR_CLOSED, DOOR_OPEN, SiteScene
+from services.recorder.sink import FoxgloveSink
 from services.supervisor.catalog import RECORDER_NAME, SERVICES, Launch, MissionOptions, service_argv
 from services.supervisor.cli import add_up_arguments, build_config
+from tests.procs import arroch
 
 
 def up_config(tmp_path: Path, *args: str):
@@ -89,9 +102,6 @@ def test_the_scene_follows_door_states_and_carried_objects():
 
 
 def test_the_layout_in_the_repository_is_the_one_the_code_builds(tmp_path):
-    from services.cli import main
-    from services.recorder.layout import layout_json
-
     kept = (Path(__file__).resolve().parents[2] / "docs" / "foxglove-layout.json").read_text()
     assert kept == layout_json()
     assert main(["view", "--write-layout", str(tmp_path / "layout.json")]) == 0
@@ -105,32 +115,23 @@ def test_the_layout_in_the_repository_is_the_one_the_code_builds(tmp_path):
 @pytest.mark.parametrize("args, problem", [
     (["--out", "x.txt"], "a recording is an .mcap file"),
     (["--out", "{existing}"], "the file exists already"),
+    (["--out", "new.mcap", "--image-scale", "0"], "--image-scale must be in (0, 1]"),
+    (["--out", "new.mcap", "--view", "--view-port", "{busy}"], "cannot serve the live view on 127.0.0.1:"),
 ])
 def test_record_refuses_bad_output_paths_clearly(tmp_path, args, problem):
-    import subprocess
-
-    from tests.procs import arroch
-
     existing = tmp_path / "old.mcap"
     existing.write_bytes(b"kept")
-    argv = arroch("record", *[a.replace("{existing}", str(existing)) for a in args], "--connect", "tcp/127.0.0.1:9")
-    result = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, timeout=60)
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        filled = [a.replace("{existing}", str(existing)).replace("{busy}", str(busy.getsockname()[1])) for a in args]
+        result = subprocess.run(arroch("record", *filled, "--connect", "tcp/127.0.0.1:9"), cwd=tmp_path,
+                                capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and problem in result.stderr, result.stderr
-    assert existing.read_bytes() == b"kept"
+    assert existing.read_bytes() == b"kept" and not (tmp_path / "new.mcap").exists()
 
 
 def test_frames_kept_smaller_keep_their_pixels_calibration_and_overlay_in_step(tmp_path):
-    import cv2
-    import numpy as np
-    from mcap.reader import make_reader
-    from mcap_protobuf.decoder import DecoderFactory
-
-    from protocol.keys import Keys
-    from protocol.messages import CameraFrame, Overlay, Primitive
-    from services.recorder.profile import FoxgloveProfile
-    from services.recorder.reading import messages
-    from services.recorder.sink import FoxgloveSink
-
     image = np.zeros((480, 640, 3), np.uint8)
     cv2.circle(image, (401, 201), 6, (255, 255, 255), -1)  # a bright disc centred on pixel (401, 201)
     jpeg = cv2.imencode(".jpg", image)[1].tobytes()

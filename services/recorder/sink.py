@@ -20,6 +20,9 @@ from foxglove.websocket import ServerListener
 from .topics import RAW_ENCODING, RAW_SCHEMA_PREFIX
 
 log = logging.getLogger("arroch.record")
+# Messages queued per viewer before the oldest are dropped (the SDK's default is 1024): a lockstep
+# mission publishes in bursts of hundreds, which a viewer on a slow link should still get whole.
+VIEWER_BACKLOG = 16384
 
 
 def ns(t: float) -> int:
@@ -44,7 +47,7 @@ class FoxgloveSink:
             host, port = serve
             try:
                 self.server = foxglove.start_server(name="arroch", host=host, port=port, context=self.context,
-                                                    server_listener=_Listener(self))
+                                                    server_listener=_Listener(self), message_backlog_size=VIEWER_BACKLOG)
             except Exception as exc:
                 raise ValueError(f"cannot serve the live view on {host}:{port}: {exc}") from None
             log.info("Foxglove WebSocket server on ws://%s:%d (open it in Foxglove: Open connection)", host, self.server.port)

@@ -38,7 +38,9 @@ async def watch(url: str, replay_argv: list[str]) -> tuple[dict[str, list], dict
         deadline = loop.time() + 120
         while loop.time() < deadline:
             if replay is not None and replay.returncode is not None:
-                deadline = min(deadline, loop.time() + 2.0)  # what the viewer still has on its way
+                if any(isinstance(e, dict) and e.get("kind") == "mission_done" for e in received.get("/events", [])):
+                    break  # the last event of the run is there: the rest went before it
+                deadline = min(deadline, loop.time() + 10.0)  # what the viewer still has on its way
             try:
                 frame = await ws.receive(timeout=0.5)
             except asyncio.TimeoutError:

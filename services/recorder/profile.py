@@ -10,6 +10,8 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
+from foxglove.messages import FrameTransforms, Log, SceneUpdate
+
 from protocol.codec import encode
 from protocol.keys import Keys
 from protocol.messages import (
@@ -61,12 +63,21 @@ class FoxgloveProfile:
         }
 
     def start(self, t: float) -> None:
+        # The fixed channels exist from the start, so a viewer can subscribe before the mission's burst.
+        for topic, message_type in ((topics.TF, FrameTransforms), (topics.PATHS, SceneUpdate), (topics.LOG, Log)):
+            self.sink.declare(topic, message_type)
+        for topic, schema in ((topics.PLAN, record_schema(TeamPlan)), (topics.CONSTRAINTS, record_schema(ConstraintSet)),
+                              (topics.EVENTS, record_schema(Event)), (topics.PROGRESS, PROGRESS_SCHEMA), (topics.METRICS, METRICS_SCHEMA)):
+            self.sink.declare_json(topic, schema)
+        self._scene(t)
+
+    def _scene(self, t: float) -> None:
         self.sink.message(topics.SCENE, to_foxglove(self.scene.entities(), t), t)
 
     def resend(self, topic: str, t: float) -> None:
         """A viewer subscribed to ``topic``: the scene, sent whole only at the start, goes out again as it is now."""
         if topic == topics.SCENE:
-            self.start(t)
+            self._scene(t)
 
     def handle(self, msg: Message, key: str) -> None:
         if self.image_scale < 1.0:  # frames kept smaller, everything drawn on them alike

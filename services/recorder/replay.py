@@ -34,6 +34,7 @@ from .topics import RAW_PREFIX, key_of
 
 log = logging.getLogger("arroch.replay")
 PROGRESS_EVERY = 5.0  # wall seconds between two progress lines
+LINGER = 0.5  # wall seconds between the last message and closing the session (a batch may still be on its way)
 
 
 class Pacer:
@@ -154,6 +155,7 @@ def replay_main(args: argparse.Namespace) -> int:
         time.sleep(args.delay)  # subscribers discover the new publisher first
         records = (r for r in messages(path, start=args.start, end=args.end) if selected(r.topic, args.only or [], args.skip or []))
         code = replayer.replay(records, pacer)
+        time.sleep(LINGER)  # the last messages leave before the session closes
     except RecordingError as exc:
         log.error("%s", exc)
         code = 2

@@ -69,16 +69,23 @@ class FoxgloveSink:
 
     def message(self, topic: str, msg: Any, t: float) -> None:
         """A ``foxglove.messages`` message on its typed channel."""
-        typed = getattr(foxglove.channels, f"{type(msg).__name__}Channel")
-        self._channel(topic, lambda: typed(topic, context=self.context)).log(msg, log_time=ns(t))
+        self.declare(topic, type(msg)).log(msg, log_time=ns(t))
 
     def json(self, topic: str, schema: dict[str, Any], data: Any, t: float) -> None:
+        self.declare_json(topic, schema).log(json.dumps(data, separators=(",", ":"), default=_jsonable).encode(), log_time=ns(t))
+
+    def declare(self, topic: str, message_type: type) -> Any:
+        """The typed channel of ``topic`` (made now if new: a viewer sees it advertised from then on)."""
+        typed = getattr(foxglove.channels, f"{message_type.__name__}Channel")
+        return self._channel(topic, lambda: typed(topic, context=self.context))
+
+    def declare_json(self, topic: str, schema: dict[str, Any]) -> Channel:
         def make() -> Channel:
             name = schema.get("title") or topic.strip("/")
             return Channel(topic, message_encoding="json", context=self.context,
                            schema=Schema(name=f"arroch.{name}", encoding="jsonschema", data=json.dumps(schema).encode()))
 
-        self._channel(topic, make).log(json.dumps(data, separators=(",", ":"), default=_jsonable).encode(), log_time=ns(t))
+        return self._channel(topic, make)
 
     def raw(self, topic: str, type_name: str, schema: dict[str, Any], payload: bytes, t: float) -> None:
         def make() -> Channel:

@@ -76,3 +76,19 @@ def test_replay_selects_keys_and_paces_on_the_site_clock():
 def test_replay_of_a_missing_file_says_so(tmp_path):
     result = subprocess.run(arroch("replay", str(tmp_path / "none.mcap")), cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and "none.mcap: cannot open" in result.stderr
+
+
+def test_a_fast_replay_recorded_again_gives_back_every_message_byte_for_byte(mission, spawn, router, namespace, tmp_path):
+    again = tmp_path / "again.mcap"
+    recorder = spawn(arroch("record", "--out", str(again), "--namespace", namespace, "--connect", router), name="record")
+    recorder.wait_for("up on namespace", timeout=60)
+    time.sleep(0.5)  # its subscriptions reach the router
+    result = subprocess.run(arroch("replay", str(mission.recording), "--fast", "--namespace", namespace, "--connect", router,
+                                   "--log-level", "WARNING"), cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    time.sleep(1.0)
+    assert recorder.stop() == 0  # SIGTERM: the file is closed whole
+    original = sorted((r.topic, r.time, r.payload) for r in messages(mission.recording))
+    copied = sorted((r.topic, r.time, r.payload) for r in messages(again))
+    assert len(copied) == len(original) > 1000
+    assert copied == original

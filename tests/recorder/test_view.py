@@ -18,6 +18,7 @@ from mcap_protobuf.decoder import DecoderFactory
 
 from protocol.messages import Event
 from protocol.transport import free_tcp_port
+from services.recorder.reading import channel_stats
 from tests.procs import ROOT, arroch
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
@@ -48,10 +49,7 @@ async def watch(url: str, replay_argv: list[str]) -> tuple[dict[str, list], dict
                 continue
             if frame.type == aiohttp.WSMsgType.TEXT:
                 op = json.loads(frame.data)
-                if op["op"] == "serverInfo" and replay is None:
-                    replay = await asyncio.create_subprocess_exec(*replay_argv, cwd=ROOT, stdout=asyncio.subprocess.DEVNULL,
-                                                                  stderr=asyncio.subprocess.DEVNULL)
-                elif op["op"] == "advertise":
+                if op["op"] == "advertise":
                     subs = []
                     for channel in op["channels"]:
                         sid = len(subscriptions) + 1
@@ -63,6 +61,10 @@ async def watch(url: str, replay_argv: list[str]) -> tuple[dict[str, list], dict
                             channel["decode"] = factory.decoder_for("protobuf", schema)
                         subs.append({"id": sid, "channelId": channel["id"]})
                     await ws.send_str(json.dumps({"op": "subscribe", "subscriptions": subs}))
+                    if replay is None:  # the fixed channels are advertised from the start: now the mission
+                        await asyncio.sleep(0.5)
+                        replay = await asyncio.create_subprocess_exec(*replay_argv, cwd=ROOT, stdout=asyncio.subprocess.DEVNULL,
+                                                                      stderr=asyncio.subprocess.DEVNULL)
             elif frame.type == aiohttp.WSMsgType.BINARY and frame.data[0] == MESSAGE_DATA:
                 sid, _log_time = struct.unpack_from("<IQ", frame.data, 1)
                 channel = subscriptions[sid]
@@ -79,7 +81,7 @@ def test_the_live_view_serves_decodable_channels_to_a_websocket_client(mission, 
     port = free_tcp_port()
     view = spawn(arroch("view", "--port", str(port), "--namespace", namespace, "--connect", router), name="view")
     view.wait_for("Foxglove WebSocket server", timeout=60)
-    replay = [sys.executable, "-m", "services.cli", "replay", str(mission.recording), "--fast", "--namespace", namespace,
+    replay = [sys.executable, "-m", "services.cli", "replay", str(mission.recording), "--rate", "100", "--namespace", namespace,
               "--connect", router, "--delay", "1.0"]
     received, channels, code = asyncio.run(watch(f"ws://127.0.0.1:{port}", replay))
     assert code == 0, code
@@ -89,7 +91,8 @@ def test_the_live_view_serves_decodable_channels_to_a_websocket_client(mission, 
     assert {"walls", "door/d_storage", "robot/r0"} <= scene_ids  # sent again when the client subscribed
     frames = {t.child_frame_id for msg in received["/tf"] for t in msg.transforms}
     assert {"robot/r0", "robot/r1", "robot/r2", "camera/tablet"} <= frames
-    assert all("plan_id" in plan for plan in received["/plan"]) and len(received["/plan"]) > 10
+    plans = next(c.messages for c in channel_stats(mission.recording) if c.topic == "/plan")
+    assert all("plan_id" in plan for plan in received["/plan"]) and len(received["/plan"]) == plans  # every plan of the run
     assert any(len(msg.entities) and len(msg.entities[0].lines) for msg in received["/paths"])
     images = received["/camera/tablet/image"]
     assert images and all(img.format == "jpeg" and img.data[:2] == b"\xff\xd8" for img in images)

@@ -1,4 +1,4 @@
-"""One recorded mission shared by the recorder tests: the default lockstep demo mission (planner,
+"""One recorded mission shared by all the recorder tests: the default lockstep demo mission (planner,
 restrictor, sim with the tablet camera, AR client) under ``arroch up``, which records it to
 ``run.mcap``, and a second recorder beside it writing the ROS 2 profile."""
 
@@ -28,7 +28,7 @@ class Mission:
         return self.run / "run.mcap"
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")  # one mission for every recorder test (only they use it)
 def mission(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Mission]:
     base = tmp_path_factory.mktemp("mission")
     ros2 = base / "ros2"

@@ -27,6 +27,7 @@ COMMANDS: tuple[str, ...] = (
     "services.ar_client.web.cli",  # arroch tablet, ar calibrate
     "services.supervisor.cli",  # arroch up
     "services.experiments.cli",  # arroch experiment
+    "services.recorder.cli",  # arroch record, view, replay, runs show
 )
 
 

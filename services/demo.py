@@ -19,8 +19,9 @@ the same site times for the same mission (``services/ar_client/snapshots.py``). 
 wall seconds. ``arroch up ... --mode realtime`` shows the mission at its own pace.
 
 The supervisor prints progress and the final metrics and leaves a run folder (metrics.json,
-events.jsonl, the merged log, ``overlays/`` with a few overlay frames); the site picture goes there
-too. Everything it starts is stopped before it returns.
+events.jsonl, the merged log, ``overlays/`` with a few overlay frames, ``run.mcap``: the recording of
+the whole run, unless ``--no-record``); the site picture goes there too. Everything it starts is
+stopped before it returns.
 """
 
 from __future__ import annotations
@@ -103,6 +104,7 @@ def run_demo(args: argparse.Namespace) -> int:
         "up", "--site", site_file, "--services", SERVICES, "--camera", CAMERA, "--method", args.method,
         "--mode", args.mode, "--seed", str(args.seed), "--until-done", "--timeout", str(args.timeout),
         "--run-dir", str(run_root), "--progress", "line", "--log-level", args.log_level or "WARNING",
+        "--record" if args.record else "--no-record", *(["--view", "--view-port", str(args.view_port)] if args.view else []),
     )
     # Line by line through us, so the tablet's URL can be repeated where it is seen; the supervisor
     # stops its children on SIGINT/SIGTERM, which a terminal's Ctrl-C sends it (same process group).
@@ -123,6 +125,9 @@ def run_demo(args: argparse.Namespace) -> int:
         return code
     frames = sorted((run_dir / "overlays").glob("*.png"))
     _step(f"done; metrics, event log, site picture and {len(frames)} overlay frame(s) (overlays/) in {run_dir}")
+    if (run_dir / "run.mcap").is_file():
+        _step(f"recording {run_dir / 'run.mcap'}: open it in Foxglove (layout docs/foxglove-layout.json), "
+              f"`arroch runs show {run_dir}` for its summary and timeline, `arroch replay` to play it back")
     return 0
 
 
@@ -135,5 +140,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, default=1, help="seed of the simulated human (default 1)")
     parser.add_argument("--timeout", type=float, default=600.0, help="give up after this many wall seconds (default 600)")
     parser.add_argument("--run-dir", default="runs", help="folder of run folders (default runs/)")
+    parser.add_argument("--record", action=argparse.BooleanOptionalAction, default=True,
+                        help="record the run to <run folder>/run.mcap (default; --no-record turns it off)")
+    parser.add_argument("--view", action="store_true", help="serve the run live to Foxglove (ws://127.0.0.1:--view-port)")
+    parser.add_argument("--view-port", type=int, default=8765, help="with --view: the port (default 8765)")
     parser.add_argument("--log-level", default=None, choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     parser.set_defaults(func=run_demo)

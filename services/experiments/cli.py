@@ -115,6 +115,9 @@ def _add_sweep_arguments(parser: argparse.ArgumentParser, kind: str) -> None:
                      help="a bar on a terminal (auto), a line every 30 s, or nothing")
     run.add_argument("--keep-events", action="store_true",
                      help="keep every trial's event log in DIR/events/<trial>.jsonl (the sim's --events-out; to compare runs)")
+    run.add_argument("--record", choices=("failed", "all", "none"), default="failed",
+                     help="record each trial (arroch record) and keep the recordings of failed trials (timeout, error; default), "
+                          "of all trials, or none (no recorder) in DIR/recordings/<trial>.mcap")
     run.add_argument("--no-report", dest="report", action="store_false", help="do not build the report at the end")
     parser.add_argument("--log-level", default=None, choices=("DEBUG", "INFO", "WARNING", "ERROR"),
                         help="this command's log level (env ARROCH_LOG_LEVEL, default INFO)")
@@ -164,10 +167,12 @@ def run_sweep(args: argparse.Namespace) -> int:
 
     try:
         spec = _spec(args)
+        out = args.out or Path("experiments/results") / args.kind
         options = RunOptions(
-            out=args.out or Path("experiments/results") / args.kind, jobs=args.jobs, router=args.router,
+            out=out, jobs=args.jobs, router=args.router,
             resume=args.resume, progress=args.progress, report=args.report,
-            trial=TrialConfig(timeout=args.trial_timeout, log_level=args.service_log_level, events_dir=None),
+            trial=TrialConfig(timeout=args.trial_timeout, log_level=args.service_log_level, events_dir=None,
+                              record=args.record, recordings_dir=(Path(out) / "recordings").resolve()),
             keep_events=args.keep_events, cluster=args.cluster,
         )
         sweep = Sweep(spec, options)

@@ -70,8 +70,9 @@ class ClusterPool:
         """Every trial of ``keys``, submitted at once; outcomes in the order they finish. ``cancelled``
         is asked (and ``idle`` called) a few times a second; once it says so the rest is cancelled."""
         spec_json = spec.to_json()
-        # events_dir is a path on this machine; a worker elsewhere writes nothing there.
-        remote = dataclasses.replace(config, events_dir=None)
+        # events_dir and recordings_dir are paths on this machine: a worker elsewhere keeps no event
+        # log and runs no recorder (a failed trial's reason and services' output still come back).
+        remote = dataclasses.replace(config, events_dir=None, record="none", recordings_dir=None)
         self._futures = [self.client.submit(run_on_worker, spec_json, dataclasses.astuple(key), remote,
                                             key=f"arroch-trial-{key.ident()}", pure=False) for key in keys]
         remaining = dict(zip(self._futures, keys))

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from protocol.site import generate_site
-from services.supervisor.catalog import SERVICES, Launch, MissionOptions, ServiceSpec, service_argv
+from services.supervisor.catalog import RECORDER, RECORDING, SERVICES, Launch, MissionOptions, ServiceSpec, service_argv
 from services.supervisor.children import Child, describe_exit, stop_all
 
 from .design import SweepSpec, TrialKey, format_p
@@ -58,6 +58,10 @@ class TrialConfig:
     stop_timeout: float = 5.0  # wall s a service gets after SIGTERM
     log_level: str = "WARNING"  # the services' log level (their output is kept only for failures)
     events_dir: Path | None = None  # keep each trial's event log there (the sim's --events-out)
+    # A recorder beside the services (arroch record); which trials' recordings are kept in
+    # recordings_dir as <trial>.mcap: "failed" (timeout, error), "all", or "none" (no recorder at all).
+    record: str = "none"
+    recordings_dir: Path | None = None
 
 
 @dataclass
@@ -106,8 +110,8 @@ def _spec_for(name: str, drop: tuple[str, ...] = ()) -> ServiceSpec:
 
 def service_commands(spec: SweepSpec, key: TrialKey, *, namespace: str, site: Path, folder: Path,
                      connect: str, log_level: str, human_config: Path | None,
-                     events: Path | None = None) -> dict[str, list[str]]:
-    """The three command lines of a trial, built by the supervisor's catalog.
+                     events: Path | None = None, record: bool = False) -> dict[str, list[str]]:
+    """The three command lines of a trial (four with ``record``), built by the supervisor's catalog.
 
     The catalog's ``method`` is the baseline the *sim* runs (the human model); the planner is the
     same ARROCH planner for every method (its own ``--method`` is iidp/joint), so it does not get it.
@@ -126,11 +130,14 @@ def service_commands(spec: SweepSpec, key: TrialKey, *, namespace: str, site: Pa
         sim += ["--events-out", str(events)]
     if spec.time_limit is not None:
         sim += ["--time-limit", f"{spec.time_limit:g}"]
-    return {
+    commands = {
         "planner": service_argv(_spec_for("planner", drop=("method",)), launch) + PLANNER_LIMITS,
         "restrictor": service_argv(SERVICES["restrictor"], launch),  # --state-dir <folder>/state
         "sim": sim,
     }
+    if record:
+        commands[RECORDER.name] = service_argv(RECORDER, launch)  # --out <folder>/run.mcap
+    return commands
 
 
 def _read_metrics(path: Path) -> dict[str, Any] | None:
@@ -163,6 +170,7 @@ class Trial:
         folder = Path(tempfile.mkdtemp(prefix=f"arroch-exp-{self.key.ident()}-"))
         assert self.router.monitor is not None, "the router must be started"
         watch = self.router.monitor.watch(self.namespace)
+        status = ""
         try:
             try:
                 status, reason, metrics = self._mission(folder, watch, started)
@@ -172,6 +180,7 @@ class Trial:
         finally:
             stopping = time.monotonic()
             killed = stop_all(list(self.children.values()), 0.5 if self.cancel.is_set() else self.config.stop_timeout)
+            self._keep_recording(folder, status)
             watch.close()
             shutil.rmtree(folder, ignore_errors=True)
             self.timing["shutdown"] = time.monotonic() - stopping
@@ -183,6 +192,17 @@ class Trial:
         return TrialOutcome(self.key, status, reason, metrics, self.timing, self.output.lines(), code)
 
     # ------------------------------------------------------------------ steps
+
+    def _keep_recording(self, folder: Path, status: str) -> None:
+        """Move the trial's recording out of its folder (about to be removed) if it is to be kept."""
+        recording = folder / RECORDING
+        keep = self.config.record == "all" or (self.config.record == "failed" and status in ("timeout", "error"))
+        if not keep or status in ("", "cancelled") or self.config.recordings_dir is None or not recording.is_file():
+            return
+        self.config.recordings_dir.mkdir(parents=True, exist_ok=True)
+        target = self.config.recordings_dir / f"{self.key.ident()}.mcap"
+        shutil.move(str(recording), target)
+        self.output("experiment", f"recording kept: {target}")
 
     def _start(self, name: str, argv: list[str]) -> None:
         child = Child(name, argv, env=child_env(), on_line=self.output, restart=False)
@@ -226,14 +246,16 @@ class Trial:
             human.write_text(self.spec.human_config, encoding="utf-8")
         commands = service_commands(self.spec, self.key, namespace=self.namespace, site=site, folder=folder,
                                     connect=self.router.endpoint, log_level=self.config.log_level, human_config=human,
-                                    events=self.config.events_dir / f"{self.key.ident()}.jsonl" if self.config.events_dir else None)
-        for name in FIRST:  # together: their start-ups overlap
+                                    events=self.config.events_dir / f"{self.key.ident()}.jsonl" if self.config.events_dir else None,
+                                    record=self.config.record != "none")
+        first = tuple(name for name in (*FIRST, RECORDER.name) if name in commands)
+        for name in first:  # together: their start-ups overlap
             self._start(name, commands[name])
         while True:
-            missing = watch.wait_alive(FIRST, POLL)
+            missing = watch.wait_alive(first, POLL)
             if not missing:
                 break
-            dead = self._dead(FIRST)
+            dead = self._dead(first)
             if dead:
                 raise _Failed("error", dead.replace(" during the mission", " before it was up"))
             self._check(started, f"waiting for {', '.join(missing)} to come up")

@@ -35,6 +35,7 @@ class MissionOptions:
     rate: float | None = None
     seed: int | None = None
     camera: str | None = None  # the sim's virtual camera ('tablet' or X,Y,Z,YAW,PITCH); None: no camera
+    view_port: int | None = None  # serve the recorder's channels live to Foxglove on this port; None: don't
 
 
 # How each option is spelled on a service's command line (the services' own flags).
@@ -52,7 +53,18 @@ OPTION_FLAGS: dict[str, Callable[["Launch"], list[str]]] = {
     "camera_source": lambda l: ["--camera-source", f"sim:{SIM_CAMERA_ID}"] if l.mission.camera else [],
     # A few overlay frames spread over the run, kept with its other records.
     "snapshots": lambda l: ["--snapshots", str(l.run_dir / OVERLAY_FOLDER)] if l.run_dir else [],
+    # The run's recording, with the merged log's lines, and (arroch up --view) the live Foxglove view.
+    "recording": lambda l: (["--out", str(l.run_dir / RECORDING)] if l.run_dir else []) + _logs(l)
+    + (["--view", "--view-port", str(l.mission.view_port)] if l.mission.view_port is not None else []),
+    "view": lambda l: ["--port", str(l.mission.view_port)] + _logs(l),
 }
+RECORDING = "run.mcap"
+
+
+def _logs(launch: "Launch") -> list[str]:
+    return ["--logs", str(launch.run_dir / "supervisor.log")] if launch.run_dir else []
+
+RECORDER_NAME = "recorder"  # its service name (liveliness), which the sim waits for
 SIM_CAMERA_ID = "tablet"  # the sim's default --camera-id, which is also the AR client's default --camera
 OVERLAY_FOLDER = "overlays"
 
@@ -85,7 +97,7 @@ SERVICES: dict[str, ServiceSpec] = {
         # The sim starts the mission clock: the planner and restrictor must be listening by then, and
         # the AR client (when this run has one) watching, so its overlays cover the whole mission.
         ServiceSpec("sim", ("sim",), ("method", "mode", "rate", "seed", "camera"), "simulated robots, doors, human, tablet camera",
-                    after=("planner", "restrictor", "ar")),
+                    after=("planner", "restrictor", "ar", RECORDER_NAME)),
         ServiceSpec("ar", ("ar",), ("snapshots",), "AR client: overlays of the camera frames"),
         # Any free port: the printed URL carries it with the run's token. Its identity is the AR role's.
         ServiceSpec("tablet", ("tablet", "--port", "0", "--no-qr"), ("camera_source",), "tablet page (HTTPS; URL and token printed)",
@@ -94,6 +106,11 @@ SERVICES: dict[str, ServiceSpec] = {
     )
 }
 DEFAULT_SERVICES: tuple[str, ...] = ("planner", "restrictor", "sim", "ar")
+# Not chosen with --services: ``arroch up`` adds it to every run with a sim unless --no-record. It
+# reads what the supervisor's role may read (every key but robot commands, in the secure profile).
+RECORDER = ServiceSpec(RECORDER_NAME, ("record",), ("recording",), "records the run to run.mcap (and serves it live with --view)",
+                       role="supervisor")
+VIEWER = ServiceSpec(RECORDER_NAME, ("view",), ("view",), "serves the run live to Foxglove (--view with --no-record)", role="supervisor")
 ROUTER = "router"
 SUPERVISOR_ROLE = "supervisor"
 

@@ -29,7 +29,7 @@ from protocol.clock import make_clock
 from protocol.runner import LOG_FORMAT, add_common_arguments
 from protocol.transport import DEFAULT_ROUTER, ZenohOptions, free_tcp_port
 
-from .catalog import DEFAULT_SERVICES, SERVICES, SUPERVISOR_ROLE, Launch, MissionOptions, parse_child, parse_services
+from .catalog import DEFAULT_SERVICES, RECORDER, SERVICES, SUPERVISOR_ROLE, VIEWER, Launch, MissionOptions, parse_child, parse_services
 from .output import Output, OutputHandler
 from .supervisor import UpConfig, Supervisor
 
@@ -69,9 +69,18 @@ def _connect_for(listen: str) -> str:
     return f"{proto}/{host}:{port}"
 
 
+def _recording(args: argparse.Namespace, services: list) -> list:
+    """The recorder to add: by default to every run with a sim; --record always, --no-record never (but --view)."""
+    record = args.record if args.record is not None else any(s.name == "sim" for s in services)
+    if record:
+        return [RECORDER]
+    return [VIEWER] if args.view else []
+
+
 def build_config(args: argparse.Namespace) -> tuple[UpConfig, ZenohOptions]:
     """Check the options and turn them into the supervisor's configuration (ValueError if wrong)."""
     services = parse_services(args.services)
+    services += _recording(args, services)
     config_dir = Path(args.zenoh_config_dir).resolve() if args.zenoh_config_dir else None
     if config_dir is not None:
         needed = list(dict.fromkeys(s.identity for s in services)) + [SUPERVISOR_ROLE] + (["router"] if args.router else [])
@@ -98,7 +107,8 @@ def build_config(args: argparse.Namespace) -> tuple[UpConfig, ZenohOptions]:
     launch = Launch(
         namespace=_namespace(args), connect=connect, zenoh_config_dir=config_dir, site=args.site,
         clock=args.clock if args.clock != "sim" else None, log_level=args.log_level,
-        mission=MissionOptions(method=args.method, mode=args.mode, rate=args.rate, seed=args.seed, camera=args.camera),
+        mission=MissionOptions(method=args.method, mode=args.mode, rate=args.rate, seed=args.seed, camera=args.camera,
+                               view_port=args.view_port if args.view else None),
     )
     extra = [parse_child(entry, launch) for entry in args.child or []]
     names = [s.name for s in services] + [name for name, _ in extra]
@@ -155,6 +165,11 @@ def add_up_arguments(parser: argparse.ArgumentParser) -> None:
     mission.add_argument("--seed", type=int, metavar="N", help="random seed of the simulation")
     mission.add_argument("--camera", metavar="SPEC", help="the sim's virtual camera: 'tablet' (the human's tablet) or X,Y,Z,YAW,PITCH; "
                                                          "the ar client and the tablet page (viewer mode) show it")
+    view = parser.add_argument_group("recording and live view")
+    view.add_argument("--record", action=argparse.BooleanOptionalAction, default=None,
+                      help="record the run to <run folder>/run.mcap (default: when the run has a sim; arroch runs show DIR reads it)")
+    view.add_argument("--view", action="store_true", help="serve the run live to Foxglove (WebSocket; layout docs/foxglove-layout.json)")
+    view.add_argument("--view-port", type=int, default=8765, metavar="PORT", help="with --view: the port (default 8765)")
     run = parser.add_argument_group("supervision")
     run.add_argument("--until-done", action="store_true", help="stop when the mission_done event arrives and print its metrics")
     run.add_argument("--timeout", type=float, metavar="S", help="give up (exit 1) after S seconds")

@@ -215,7 +215,7 @@ def test_the_camera_option_reaches_the_sim_and_the_tablet_page_and_overlays_go_t
 
 
 def test_the_sim_starts_only_once_the_restrictor_is_up(spawn, namespace, tmp_path):
-    sup = up(spawn, tmp_path, "--services", "sim,restrictor", "--namespace", namespace, "--rate", "20")
+    sup = up(spawn, tmp_path, "--services", "sim,restrictor", "--namespace", namespace, "--rate", "20", "--no-record")
     sup.wait_for("sim starts once restrictor is up")
     sup.wait_for("started sim (pid", timeout=60)
     lines = sup.output.splitlines()

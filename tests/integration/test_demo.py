@@ -78,6 +78,8 @@ def test_demo_runs_the_mission_serves_the_tablet_page_and_keeps_overlay_frames(s
     kinds = [json.loads(line)["kind"] for line in (run / "events.jsonl").read_text().splitlines()]
     assert kinds.count("mission_done") == 1 and kinds.count("delivered") == 9
     assert (run / "site.png").stat().st_size > 0
+    # Recorded by default (tests/recorder/ checks what the recording holds).
+    assert (run / "run.mcap").stat().st_size > 100_000 and f"==> recording {run / 'run.mcap'}" in proc.output
 
     frames = sorted((run / "overlays").glob("overlay-*.png"))
     assert 4 <= len(frames) <= 5, frames  # 5 kept of the ~9 held frames that show a robot and its path

@@ -1,0 +1,186 @@
+"""``arroch replay FILE``: publish a recording's ARROCH messages back onto Zenoh.
+
+Each message goes out as it was recorded (same bytes: ``src``, ``seq`` and ``stamp`` unchanged) on
+its key in the chosen namespace (default: the recorded one), so the AR client, the tablet page or the
+planner can be fed a recorded mission. Pace: the recording's own (site seconds = wall seconds),
+``--rate K`` times faster, ``--fast`` (no waiting), or ``--step`` (Enter publishes the next
+``--step-size`` site seconds). ``--hold-camera`` lets what came before each camera frame land
+(``--settle``), publishes the frame and waits for the AR client's overlay of it (as the lockstep sim
+does), so overlays are drawn over the world they show.
+
+Examples:
+  arroch replay runs/20260101-120000/run.mcap --only 'robot/*/pose' --only 'intent/*' --only clock
+  arroch replay run.mcap --fast --hold-camera --skip 'ar/*' --namespace replayed
+"""
+
+from __future__ import annotations
+
+import argparse
+import fnmatch
+import logging
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Callable, Iterable, TextIO
+
+from protocol.messages import CameraFrame, Overlay
+from protocol.runner import add_common_arguments, zenoh_options
+from protocol.service import Service
+from protocol.transport import ZenohOptions
+
+from .reading import Recorded, RecordingError, messages, metadata
+from .topics import RAW_PREFIX, key_of
+
+log = logging.getLogger("arroch.replay")
+PROGRESS_EVERY = 5.0  # wall seconds between two progress lines
+LINGER = 0.5  # wall seconds between the last message and closing the session (a batch may still be on its way)
+
+
+class Pacer:
+    """When to publish a message recorded at site time ``t``: now, later, or after the user says so."""
+
+    def __init__(self, rate: float | None, step: float | None = None, prompt: Callable[[str], str] = input) -> None:
+        self.rate = rate  # None: as fast as possible
+        self.step = step
+        self.prompt = prompt
+        self._origin: tuple[float, float] | None = None  # (site time, wall time) of the first message
+        self._step_until: float | None = None
+
+    def wait(self, t: float, stopping: Callable[[], bool]) -> None:
+        if self.step is not None:
+            if self._step_until is None or t > self._step_until:
+                self.prompt(f"t = {t:.2f} s: Enter publishes the next {self.step:g} s ")
+                self._step_until = t + self.step
+            return
+        if self.rate is None:
+            return
+        if self._origin is None:
+            self._origin = (t, time.monotonic())
+        due = self._origin[1] + (t - self._origin[0]) / self.rate
+        while not stopping():
+            left = due - time.monotonic()
+            if left <= 0:
+                return
+            time.sleep(min(left, 0.1))
+
+
+def selected(topic: str, only: list[str], skip: list[str]) -> bool:
+    """Patterns match the key below the namespace (``robot/*/pose``, ``camera/tablet/frame``, ``clock``)."""
+    rest = topic[len(RAW_PREFIX):]
+    if only and not any(fnmatch.fnmatchcase(rest, p) for p in only):
+        return False
+    return not any(fnmatch.fnmatchcase(rest, p) for p in skip)
+
+
+class Replayer(Service):
+    """Publishes recorded payloads; with ``hold_camera``, waits for each frame's overlay."""
+
+    def __init__(self, namespace: str, options: ZenohOptions, *, hold_camera: float | None = None, settle: float = 0.05) -> None:
+        super().__init__("replay", namespace, options)
+        self.hold_camera = hold_camera
+        self.settle = settle
+        self.published = 0
+        self.holds_timed_out = 0
+        self._answered: dict[str, int] = {}  # camera -> newest frame_seq with an overlay
+        self._overlay = threading.Condition()
+
+    def setup(self) -> None:
+        if self.hold_camera is not None:
+            self.subscribe(self.keys.overlay(), Overlay, self._on_overlay, inline=True)
+
+    def _on_overlay(self, msg: Overlay, key: str) -> None:
+        with self._overlay:
+            self._answered[msg.camera] = max(self._answered.get(msg.camera, -1), msg.frame_seq)
+            self._overlay.notify_all()
+
+    def put(self, record: Recorded) -> None:
+        key = key_of(self.keys, record.topic)
+        if self.hold_camera is not None and isinstance(record.message, CameraFrame):
+            # Receivers take each key on a thread of its own: let what went before the frame (poses,
+            # intents) land first, as it had in the recorded run, where time stood still meanwhile.
+            time.sleep(self.settle)
+        # advertise() declares a key's publisher once; camera frames are bulk (batched), the rest go as they come.
+        self.advertise(key, express=not isinstance(record.message, CameraFrame)).put(record.payload)
+        self.published += 1
+        if self.hold_camera is not None and isinstance(record.message, CameraFrame):
+            frame = record.message
+            deadline = time.monotonic() + self.hold_camera
+            with self._overlay:
+                while self._answered.get(frame.camera, -1) < frame.seq and not self.stopping:
+                    left = deadline - time.monotonic()
+                    if left <= 0:
+                        self.holds_timed_out += 1
+                        break
+                    self._overlay.wait(min(left, 0.1))
+
+    def replay(self, records: Iterable[Recorded], pacer: Pacer, out: TextIO = sys.stderr) -> int:
+        last_note = time.monotonic()
+        for record in records:
+            if self.stopping:
+                return 130
+            pacer.wait(record.time, lambda: self.stopping)
+            self.put(record)
+            if time.monotonic() - last_note > PROGRESS_EVERY:
+                last_note = time.monotonic()
+                print(f"replay: t = {record.time:.1f} s, {self.published} messages published", file=out, flush=True)
+        return 0
+
+
+def replay_main(args: argparse.Namespace) -> int:
+    path = Path(args.file)
+    if args.rate is not None and args.rate <= 0:
+        log.error("--rate must be positive, got %g", args.rate)
+        return 2
+    try:
+        recorded = metadata(path)
+    except RecordingError as exc:
+        log.error("%s", exc)
+        return 2
+    namespace = args.namespace or recorded.get("namespace")
+    if not namespace:
+        log.error("%s names no namespace (not recorded by arroch record?): give --namespace", path)
+        return 2
+    rate = None if args.fast else (args.rate or 1.0)
+    pacer = Pacer(rate, args.step_size if args.step else None)
+    replayer = Replayer(namespace, zenoh_options(args), hold_camera=args.hold_timeout if args.hold_camera else None,
+                        settle=args.settle)
+    replayer.install_signal_handlers()
+    try:
+        replayer.open()
+    except Exception as exc:
+        log.error("could not join Zenoh: %s", exc)
+        return 1
+    try:
+        time.sleep(args.delay)  # subscribers discover the new publisher first
+        records = (r for r in messages(path, start=args.start, end=args.end) if selected(r.topic, args.only or [], args.skip or []))
+        code = replayer.replay(records, pacer)
+        time.sleep(LINGER)  # the last messages leave before the session closes
+    except RecordingError as exc:
+        log.error("%s", exc)
+        code = 2
+    except EOFError:
+        code = 0  # stepping, and the input ended
+    finally:
+        replayer.close()
+    held = f", {replayer.holds_timed_out} camera hold(s) timed out" if args.hold_camera else ""
+    print(f"replay: {replayer.published} messages published on namespace {namespace}{held}", file=sys.stderr, flush=True)
+    return code
+
+
+def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
+    add_common_arguments(parser)
+    parser.add_argument("file", metavar="FILE", help="a recording (.mcap) of arroch record")
+    pace = parser.add_mutually_exclusive_group()
+    pace.add_argument("--rate", type=float, metavar="K", help="K times the recorded pace (default 1)")
+    pace.add_argument("--fast", action="store_true", help="publish without waiting")
+    pace.add_argument("--step", action="store_true", help="wait for Enter before each --step-size site seconds")
+    parser.add_argument("--step-size", type=float, default=1.0, metavar="S", help="with --step: site seconds per Enter (default 1)")
+    parser.add_argument("--only", action="append", metavar="PATTERN", help="replay only keys matching (e.g. 'robot/*/pose'; repeatable)")
+    parser.add_argument("--skip", action="append", metavar="PATTERN", help="do not replay keys matching (repeatable)")
+    parser.add_argument("--start", type=float, metavar="T", help="from site time T")
+    parser.add_argument("--end", type=float, metavar="T", help="up to site time T")
+    parser.add_argument("--hold-camera", action="store_true", help="after each camera frame, wait for its overlay (ar/<cid>/overlay)")
+    parser.add_argument("--hold-timeout", type=float, default=3.0, metavar="S", help="longest wait for an overlay (default 3 s)")
+    parser.add_argument("--settle", type=float, default=0.05, metavar="S", help="with --hold-camera: wall seconds before each frame (default 0.05)")
+    parser.add_argument("--delay", type=float, default=0.5, metavar="S", help="wall seconds between joining Zenoh and the first message (default 0.5)")

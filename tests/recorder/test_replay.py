@@ -1,0 +1,94 @@
+"""``arroch replay``: the recorded mission fed to a fresh AR client draws the same robots at the same
+pixels (within 1 px) as the AR client of the recorded run did."""
+
+from __future__ import annotations
+
+import queue
+import subprocess
+import time
+
+import numpy as np
+import pytest
+
+from protocol.messages import Overlay
+from services.recorder.reading import messages
+from services.recorder.replay import Pacer, selected
+from tests.procs import ROOT, arroch
+
+pytestmark = [pytest.mark.integration, pytest.mark.slow]
+
+
+def robot_layers(overlay: Overlay) -> dict[str, list[np.ndarray]]:
+    layers: dict[str, list[np.ndarray]] = {}
+    for p in overlay.primitives:
+        if p.layer.startswith("robot:"):
+            layers.setdefault(p.layer, []).append(np.asarray(p.points, dtype=float))
+    return layers
+
+
+def test_replaying_the_mission_into_a_fresh_ar_client_draws_the_same_robots(mission, spawn, router, namespace, client):
+    recorded = {r.message.frame_seq: r.message for r in messages(mission.recording) if isinstance(r.message, Overlay)}
+    overlays = client.collect(client.keys.overlay("tablet"), Overlay)
+    ar = spawn(arroch("ar", "--namespace", namespace, "--connect", router, "--log-level", "INFO"), name="ar")
+    ar.wait_for("up on namespace", timeout=60)
+    result = subprocess.run(arroch("replay", str(mission.recording), "--fast", "--hold-camera", "--skip", "ar/*",
+                                   "--namespace", namespace, "--connect", router, "--log-level", "WARNING"),
+                            cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert "0 camera hold(s) timed out" in result.stderr, result.stderr
+    replayed: dict[int, Overlay] = {}
+    deadline = time.monotonic() + 5
+    while len(replayed) < len(recorded) and time.monotonic() < deadline:
+        try:
+            msg, _key = overlays.get(timeout=0.5)
+        except queue.Empty:
+            continue
+        replayed[msg.frame_seq] = msg
+    assert set(replayed) == set(recorded) and len(recorded) >= 20
+    drawn = 0
+    for seq, old in recorded.items():
+        old_layers, new_layers = robot_layers(old), robot_layers(replayed[seq])
+        assert set(old_layers) == set(new_layers), (seq, set(old_layers), set(new_layers))
+        for layer, prims in old_layers.items():
+            assert len(prims) == len(new_layers[layer]), (seq, layer)
+            for a, b in zip(prims, new_layers[layer]):
+                assert a.shape == b.shape and np.abs(a - b).max() <= 1.0, (seq, layer, np.abs(a - b).max())
+            drawn += 1
+    assert drawn >= 10  # robots were in view in enough frames for this to mean something
+
+
+def test_replay_selects_keys_and_paces_on_the_site_clock():
+    assert selected("/arroch/robot/r0/pose", ["robot/*/pose"], [])
+    assert not selected("/arroch/ar/tablet/overlay", [], ["ar/*"])
+    assert not selected("/arroch/clock", ["robot/*"], [])
+    pacer = Pacer(rate=20.0)
+    start = time.monotonic()
+    for t in (100.0, 101.0, 102.0):  # 2 site seconds at 20x: 0.1 wall s
+        pacer.wait(t, lambda: False)
+    assert 0.08 <= time.monotonic() - start < 1.0
+    prompts: list[str] = []
+    stepper = Pacer(rate=None, step=5.0, prompt=prompts.append)
+    for t in (0.0, 1.0, 4.9, 5.1, 9.0, 12.0):
+        stepper.wait(t, lambda: False)
+    assert len(prompts) == 3  # at 0, 5.1 and 12
+
+
+def test_replay_of_a_missing_file_says_so(tmp_path):
+    result = subprocess.run(arroch("replay", str(tmp_path / "none.mcap")), cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and "none.mcap: cannot open" in result.stderr
+
+
+def test_a_fast_replay_recorded_again_gives_back_every_message_byte_for_byte(mission, spawn, router, namespace, tmp_path):
+    again = tmp_path / "again.mcap"
+    recorder = spawn(arroch("record", "--out", str(again), "--namespace", namespace, "--connect", router), name="record")
+    recorder.wait_for("up on namespace", timeout=60)
+    time.sleep(0.5)  # its subscriptions reach the router
+    result = subprocess.run(arroch("replay", str(mission.recording), "--fast", "--namespace", namespace, "--connect", router,
+                                   "--log-level", "WARNING"), cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    time.sleep(1.0)
+    assert recorder.stop() == 0  # SIGTERM: the file is closed whole
+    original = sorted((r.topic, r.time, r.payload) for r in messages(mission.recording))
+    copied = sorted((r.topic, r.time, r.payload) for r in messages(again))
+    assert len(copied) == len(original) > 1000
+    assert copied == original

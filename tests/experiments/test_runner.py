@@ -118,12 +118,13 @@ def test_a_trial_is_bounded_recorded_and_leaves_nothing(tmp_path: Path, human: P
     """One real trial with a short wall-clock budget: whatever the mission does, the trial ends by its
     timeout, is recorded with its reason, and no process or folder of it survives."""
     out = tmp_path / "one"
-    before = set(Path("/tmp").glob("arroch-exp-*"))
+    mine = "arroch-exp-arroch-n2-o1-p0.5-w90-c0-t00-*"  # this trial's folder (other sweeps may run meanwhile)
+    before = set(Path("/tmp").glob(mine))
     proc = start(["robots", "--robots", "2", "--objects", "1", "--trials", "1", "--methods", "arroch", "--out", str(out),
                   "--trial-timeout", "15", "--jobs", "1"], human)
     code, output = finish(proc, 90)
     assert wait_gone(proc.pid) == [], f"processes of the sweep outlived it:\n{output}"
-    assert set(Path("/tmp").glob("arroch-exp-*")) - before == set(), "a trial folder was left behind"
+    assert set(Path("/tmp").glob(mine)) - before == set(), "a trial folder was left behind"
     [row] = rows(out)
     [timing] = rows(out, "timing.csv")
     assert row["status"] in ("ok", "timeout"), output

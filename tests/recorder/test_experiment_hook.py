@@ -11,7 +11,7 @@ import pytest
 from services.experiments.design import SweepSpec, TrialKey
 from services.experiments.trial import Trial, TrialConfig, service_commands
 
-KEY = TrialKey("arroch", 3, 3, 0.5, 2)
+KEY = TrialKey("arroch", 3, 3, 0.5, 600.0, 0.0, 2)
 
 
 def spec() -> SweepSpec:

@@ -52,7 +52,8 @@ def metrics_rows(m: dict[str, Any]) -> list[tuple[str, str, str]]:
     return rows
 
 
-def show(run: Path, out: TextIO = sys.stdout, png: Path | None = None) -> int:
+def show(run: Path, out: TextIO | None = None, png: Path | None = None) -> int:
+    out = out or sys.stdout  # looked up now, not at import: a caller may have redirected it
     recording = run if run.suffix == ".mcap" else run / RECORDING
     folder = recording.parent
     print(f"run {folder}", file=out)
@@ -65,10 +66,12 @@ def show(run: Path, out: TextIO = sys.stdout, png: Path | None = None) -> int:
     metrics = json.loads(metrics_file.read_text()) if metrics_file.is_file() else None
     if not recording.is_file():
         print(f"  no recording ({recording} is missing: the run was started with --no-record?)", file=out)
-        if metrics:
-            print("\nmetrics", file=out)
-            _table(metrics_rows(metrics), out)
-        return 0 if metrics else 1
+        if not metrics:
+            log.error("%s: neither %s nor metrics.json: nothing to show", folder, RECORDING)
+            return 1
+        print("\nmetrics", file=out)
+        _table(metrics_rows(metrics), out)
+        return 0
     stats = channel_stats(recording)
     timeline = build_timeline(recording)
     metrics = metrics or timeline.metrics

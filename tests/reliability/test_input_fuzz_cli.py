@@ -37,7 +37,7 @@ from tests.reliability.fuzzing import Overran, contained
 
 LIMIT = 30.0  # wall s a single run may take
 DEAD_ROUTER = "tcp/127.0.0.1:1"  # nothing listens there: opening a session fails at once
-PARSE_ONLY = {("router",), ("demo",), ("experiment", "robots"), ("experiment", "laziness")}
+PARSE_ONLY = {("router",), ("demo",), ("experiment", "robots"), ("experiment", "laziness"), ("experiment", "map")}
 # Services: the arguments that point them at the absent router, and the options left out because they
 # would point Zenoh elsewhere (their Zenoh-mode flag among them).
 ZENOH = {"--connect", "--listen", "--multicast", "--zenoh-config"}
@@ -53,6 +53,7 @@ SERVICES: dict[tuple[str, ...], tuple[list[str], set[str]]] = {
     ("feedback", "send"): CLIENT,
     ("constraints", "show"): CLIENT,
     # `up` never gets to start a child: its supervisor cannot join the (absent) router.
+    ("ros2", "bridge"): CLIENT,
     ("up",): (["--no-router"], ZENOH | {"--child", "--router", "--no-router", "--router-listen", "--zenoh-config-dir"}),
 }
 # Appended to a tool's argv (the last value of an option wins): a command line that gets through the

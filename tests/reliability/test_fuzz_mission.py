@@ -139,7 +139,8 @@ def make_plan(client_src: str) -> Plan:
 
 
 def start_mission(spawn, run_dir: Path, endpoint: str, namespace: str) -> Proc:
-    proc = spawn(arroch("up", "--services", SERVICES, "--mode", "lockstep", "--rate", str(PACE), "--seed", str(MISSION_SEED), "--until-done",
+    # --no-record: the fuzz counts what the mission's services drop; a recorder hears every key.
+    proc = spawn(arroch("up", "--services", SERVICES, "--mode", "lockstep", "--rate", str(PACE), "--seed", str(MISSION_SEED), "--until-done", "--no-record",
                         "--run-dir", str(run_dir), "--progress", "off", "--router-listen", endpoint, "--namespace", namespace,
                         "--timeout", str(MISSION_TIMEOUT)), name="up")
     proc.wait_for("router ready", timeout=30)

@@ -219,7 +219,7 @@ class HumanModel:
         z = float(streams.generator("task").standard_normal())
         self.task_duration = max(config.task_min, config.task_mean + config.task_std * z)
         self.focus = self._sample_focus(self.task_duration)
-        self.declared = [self._would_declare(i) for i in range(len(self.focus))]  # drawn for every method alike
+        self.declared = [self._would_declare(i) for i in range(len(self.focus))]
         self.counters = HumanCounters()
         self.work_done = 0.0
         self.done_time: float | None = None
@@ -254,8 +254,8 @@ class HumanModel:
         return out
 
     def _would_declare(self, index: int) -> bool:
-        """Whether she declares focus interval ``index`` (ARROCH): the draw is made for every method,
-        so the same intervals are declared whichever method the trial runs."""
+        """Whether she declares focus interval ``index`` (ARROCH only). The draw has a stream of its
+        own (keyed by the interval), so drawing it or not moves no other draw of hers."""
         return self.method == "arroch" and bool(self.door_points) and \
             self.streams.uniform("declare", index) < self.config.declare_probability
 

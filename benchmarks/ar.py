@@ -58,11 +58,11 @@ sys.path.insert(0, str(ROOT))
 
 from benchmarks.lib.stdio import c_stdout_to_stderr  # noqa: E402
 from protocol.apriltag import apriltag_corners  # noqa: E402
+from protocol.frames import CameraPose, gravity_in_camera, rotation_angle  # noqa: E402
 from protocol.messages import DoorState, Intent, RobotPose  # noqa: E402
 from protocol.site import load_site  # noqa: E402
 from services.ar_client.detect import TagDetector, apriltag_detector  # noqa: E402
 from services.ar_client.feedback import FeedbackPanel  # noqa: E402
-from protocol.frames import CameraPose, gravity_in_camera, rotation_angle  # noqa: E402
 from services.ar_client.localize import Localizer  # noqa: E402
 from services.ar_client.pipeline import Pipeline  # noqa: E402
 from services.ar_client.project import Intrinsics  # noqa: E402
@@ -82,7 +82,13 @@ def stats(values: list[float], scale: float = 1.0) -> dict:
     if not values:
         return {"n": 0}
     a = np.asarray(values, dtype=np.float64) * scale
-    return {"n": int(len(a)), "mean": float(a.mean()), "median": float(np.median(a)), "p90": float(np.percentile(a, 90)), "max": float(a.max())}
+    return {
+        "n": int(len(a)),
+        "mean": float(a.mean()),
+        "median": float(np.median(a)),
+        "p90": float(np.percentile(a, 90)),
+        "max": float(a.max()),
+    }
 
 
 def world_for(site) -> WorldView:  # noqa: ANN001
@@ -91,7 +97,9 @@ def world_for(site) -> WorldView:  # noqa: ANN001
     for i, (rid, spec) in enumerate(sorted(site.robots.items())):
         x, y, th = spec.start
         w.on_pose(RobotPose(robot=rid, x=x, y=y, theta=th))
-        rows = [[10.0 * k, x + 0.5 * k * np.cos(th + 0.3 * i), y + 0.5 * k * np.sin(th + 0.3 * i), th] for k in range(5)]
+        rows = [
+            [10.0 * k, x + 0.5 * k * np.cos(th + 0.3 * i), y + 0.5 * k * np.sin(th + 0.3 * i), th] for k in range(5)
+        ]
         w.on_intent(Intent(robot=rid, trajectory=rows))
     for k, did in enumerate(sorted(site.door_leaves)):
         w.on_door(DoorState(door=did, open=k % 2 == 0))
@@ -99,7 +107,9 @@ def world_for(site) -> WorldView:  # noqa: ANN001
 
 
 class Frame:
-    def __init__(self, image: np.ndarray, truth: CameraPose, K: Intrinsics, in_view: list[int], corners: dict, source: str) -> None:
+    def __init__(
+        self, image: np.ndarray, truth: CameraPose, K: Intrinsics, in_view: list[int], corners: dict, source: str
+    ) -> None:
         self.image = image
         self.truth = truth
         self.K = K
@@ -153,11 +163,16 @@ def sim_frames(site, views, n: int, size: tuple[int, int], supersample: int = 1)
             yaw = float(np.degrees(np.arctan2(fwd[1], fwd[0])))
             pitch = float(np.degrees(np.arcsin(np.clip(fwd[2], -1.0, 1.0))))
             x, y, z = (float(v) for v in view.pose.position)
-            spec = CameraSpec.from_degrees(x, y, z, yaw, pitch, width=size[0], height=size[1], vfov_deg=FOV_Y, supersample=supersample)
+            spec = CameraSpec.from_degrees(
+                x, y, z, yaw, pitch, width=size[0], height=size[1], vfov_deg=FOV_Y, supersample=supersample
+            )
             rgb = world.render(spec)
             fx, fy, cx, cy, w, h = spec.intrinsics
             K = Intrinsics(fx, fy, cx, cy, int(w), int(h))
-            pose = CameraPose(R_wc=np.asarray(spec.R_world_camera, dtype=np.float64), position=np.asarray(spec.position, dtype=np.float64))
+            pose = CameraPose(
+                R_wc=np.asarray(spec.R_world_camera, dtype=np.float64),
+                position=np.asarray(spec.position, dtype=np.float64),
+            )
             image = cv2.cvtColor(np.ascontiguousarray(rgb[..., :3]), cv2.COLOR_RGB2BGR)
             # The tags wholly in view (and their true corners) as the synthetic renderer computes them.
             ref = render(site, pose, K, noise_sigma=0.0, blur_sigma=0.0)
@@ -269,7 +284,10 @@ def compare_detectors(site, frames: list[Frame]) -> dict:  # noqa: ANN001
         out[name] = {
             "detect_ms": stats(times, 1000.0),
             "detection_rate": found / max(in_view, 1),
-            "corner_error_px": {"rms": float(np.sqrt(np.mean(np.square(corner_err)))) if corner_err else None, **stats(corner_err)},
+            "corner_error_px": {
+                "rms": float(np.sqrt(np.mean(np.square(corner_err)))) if corner_err else None,
+                **stats(corner_err),
+            },
             "position_error_m": stats(pos),
         }
     return out
@@ -282,17 +300,26 @@ def floors(size_key: str, pipe: dict, ref: dict) -> dict:
     out = {
         "frames_both_localised": len(both),
         "median_position_vs_reference": {
-            "pipeline_m": float(np.median(p_pos)), "reference_m": float(np.median(r_pos)),
-            "ratio": float(np.median(p_pos) / np.median(r_pos)), "limit": 1.2,
+            "pipeline_m": float(np.median(p_pos)),
+            "reference_m": float(np.median(r_pos)),
+            "ratio": float(np.median(p_pos) / np.median(r_pos)),
+            "limit": 1.2,
         },
         "p90_position_vs_reference": {
-            "pipeline_m": float(np.percentile(p_pos, 90)), "reference_m": float(np.percentile(r_pos, 90)),
-            "ratio": float(np.percentile(p_pos, 90) / np.percentile(r_pos, 90)), "limit": 1.2,
+            "pipeline_m": float(np.percentile(p_pos, 90)),
+            "reference_m": float(np.percentile(r_pos, 90)),
+            "ratio": float(np.percentile(p_pos, 90) / np.percentile(r_pos, 90)),
+            "limit": 1.2,
         },
-        "median_position_fraction_of_distance": {"value": pipe["position_error_fraction_of_distance"]["median"], "limit": 0.01},
+        "median_position_fraction_of_distance": {
+            "value": pipe["position_error_fraction_of_distance"]["median"],
+            "limit": 0.01,
+        },
         "detection_rate_vs_reference": {
-            "pipeline": pipe["detection_rate"], "reference": ref["detection_rate"],
-            "difference_points": 100.0 * (pipe["detection_rate"] - ref["detection_rate"]), "limit_points": -3.0,
+            "pipeline": pipe["detection_rate"],
+            "reference": ref["detection_rate"],
+            "difference_points": 100.0 * (pipe["detection_rate"] - ref["detection_rate"]),
+            "limit_points": -3.0,
         },
     }
     out["median_position_vs_reference"]["ok"] = out["median_position_vs_reference"]["ratio"] <= 1.2
@@ -302,7 +329,12 @@ def floors(size_key: str, pipe: dict, ref: dict) -> dict:
     if size_key.endswith("1280x720"):
         # CPU time of this single-threaded process per frame: what one core sustains, unaffected by
         # other jobs sharing the machine (wall-clock fps is reported beside it).
-        out["fps_1280x720_one_core"] = {"value": pipe["fps_cpu"], "wall_clock_value": pipe["fps"], "limit": 30.0, "ok": pipe["fps_cpu"] >= 30.0}
+        out["fps_1280x720_one_core"] = {
+            "value": pipe["fps_cpu"],
+            "wall_clock_value": pipe["fps"],
+            "limit": 30.0,
+            "ok": pipe["fps_cpu"] >= 30.0,
+        }
     return out
 
 
@@ -317,19 +349,27 @@ def hard_site():  # noqa: ANN201
     """A 20 x 14 m hall, one 0.16 m tag every 2.4 m along each wall at alternating heights."""
     import tempfile
 
-    lines = ['[site]\nname = "hard-hall"\n', '[[rooms]]\nid = "hall"\nrect = [0.0, 0.0, 20.0, 14.0]\n',
-             '[[robots]]\nid = "r0"\nstart = [5.0, 5.0, 0.0]\n', '[[robots]]\nid = "r1"\nstart = [14.0, 9.0, 3.14]\n',
-             '[[objects]]\nid = "o0"\nposition = [3.0, 10.0]\ndeliver_to = "hall"\nrobot = "r0"\n',
-             '[human]\nroom = "hall"\nposition = [10.0, 7.0]\n']
+    lines = [
+        '[site]\nname = "hard-hall"\n',
+        '[[rooms]]\nid = "hall"\nrect = [0.0, 0.0, 20.0, 14.0]\n',
+        '[[robots]]\nid = "r0"\nstart = [5.0, 5.0, 0.0]\n',
+        '[[robots]]\nid = "r1"\nstart = [14.0, 9.0, 3.14]\n',
+        '[[objects]]\nid = "o0"\nposition = [3.0, 10.0]\ndeliver_to = "hall"\nrobot = "r0"\n',
+        '[human]\nroom = "hall"\nposition = [10.0, 7.0]\n',
+    ]
     walls = [  # (start, direction, length, facing yaw): tags 1 mm in front of the wall faces
-        ((0.0, 0.001), (1.0, 0.0), 20.0, np.pi / 2), ((20.0 - 0.001, 0.0), (0.0, 1.0), 14.0, np.pi),
-        ((20.0, 14.0 - 0.001), (-1.0, 0.0), 20.0, -np.pi / 2), ((0.001, 14.0), (0.0, -1.0), 14.0, 0.0),
+        ((0.0, 0.001), (1.0, 0.0), 20.0, np.pi / 2),
+        ((20.0 - 0.001, 0.0), (0.0, 1.0), 14.0, np.pi),
+        ((20.0, 14.0 - 0.001), (-1.0, 0.0), 20.0, -np.pi / 2),
+        ((0.001, 14.0), (0.0, -1.0), 14.0, 0.0),
     ]
     tag = 0
     for (x0, y0), (dx, dy), length, yaw in walls:
         for k, along in enumerate(np.arange(1.6, length - 1.0, 2.4)):
             z = 1.25 if k % 2 == 0 else 1.55
-            lines.append(f"[[landmarks]]\ntag = {tag}\nsize = 0.16\nposition = [{x0 + dx * along:.3f}, {y0 + dy * along:.3f}, {z}]\nyaw = {yaw!r}\n")
+            lines.append(
+                f"[[landmarks]]\ntag = {tag}\nsize = 0.16\nposition = [{x0 + dx * along:.3f}, {y0 + dy * along:.3f}, {z}]\nyaw = {yaw!r}\n"
+            )
             tag += 1
     with tempfile.NamedTemporaryFile("w", suffix=".toml", delete=False) as fh:
         fh.write("\n".join(lines))
@@ -365,11 +405,26 @@ def hard_frames(site, n: int, size: tuple[int, int], seed: int) -> list[HardFram
     out: list[HardFrame] = []
     batch = 0
     while len(out) < n:
-        views = sample_views(site, 4 * n, seed=seed * 1000 + batch, distance=(2.0, 7.0), max_obliquity_deg=65.0,
-                             heights=(1.0, 1.7), aim_jitter=0.6, max_roll_deg=10.0)
+        views = sample_views(
+            site,
+            4 * n,
+            seed=seed * 1000 + batch,
+            distance=(2.0, 7.0),
+            max_obliquity_deg=65.0,
+            heights=(1.0, 1.7),
+            aim_jitter=0.6,
+            max_roll_deg=10.0,
+        )
         batch += 1
         for v in views:
-            f = render(site, v.pose, K, seed=int(rng.integers(1 << 30)), noise_sigma=2.5, blur_sigma=float(rng.uniform(0.5, 1.1)))
+            f = render(
+                site,
+                v.pose,
+                K,
+                seed=int(rng.integers(1 << 30)),
+                noise_sigma=2.5,
+                blur_sigma=float(rng.uniform(0.5, 1.1)),
+            )
             if not 1 <= len(f.in_view) <= 3:
                 continue
             gravity = gravity_in_camera(v.pose.R_wc, HARD_GRAVITY_SIGMA_DEG, rng)
@@ -395,8 +450,13 @@ class BucketRate:
             self.found[i] += tag in detected
 
     def summary(self) -> dict:
-        return {bucket_name(lo, hi): {"rate": (float(self.found[i] / self.total[i]) if self.total[i] else None), "tags": int(self.total[i])}
-                for i, (lo, hi) in enumerate(HARD_BUCKETS)}
+        return {
+            bucket_name(lo, hi): {
+                "rate": (float(self.found[i] / self.total[i]) if self.total[i] else None),
+                "tags": int(self.total[i]),
+            }
+            for i, (lo, hi) in enumerate(HARD_BUCKETS)
+        }
 
 
 def hard_ours(site, frames: list[HardFrame], use_gravity: bool) -> dict:  # noqa: ANN001
@@ -420,9 +480,15 @@ def hard_ours(site, frames: list[HardFrame], use_gravity: bool) -> dict:  # noqa
         first_pass.add(f, {d.tag_id for d in pipeline.detector.detect(f.decoded)})
     out = accuracy.summary()
     out.pop("_per_frame")
-    return {**out, "ambiguous_frames": ambiguous, "detection_rate_by_size_first_pass": first_pass.summary(),
-            "detection_rate_by_size": final.summary(), "cpu_ms_per_frame": stats(cpu, 1000.0),
-            "fps_cpu": float(1.0 / np.mean(cpu)), "fps_wall": float(1.0 / np.mean(wall))}
+    return {
+        **out,
+        "ambiguous_frames": ambiguous,
+        "detection_rate_by_size_first_pass": first_pass.summary(),
+        "detection_rate_by_size": final.summary(),
+        "cpu_ms_per_frame": stats(cpu, 1000.0),
+        "fps_cpu": float(1.0 / np.mean(cpu)),
+        "fps_wall": float(1.0 / np.mean(wall)),
+    }
 
 
 def hard_reference(site, frames: list[HardFrame]) -> dict:  # noqa: ANN001
@@ -458,14 +524,23 @@ def hard_checks(entries: dict) -> dict:
         checks[f"{key}: p90 position error without gravity"] = {"value": without.get("p90"), "limit": 0.15}
         checks[f"{key}: median position error with gravity"] = {"value": with_g.get("median"), "limit": 0.015}
         checks[f"{key}: median position error without gravity"] = {"value": without.get("median"), "limit": 0.015}
-        ours, ref = e["ours_without_gravity"]["detection_rate_by_size_first_pass"], e["apriltag3"]["detection_rate_by_size"]
+        ours, ref = (
+            e["ours_without_gravity"]["detection_rate_by_size_first_pass"],
+            e["apriltag3"]["detection_rate_by_size"],
+        )
         for bucket, r in ref.items():
             if r["rate"] is None:  # no tag of that size in view
                 continue
-            checks[f"{key}: detection {bucket} vs AprilTag 3"] = {"value": ours[bucket]["rate"], "reference": r["rate"],
-                                                                  "ok": ours[bucket]["rate"] >= r["rate"]}
+            checks[f"{key}: detection {bucket} vs AprilTag 3"] = {
+                "value": ours[bucket]["rate"],
+                "reference": r["rate"],
+                "ok": ours[bucket]["rate"] >= r["rate"],
+            }
         if key == "1280x720":
-            checks[f"{key}: fps whole pipeline, one core (CPU time)"] = {"value": e["ours_with_gravity"]["fps_cpu"], "min": 60.0}
+            checks[f"{key}: fps whole pipeline, one core (CPU time)"] = {
+                "value": e["ours_with_gravity"]["fps_cpu"],
+                "min": 60.0,
+            }
     for c in checks.values():
         if "ok" not in c:
             c["ok"] = c["value"] is not None and (c["value"] >= c["min"] if "min" in c else c["value"] <= c["limit"])
@@ -494,11 +569,20 @@ def hard_plot(result: dict, path: str) -> None:
         ax.set_title(f"{key}: tags detected, by size")
         ax.legend(fontsize=8)
         ax = axes[1][col]
-        names = {"ours_with_gravity": "ours + gravity", "ours_without_gravity": "ours", "apriltag3": "AprilTag 3 + SQPnP"}
+        names = {
+            "ours_with_gravity": "ours + gravity",
+            "ours_without_gravity": "ours",
+            "apriltag3": "AprilTag 3 + SQPnP",
+        }
         for i, (name, label) in enumerate(names.items()):
             st = e[name]["position_error_fraction_of_distance"]
-            ax.bar([i - 0.2, i + 0.2], [100 * st["median"], 100 * st["p90"]], 0.4, color=["C0", "C1"],
-                   label=None if i else ["median", "p90"])
+            ax.bar(
+                [i - 0.2, i + 0.2],
+                [100 * st["median"], 100 * st["p90"]],
+                0.4,
+                color=["C0", "C1"],
+                label=None if i else ["median", "p90"],
+            )
         ax.set_xticks(range(len(names)), list(names.values()), fontsize=8)
         ax.set_ylabel("position error, % of distance")
         ax.legend(fontsize=8)
@@ -510,16 +594,29 @@ def hard_plot(result: dict, path: str) -> None:
 
 def hard_main(args: argparse.Namespace) -> int:
     site = hard_site()
-    result: dict = {"benchmark": "ar --hard", "command": " ".join(["benchmarks/ar.py", *sys.argv[1:]]), "site": site.name,
-                    "frames_per_size": args.frames, "seed": args.seed, "opencv": cv2.__version__, "threads": 1,
-                    "gravity_noise_deg_per_axis": HARD_GRAVITY_SIGMA_DEG, "load_average_at_start": list(os.getloadavg()), "sizes": {}}
+    result: dict = {
+        "benchmark": "ar --hard",
+        "command": " ".join(["benchmarks/ar.py", *sys.argv[1:]]),
+        "site": site.name,
+        "frames_per_size": args.frames,
+        "seed": args.seed,
+        "opencv": cv2.__version__,
+        "threads": 1,
+        "gravity_noise_deg_per_axis": HARD_GRAVITY_SIGMA_DEG,
+        "load_average_at_start": list(os.getloadavg()),
+        "sizes": {},
+    }
     for w, h in SIZES:
         key = f"{w}x{h}"
         log(f"{key}: rendering {args.frames} hard frames")
         frames = hard_frames(site, args.frames, (w, h), args.seed)
         sides = [s for f in frames for s in f.sizes.values()]
-        entry: dict = {"frames": len(frames), "tags_in_view": stats([len(f.in_view) for f in frames]),
-                       "tag_side_px": stats(sides), "distance_m": stats([distance_to_tags(site, f.truth, f.in_view) for f in frames])}
+        entry: dict = {
+            "frames": len(frames),
+            "tags_in_view": stats([len(f.in_view) for f in frames]),
+            "tag_side_px": stats(sides),
+            "distance_m": stats([distance_to_tags(site, f.truth, f.in_view) for f in frames]),
+        }
         log(f"{key}: ours with gravity")
         entry["ours_with_gravity"] = hard_ours(site, frames, True)
         log(f"{key}: ours without gravity")
@@ -539,11 +636,19 @@ def hard_main(args: argparse.Namespace) -> int:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--frames", type=int, default=None, help="sampled poses (default 150; --hard: 120 per size)")
-    parser.add_argument("--hard", action="store_true", help="the hard set (far, small, few tags; with and without gravity)")
+    parser.add_argument(
+        "--hard", action="store_true", help="the hard set (far, small, few tags; with and without gravity)"
+    )
     parser.add_argument("--plot", metavar="FILE.png", help="--hard: also draw detection by tag size and pose errors")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--site", help="site file (default: the packaged office site)")
-    parser.add_argument("--sim", type=int, default=0, metavar="N", help="also N frames rendered by the simulator's pybullet camera, at both sizes")
+    parser.add_argument(
+        "--sim",
+        type=int,
+        default=0,
+        metavar="N",
+        help="also N frames rendered by the simulator's pybullet camera, at both sizes",
+    )
     parser.add_argument("--no-detectors", action="store_true", help="skip the detector comparison")
     args = parser.parse_args()
 
@@ -562,7 +667,10 @@ def main() -> int:
         "opencv": cv2.__version__,
         "threads": 1,
         "load_average_at_start": list(os.getloadavg()),
-        "views": {"distance_m": stats([v.distance for v in views]), "obliquity_deg": stats([np.degrees(v.obliquity) for v in views])},
+        "views": {
+            "distance_m": stats([v.distance for v in views]),
+            "obliquity_deg": stats([np.degrees(v.obliquity) for v in views]),
+        },
         "sizes": {},
     }
     groups: list[tuple[str, list[Frame]]] = []
@@ -591,7 +699,10 @@ def main() -> int:
             part.pop("_per_frame")
         result["sizes"][key] = entry
     result["all_floors_ok"] = all(
-        f["ok"] for entry in result["sizes"].values() for f in entry["floors"].values() if isinstance(f, dict) and "ok" in f
+        f["ok"]
+        for entry in result["sizes"].values()
+        for f in entry["floors"].values()
+        if isinstance(f, dict) and "ok" in f
     )
     print(json.dumps(result, indent=2))
     return 0

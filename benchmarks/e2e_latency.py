@@ -60,7 +60,6 @@ sys.path.insert(0, str(ROOT))
 
 from benchmarks.lib import figures  # noqa: E402
 from benchmarks.lib.figures import log  # noqa: E402
-
 from protocol.clock import WallClock  # noqa: E402
 from protocol.codec import decode  # noqa: E402
 from protocol.messages import Overlay, RobotPose, TeamPlan  # noqa: E402
@@ -71,7 +70,6 @@ from tests.procs import Proc, arroch  # noqa: E402
 CAMERA = "tablet"
 MISSION = ["--mode", "realtime", "--method", "no-feedback", "--seed", "1", "--camera", CAMERA]
 HUB_PORT = 7447
-
 
 
 def summary(values: list[float]) -> dict[str, float]:
@@ -102,8 +100,12 @@ class Probe:
 
     def listen(self) -> None:
         keys, session = self.client.keys, self.client.session
-        for key, handler in ((keys.robot_pose("*"), self._on_pose), (keys.overlay(CAMERA), self._on_overlay), (keys.plan(), self._on_plan),
-                             (keys.camera_frame(CAMERA), self._on_frame)):
+        for key, handler in (
+            (keys.robot_pose("*"), self._on_pose),
+            (keys.overlay(CAMERA), self._on_overlay),
+            (keys.plan(), self._on_plan),
+            (keys.camera_frame(CAMERA), self._on_frame),
+        ):
             self.client._declared.append(session.declare_subscriber(key, handler))  # undeclared when the client closes
 
     def _on_pose(self, sample: Any) -> None:
@@ -115,7 +117,9 @@ class Probe:
 
     def _on_frame(self, sample: Any) -> None:
         arrival = time.time()
-        seq = msgpack.unpackb(sample.payload.to_bytes()).get("seq")  # only the envelope's seq: no need to decode the JPEG
+        seq = msgpack.unpackb(sample.payload.to_bytes()).get(
+            "seq"
+        )  # only the envelope's seq: no need to decode the JPEG
         with self.lock:
             self.frames[int(seq)] = zenoh_time(sample, arrival)
 
@@ -126,8 +130,14 @@ class Probe:
         stamps = msgpack.unpackb(payload).get("pose_stamps", {})  # an extra field: decode() drops it
         drawn = {p.layer.split(":", 1)[1] for p in overlay.primitives if p.layer.startswith("robot:")}
         with self.lock:
-            self.overlays.append({"arrival": arrival, "ok": overlay.ok, "frame": overlay.frame_seq,
-                                  "drawn": {rid: float(stamps[rid]) for rid in drawn if rid in stamps}})
+            self.overlays.append(
+                {
+                    "arrival": arrival,
+                    "ok": overlay.ok,
+                    "frame": overlay.frame_seq,
+                    "drawn": {rid: float(stamps[rid]) for rid in drawn if rid in stamps},
+                }
+            )
 
     def _on_plan(self, sample: Any) -> None:
         arrival = time.time()
@@ -156,13 +166,27 @@ class Probe:
         planned = None
         while planned is None and time.monotonic() < deadline:
             with self.lock:
-                planned = next(((t, solve) for t, version, solve in self.plans if version >= ack.constraints_version and t >= pressed), None)
+                planned = next(
+                    (
+                        (t, solve)
+                        for t, version, solve in self.plans
+                        if version >= ack.constraints_version and t >= pressed
+                    ),
+                    None,
+                )
             time.sleep(0.002)
-        return {"kind": kind, "press_to_ack": acked - pressed, "press_to_plan": None if planned is None else planned[0] - pressed,
-                "solve_time": None if planned is None else planned[1], "constraints_version": ack.constraints_version}
+        return {
+            "kind": kind,
+            "press_to_ack": acked - pressed,
+            "press_to_plan": None if planned is None else planned[0] - pressed,
+            "solve_time": None if planned is None else planned[1],
+            "constraints_version": ack.constraints_version,
+        }
 
     def presses(self, count: int, gap: float, until: float) -> list[dict[str, Any]]:
-        choices = itertools.cycle([("door_unavailable", {"door": self.door, "minutes": 1}), ("door_available_now", {"door": self.door})])
+        choices = itertools.cycle(
+            [("door_unavailable", {"door": self.door, "minutes": 1}), ("door_available_now", {"door": self.door})]
+        )
         out = []
         while len(out) < count and time.monotonic() < until:
             out.append(self.press(*next(choices)))
@@ -195,17 +219,29 @@ class Probe:
                     age_at_frame.append(frames[overlay["frame"]] - published[stamp])
                 if previous is not None and stamp > previous:
                     # Every pose after the previous overlay's, up to this one's, is first shown now.
-                    lo, hi = np.searchsorted(stamps, previous, side="right"), np.searchsorted(stamps, stamp, side="right")
+                    lo, hi = (
+                        np.searchsorted(stamps, previous, side="right"),
+                        np.searchsorted(stamps, stamp, side="right"),
+                    )
                     first_shown += [overlay["arrival"] - published[s] for s in stamps[lo:hi]]
                 previous = stamp if previous is None else max(previous, stamp)
-        return {"drawn": drawn_age, "age_at_frame": age_at_frame, "first": first_shown, "frame_to_overlay": frame_to_overlay}
+        return {
+            "drawn": drawn_age,
+            "age_at_frame": age_at_frame,
+            "first": first_shown,
+            "frame_to_overlay": frame_to_overlay,
+        }
 
 
 def run_probe(args: argparse.Namespace) -> int:
     from protocol.site import load_site
 
     door = next(d for d, o in load_site(None).doors.items() if o.human_operated)
-    options = ZenohOptions(config_file=args.zenoh_config) if args.zenoh_config else ZenohOptions(mode="client", connect=[args.connect])
+    options = (
+        ZenohOptions(config_file=args.zenoh_config)
+        if args.zenoh_config
+        else ZenohOptions(mode="client", connect=[args.connect])
+    )
     client = Service("probe", args.namespace, options, clock=WallClock())
     client.open()
     try:
@@ -244,8 +280,20 @@ def run_probe(args: argparse.Namespace) -> int:
 
 
 def probe_argv(zenoh: list[str], namespace: str, args: argparse.Namespace) -> list[str]:
-    return [sys.executable, str(Path(__file__).resolve()), "probe", *zenoh, "--namespace", namespace,
-            "--seconds", str(args.seconds), "--presses", str(args.presses), "--gap", str(args.gap)]
+    return [
+        sys.executable,
+        str(Path(__file__).resolve()),
+        "probe",
+        *zenoh,
+        "--namespace",
+        namespace,
+        "--seconds",
+        str(args.seconds),
+        "--presses",
+        str(args.presses),
+        "--gap",
+        str(args.gap),
+    ]
 
 
 def collect(probe: Proc, timeout: float) -> dict[str, Any]:
@@ -259,8 +307,26 @@ def run_local(args: argparse.Namespace, workdir: Path) -> dict[str, Any]:
     env = {"XDG_STATE_HOME": str(workdir / "state")}
     procs: list[Proc] = []
     try:
-        up = Proc(arroch("up", "--services", "planner,restrictor,sim,ar", *MISSION, "--namespace", namespace, "--router-listen", endpoint,
-                         "--run-dir", str(workdir / "runs-local"), "--progress", "off", "--log-level", "WARNING"), env=env, name="up")
+        up = Proc(
+            arroch(
+                "up",
+                "--services",
+                "planner,restrictor,sim,ar",
+                *MISSION,
+                "--namespace",
+                namespace,
+                "--router-listen",
+                endpoint,
+                "--run-dir",
+                str(workdir / "runs-local"),
+                "--progress",
+                "off",
+                "--log-level",
+                "WARNING",
+            ),
+            env=env,
+            name="up",
+        )
         procs.append(up)
         up.wait_for("router ready", timeout=60)
         probe = Proc(probe_argv(["--connect", endpoint], namespace, args), env=env, name="probe")
@@ -291,14 +357,32 @@ def run_hosts(args: argparse.Namespace, workdir: Path) -> dict[str, Any]:
         configs = render_configs(certs, foreign, workdir / "zenoh", router=endpoint, listen=endpoint)
 
         def up(host: str, *extra: str) -> Proc:
-            return lan.spawn(host, arroch("up", "--namespace", namespace, "--zenoh-config-dir", str(configs), "--progress", "off",
-                                          "--log-level", "WARNING", "--run-dir", str(workdir / f"runs-{host}"), *extra), name=host)
+            return lan.spawn(
+                host,
+                arroch(
+                    "up",
+                    "--namespace",
+                    namespace,
+                    "--zenoh-config-dir",
+                    str(configs),
+                    "--progress",
+                    "off",
+                    "--log-level",
+                    "WARNING",
+                    "--run-dir",
+                    str(workdir / f"runs-{host}"),
+                    *extra,
+                ),
+                name=host,
+            )
 
         planning = up("planning", "--services", "planner,restrictor")
         planning.wait_for("router ready", timeout=60)
         up("ar", "--no-router", "--services", "ar")
         up("sim", "--no-router", "--services", "sim", *MISSION)
-        probe = lan.spawn("ar", probe_argv(["--zenoh-config", str(configs / "ar.json5")], namespace, args), name="probe")
+        probe = lan.spawn(
+            "ar", probe_argv(["--zenoh-config", str(configs / "ar.json5")], namespace, args), name="probe"
+        )
         result = collect(probe, args.seconds + 150)
         result["link"] = f"TLS over veth, router {endpoint}"
         return result
@@ -311,7 +395,9 @@ def main() -> int:
     parser.add_argument("role", nargs="?", default="run", choices=("run", "probe"), help=argparse.SUPPRESS)
     parser.add_argument("--seconds", type=float, default=40.0, help="measuring time per placement (default 40)")
     parser.add_argument("--presses", type=int, default=15, help="feedback presses per placement (default 15)")
-    parser.add_argument("--gap", type=float, default=1.0, help="seconds between a press's plan and the next press (default 1)")
+    parser.add_argument(
+        "--gap", type=float, default=1.0, help="seconds between a press's plan and the next press (default 1)"
+    )
     parser.add_argument("--placements", default="local,hosts", help="local, hosts or both (default local,hosts)")
     parser.add_argument("--connect", help=argparse.SUPPRESS)
     parser.add_argument("--zenoh-config", help=argparse.SUPPRESS)
@@ -331,12 +417,21 @@ def main() -> int:
             runner = run_local if placement == "local" else run_hosts
             results[placement] = runner(args, Path(tmp) / placement)
             log(json.dumps(results[placement]))
-    print(json.dumps({
-        "benchmark": "e2e_latency",
-        "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "load_avg_1min": round(os.getloadavg()[0], 2)},
-        "setup": {"mission": " ".join(MISSION), "seconds": args.seconds, "presses": args.presses},
-        **results,
-    }, indent=1))
+    print(
+        json.dumps(
+            {
+                "benchmark": "e2e_latency",
+                "machine": {
+                    "python": platform.python_version(),
+                    "cpus": os.cpu_count(),
+                    "load_avg_1min": round(os.getloadavg()[0], 2),
+                },
+                "setup": {"mission": " ".join(MISSION), "seconds": args.seconds, "presses": args.presses},
+                **results,
+            },
+            indent=1,
+        )
+    )
     return 0
 
 

@@ -52,7 +52,6 @@ sys.path.insert(0, str(ROOT))
 
 from benchmarks.lib import figures  # noqa: E402
 from benchmarks.lib.figures import log  # noqa: E402
-
 from protocol.clock import WallClock  # noqa: E402
 from protocol.messages import CameraFrame, Event, RobotPose  # noqa: E402
 from protocol.service import Service  # noqa: E402
@@ -63,7 +62,6 @@ CAMERA = "tablet"
 # Robots stand in the storage room (x 6..11, y 0..4), in front of the tablet's view of its south wall.
 AREA = (6.6, 0.6, 10.4, 2.6)
 SAMPLE_PERIOD = 0.25  # s between two looks at the AR client's counters
-
 
 
 def summary(values: list[float]) -> dict[str, float]:
@@ -96,7 +94,9 @@ def run_poses(args: argparse.Namespace) -> int:
             for i, key in enumerate(keys):
                 angle = 0.5 * t + phases[i]  # 0.2 m circles at 0.1 m/s
                 x, y = centres[i] + 0.2 * np.array([math.cos(angle), math.sin(angle)])
-                service.publish(key, RobotPose(robot=f"l{i}", x=float(x), y=float(y), theta=angle + math.pi / 2, vel=0.1))
+                service.publish(
+                    key, RobotPose(robot=f"l{i}", x=float(x), y=float(y), theta=angle + math.pi / 2, vel=0.1)
+                )
             next_due += period
             time.sleep(max(0.0, next_due - time.monotonic()))
     finally:
@@ -122,8 +122,16 @@ def run_camera(args: argparse.Namespace) -> int:
     n = 0
     try:
         while not service.stopping:
-            service.publish(key, CameraFrame(camera=CAMERA, jpeg=jpegs[n % len(jpegs)], width=int(width), height=int(height),
-                                             intrinsics=[fx, fy, cx, cy]))
+            service.publish(
+                key,
+                CameraFrame(
+                    camera=CAMERA,
+                    jpeg=jpegs[n % len(jpegs)],
+                    width=int(width),
+                    height=int(height),
+                    intrinsics=[fx, fy, cx, cy],
+                ),
+            )
             n += 1
             next_due += period
             time.sleep(max(0.0, next_due - time.monotonic()))
@@ -189,15 +197,34 @@ def measure(args: argparse.Namespace) -> dict:
     try:
         procs.append(Proc(arroch("router", "--listen", endpoint), name="router"))
         procs[-1].wait_for("router ready", timeout=30)
-        ar = Proc(arroch("ar", "--namespace", namespace, "--connect", endpoint, "--clock", "wall", "--no-feedback",
-                         "--camera", CAMERA), name="ar")
+        ar = Proc(
+            arroch(
+                "ar",
+                "--namespace",
+                namespace,
+                "--connect",
+                endpoint,
+                "--clock",
+                "wall",
+                "--no-feedback",
+                "--camera",
+                CAMERA,
+            ),
+            name="ar",
+        )
         procs.append(ar)
         ar.wait_for("waiting for frames", timeout=60)
         bench.open()
         observer = Observer(bench)
         procs.append(Proc([*me, "--role", "camera", "--fps", str(args.fps)], name="camera"))
-        procs.append(Proc([*me, "--role", "poses", "--robots", str(args.robots), "--pose-rate", str(args.pose_rate)], name="poses"))
-        log(f"load: {args.robots} robots at {args.pose_rate:g} Hz, camera at {args.fps:g} frames/s; warming up {args.warmup:g} s")
+        procs.append(
+            Proc(
+                [*me, "--role", "poses", "--robots", str(args.robots), "--pose-rate", str(args.pose_rate)], name="poses"
+            )
+        )
+        log(
+            f"load: {args.robots} robots at {args.pose_rate:g} Hz, camera at {args.fps:g} frames/s; warming up {args.warmup:g} s"
+        )
         deadline = time.monotonic() + 60
         while observer.received == 0:  # the camera process renders its snapshots first
             if time.monotonic() > deadline:
@@ -212,8 +239,14 @@ def measure(args: argparse.Namespace) -> dict:
         while (elapsed := time.monotonic() - started) < args.seconds:
             s = stats_of(bench, "ar")
             if s:
-                samples.append({"t": round(elapsed, 2), "inbox_depth": s.get("inbox_depth", 0), "inbox_depth_max": s.get("inbox_depth_max", 0),
-                                "latest_waiting": s.get("latest_waiting", 0)})
+                samples.append(
+                    {
+                        "t": round(elapsed, 2),
+                        "inbox_depth": s.get("inbox_depth", 0),
+                        "inbox_depth_max": s.get("inbox_depth_max", 0),
+                        "latest_waiting": s.get("latest_waiting", 0),
+                    }
+                )
             time.sleep(SAMPLE_PERIOD)
         with observer.lock:
             observer.recording = False
@@ -233,8 +266,15 @@ def measure(args: argparse.Namespace) -> dict:
             proc.stop()
 
 
-def report(args: argparse.Namespace, observer: Observer, samples: list[dict], s: dict, sent: dict[str, int], overlays: int,
-           rss: tuple[float, float]) -> dict:
+def report(
+    args: argparse.Namespace,
+    observer: Observer,
+    samples: list[dict],
+    s: dict,
+    sent: dict[str, int],
+    overlays: int,
+    rss: tuple[float, float],
+) -> dict:
     """The JSON document: ``s`` is the AR client's final counters, ``sent`` what each generator sent."""
     frames_processed = s.get("frames", 0)
     frames_bad = s.get("bad_frames", 0)
@@ -244,18 +284,33 @@ def report(args: argparse.Namespace, observer: Observer, samples: list[dict], s:
     thirds = [[x for x in samples if k * args.seconds / 3 <= x["t"] < (k + 1) * args.seconds / 3] for k in range(3)]
     return {
         "benchmark": "load",
-        "robots": args.robots, "pose_rate_hz": args.pose_rate, "fps": args.fps, "seconds": args.seconds,
+        "robots": args.robots,
+        "pose_rate_hz": args.pose_rate,
+        "fps": args.fps,
+        "seconds": args.seconds,
         "pose_to_overlay_ms": summary(observer.pose_ages),
         "frame_to_overlay_ms": summary(observer.frame_ages),
         "overlays_per_s": round(overlays / args.seconds, 2),
         "robots_per_overlay": summary([float(n) for n in observer.robots_per_overlay]),
         "stages": {
-            "poses_to_ar": {"sent": sent["poses"], "handled": poses_handled, "superseded": poses_superseded,
-                            "lost": sent["poses"] - poses_handled - poses_superseded},
-            "frames_to_ar": {"sent": sent["camera"], "processed": frames_processed, "superseded": frames_superseded, "bad": frames_bad,
-                             "lost": sent["camera"] - frames_processed - frames_superseded - frames_bad},
-            "overlays_to_observer": {"sent": s.get("published", 0), "received": observer.received,
-                                     "lost": s.get("published", 0) - observer.received},
+            "poses_to_ar": {
+                "sent": sent["poses"],
+                "handled": poses_handled,
+                "superseded": poses_superseded,
+                "lost": sent["poses"] - poses_handled - poses_superseded,
+            },
+            "frames_to_ar": {
+                "sent": sent["camera"],
+                "processed": frames_processed,
+                "superseded": frames_superseded,
+                "bad": frames_bad,
+                "lost": sent["camera"] - frames_processed - frames_superseded - frames_bad,
+            },
+            "overlays_to_observer": {
+                "sent": s.get("published", 0),
+                "received": observer.received,
+                "lost": s.get("published", 0) - observer.received,
+            },
             "ar_inbox_full_drops": s.get("dropped_inbox_full", 0),
             "ar_bad_messages": s.get("bad_messages", 0),
         },

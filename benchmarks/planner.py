@@ -53,10 +53,21 @@ def pct(values: list[float], q: float) -> float:
 
 
 def summary(values: list[float]) -> dict:
-    return {"n": len(values), "median": round(statistics.median(values), 4), "p95": round(pct(values, 0.95), 4), "max": round(max(values), 4)} if values else {"n": 0}
+    return (
+        {
+            "n": len(values),
+            "median": round(statistics.median(values), 4),
+            "p95": round(pct(values, 0.95), 4),
+            "max": round(max(values), 4),
+        }
+        if values
+        else {"n": 0}
+    )
 
 
-def run_size(robots: int, seeds: int, replans: int, joint_limit: float, time_limit: float, first_limit: float, validate: bool) -> dict:
+def run_size(
+    robots: int, seeds: int, replans: int, joint_limit: float, time_limit: float, first_limit: float, validate: bool
+) -> dict:
     cold_times, makespans, openings, rounds = [], [], [], []
     replan_times, constraint_times, cpu_times, solves = [], [], [], []
     invalid = 0
@@ -102,13 +113,21 @@ def run_size(robots: int, seeds: int, replans: int, joint_limit: float, time_lim
             took = time.perf_counter() - t0
             if validate and validate_result(site, world, joint):
                 invalid += 1
-            joint_rows.append({
-                "seed": seed, "iidp_makespan": first.makespan, "iidp_openings": first.door_openings,
-                "joint_makespan": joint.makespan, "joint_openings": joint.door_openings, "joint_optimal": joint.optimal,
-                "joint_seconds": round(took, 2),
-                "ratio_makespan": round(first.makespan / joint.makespan, 4) if joint.makespan else None,
-                "ratio_openings": round(first.door_openings / joint.door_openings, 4) if joint.door_openings else None,
-            })
+            joint_rows.append(
+                {
+                    "seed": seed,
+                    "iidp_makespan": first.makespan,
+                    "iidp_openings": first.door_openings,
+                    "joint_makespan": joint.makespan,
+                    "joint_openings": joint.door_openings,
+                    "joint_optimal": joint.optimal,
+                    "joint_seconds": round(took, 2),
+                    "ratio_makespan": round(first.makespan / joint.makespan, 4) if joint.makespan else None,
+                    "ratio_openings": round(first.door_openings / joint.door_openings, 4)
+                    if joint.door_openings
+                    else None,
+                }
+            )
     all_replans = replan_times + constraint_times
     row = {
         "robots": robots,
@@ -149,17 +168,33 @@ def main(argv: list[str] | None = None) -> int:
     results = []
     for n in sizes:
         t0 = time.perf_counter()
-        results.append(run_size(n, args.seeds, args.replans, args.joint_limit, args.time_limit, args.first_plan_limit, not args.no_validate))
+        results.append(
+            run_size(
+                n,
+                args.seeds,
+                args.replans,
+                args.joint_limit,
+                args.time_limit,
+                args.first_plan_limit,
+                not args.no_validate,
+            )
+        )
         print(f"{n} robots done in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     floors = {}
     for row in results:
         if row["robots"] in FLOORS:
-            floors[f"median_replan_{row['robots']}_robots<= {FLOORS[row['robots']]} s"] = row["replan_seconds"]["median"] <= FLOORS[row["robots"]]
+            floors[f"median_replan_{row['robots']}_robots<= {FLOORS[row['robots']]} s"] = (
+                row["replan_seconds"]["median"] <= FLOORS[row["robots"]]
+            )
         if "ratio_makespan_max_where_joint_finished" in row:
-            floors[f"iidp/joint_makespan_{row['robots']}_robots<= {RATIO_FLOOR}"] = row["ratio_makespan_max_where_joint_finished"] <= RATIO_FLOOR
+            floors[f"iidp/joint_makespan_{row['robots']}_robots<= {RATIO_FLOOR}"] = (
+                row["ratio_makespan_max_where_joint_finished"] <= RATIO_FLOOR
+            )
     doc = {
         "benchmark": "planner",
-        "command": " ".join([Path(sys.executable).name, "benchmarks/planner.py", *(argv if argv is not None else sys.argv[1:])]),
+        "command": " ".join(
+            [Path(sys.executable).name, "benchmarks/planner.py", *(argv if argv is not None else sys.argv[1:])]
+        ),
         "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "platform": platform.platform()},
         "settings": {"objects_per_robot": 3, "replan_time_limit": args.time_limit, "joint_limit": args.joint_limit},
         "results": results,

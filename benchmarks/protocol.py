@@ -52,10 +52,10 @@ import threading
 import time
 import timeit
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
-from typing import Callable
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # run as a plain script from a checkout
@@ -88,13 +88,24 @@ def _per_call_us(fn: Callable[[], object], number: int, repeat: int) -> float:
 
 
 def sample_pose() -> RobotPose:
-    return RobotPose(robot="r0", x=3.25, y=5.5, theta=1.2, vel=0.5, omega=-0.1, src="sim-4242", seq=123456, stamp=1712.25)
+    return RobotPose(
+        robot="r0", x=3.25, y=5.5, theta=1.2, vel=0.5, omega=-0.1, src="sim-4242", seq=123456, stamp=1712.25
+    )
 
 
 def sample_intent(points: int = 200) -> Intent:
     trajectory = [[100.0 + 0.1 * i, 1.0 + 0.05 * i, 5.0 - 0.02 * i, 0.001 * i] for i in range(points)]
-    return Intent(robot="r0", plan_id=17, action_id=42, action="approach", args=["d_storage"],
-                  trajectory=trajectory, src="planner-4242", seq=99, stamp=100.0)
+    return Intent(
+        robot="r0",
+        plan_id=17,
+        action_id=42,
+        action="approach",
+        args=["d_storage"],
+        trajectory=trajectory,
+        src="planner-4242",
+        seq=99,
+        stamp=100.0,
+    )
 
 
 def bench_codec(quick: bool) -> dict:
@@ -107,8 +118,12 @@ def bench_codec(quick: bool) -> dict:
         enc = _per_call_us(lambda: encode(msg), number, repeat)
         dec = _per_call_us(lambda: decode(payload, cls), number, repeat)
         both = _per_call_us(lambda: decode(encode(msg), cls), number, repeat)
-        out[name] = {"bytes": len(payload), "encode_us": round(enc, 2), "decode_us": round(dec, 2),
-                     "encode_decode_us": round(both, 2)}
+        out[name] = {
+            "bytes": len(payload),
+            "encode_us": round(enc, 2),
+            "decode_us": round(dec, 2),
+            "encode_decode_us": round(both, 2),
+        }
         progress(f"codec {name}: {len(payload)} B, encode {enc:.1f} µs, decode {dec:.1f} µs, both {both:.1f} µs")
     return out
 
@@ -193,9 +208,23 @@ class Children:
     def start(self, *commands: tuple[list[str], str], timeout: float = 30.0) -> None:
         """Start every ``(argv, ready line)`` at once, then wait until each has printed its line."""
         env = dict(os.environ, ARROCH_ZENOH_SHM="0", ARROCH_LOG_LEVEL="WARNING", PYTHONUNBUFFERED="1")
-        started = [(argv, ready, subprocess.Popen(argv, cwd=ROOT, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                                  stderr=subprocess.STDOUT, text=True, start_new_session=True))
-                   for argv, ready in commands]
+        started = [
+            (
+                argv,
+                ready,
+                subprocess.Popen(
+                    argv,
+                    cwd=ROOT,
+                    env=env,
+                    stdin=subprocess.DEVNULL,
+                    stdout=subprocess.PIPE,
+                    stderr=subprocess.STDOUT,
+                    text=True,
+                    start_new_session=True,
+                ),
+            )
+            for argv, ready in commands
+        ]
         self.procs.extend(proc for _, _, proc in started)
         deadline = time.monotonic() + timeout
         for argv, ready, proc in started:
@@ -276,7 +305,10 @@ def one_run(args: argparse.Namespace, index: int, rounds: int) -> tuple[Run, dic
         pingers.insert(0, raw)  # closed before the session it uses
         children.start(
             ([*arroch, "ping", "serve", "--namespace", ns["protocol"], *theirs], "ping serve ready"),
-            ([*arroch, "ping", "serve", "--worker", "--namespace", ns["protocol_worker"], *worker_theirs], "ping serve ready"),
+            (
+                [*arroch, "ping", "serve", "--worker", "--namespace", ns["protocol_worker"], *worker_theirs],
+                "ping serve ready",
+            ),
             ([sys.executable, __file__, "--raw-echo", "--namespace", ns["raw"], *theirs], "raw echo ready"),
         )
         for name, pinger in (("protocol", sender), ("protocol_worker", worker_sender), ("raw", raw)):
@@ -300,8 +332,11 @@ def one_run(args: argparse.Namespace, index: int, rounds: int) -> tuple[Run, dic
                 run.samples[name].extend(batch)
                 run.batch_p50[name].append(statistics.median(batch) if batch else float("nan"))
         # Like for like on the wire: the same payload size (at a typical seq) and key lengths.
-        info = {"transport": transport, "payload_bytes": len(sender.typical_payload()),
-                "raw_payload_bytes": len(raw_payload(1000))}
+        info = {
+            "transport": transport,
+            "payload_bytes": len(sender.typical_payload()),
+            "raw_payload_bytes": len(raw_payload(1000)),
+        }
         return run, info
     finally:
         for pinger in pingers:
@@ -313,32 +348,49 @@ def bench_latency(args: argparse.Namespace) -> dict:
     rounds = max(1, args.pings // (args.batch * args.runs))
     runs: list[Run] = []
     info: dict = {}
-    progress(f"{args.runs} runs of {rounds} rounds of {args.batch} pings per variant, variants in random order each round")
+    progress(
+        f"{args.runs} runs of {rounds} rounds of {args.batch} pings per variant, variants in random order each round"
+    )
     started = time.monotonic()
     for index in range(args.runs):
         run, info = one_run(args, index, rounds)
         runs.append(run)
         figures = ", ".join(f"{name} {statistics.median(run.samples[name]):.0f}" for name in VARIANTS)
-        progress(f"  run {index + 1}/{args.runs}: p50 µs {figures}; protocol/raw paired "
-                 f"{statistics.median(run.paired('protocol')):.3f} ({time.monotonic() - started:.1f} s)")
+        progress(
+            f"  run {index + 1}/{args.runs}: p50 µs {figures}; protocol/raw paired "
+            f"{statistics.median(run.paired('protocol')):.3f} ({time.monotonic() - started:.1f} s)"
+        )
 
     sent = rounds * args.batch * args.runs
-    result: dict = {"transport": info["transport"], "endpoint_kind": "router" if args.router else "peer",
-                    "shared_memory": False, "payload_bytes": info["payload_bytes"],
-                    "raw_payload_bytes": info["raw_payload_bytes"], "pings_per_variant": sent,
-                    "batch": args.batch, "runs": args.runs, "rounds_per_run": rounds}
+    result: dict = {
+        "transport": info["transport"],
+        "endpoint_kind": "router" if args.router else "peer",
+        "shared_memory": False,
+        "payload_bytes": info["payload_bytes"],
+        "raw_payload_bytes": info["raw_payload_bytes"],
+        "pings_per_variant": sent,
+        "batch": args.batch,
+        "runs": args.runs,
+        "rounds_per_run": rounds,
+    }
     for name in VARIANTS:
         s = summarize([x for run in runs for x in run.samples[name]], sent)
         result[name] = {k: round(v, 1) if isinstance(v, float) else v for k, v in s.to_dict().items()}
         progress(f"{name:16s} p50 {s.p50_us:6.0f} µs  p99 {s.p99_us:6.0f} µs  ({s.received}/{sent})")
-    per_run: list[dict] = [{f"{name}_p50_us": round(statistics.median(run.samples[name]), 1) for name in VARIANTS} for run in runs]
+    per_run: list[dict] = [
+        {f"{name}_p50_us": round(statistics.median(run.samples[name]), 1) for name in VARIANTS} for run in runs
+    ]
     for name in ("protocol", "protocol_worker"):
         for q in ("p50", "p99"):
             result[f"{name}_over_raw_{q}"] = round(result[name][f"{q}_us"] / result["raw"][f"{q}_us"], 3)
-        result[f"{name}_over_raw_p50_paired"] = round(statistics.median([r for run in runs for r in run.paired(name)]), 3)
+        result[f"{name}_over_raw_p50_paired"] = round(
+            statistics.median([r for run in runs for r in run.paired(name)]), 3
+        )
         for figures, run in zip(per_run, runs):
             figures[f"{name}_over_raw_p50_paired"] = round(statistics.median(run.paired(name)), 3)
-        result[f"{name}_over_raw_p50_runs_median"] = round(statistics.median(f[f"{name}_over_raw_p50_paired"] for f in per_run), 3)
+        result[f"{name}_over_raw_p50_runs_median"] = round(
+            statistics.median(f[f"{name}_over_raw_p50_paired"] for f in per_run), 3
+        )
     result["per_run"] = per_run
     return result
 
@@ -348,11 +400,22 @@ def bench_latency(args: argparse.Namespace) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--pings", type=int, default=6000, help="timed round trips per variant, all runs together (default 6000)")
-    parser.add_argument("--runs", type=int, default=None, help="runs, each with fresh echo processes (default 5; 2 with --quick)")
+    parser.add_argument(
+        "--pings", type=int, default=6000, help="timed round trips per variant, all runs together (default 6000)"
+    )
+    parser.add_argument(
+        "--runs", type=int, default=None, help="runs, each with fresh echo processes (default 5; 2 with --quick)"
+    )
     parser.add_argument("--batch", type=int, default=20, help="pings per variant per round (default 20)")
-    parser.add_argument("--warmup", type=int, default=None, help="uncounted pings per variant at the start of a run (default 200; 50 with --quick)")
-    parser.add_argument("--router", action="store_true", help="go through `arroch router` (client mode) instead of peer to peer")
+    parser.add_argument(
+        "--warmup",
+        type=int,
+        default=None,
+        help="uncounted pings per variant at the start of a run (default 200; 50 with --quick)",
+    )
+    parser.add_argument(
+        "--router", action="store_true", help="go through `arroch router` (client mode) instead of peer to peer"
+    )
     parser.add_argument("--quick", action="store_true", help="fewer repetitions (for tests)")
     parser.add_argument("--check", action="store_true", help="exit 1 if a floor is missed")
     parser.add_argument("--raw-echo", action="store_true", help=argparse.SUPPRESS)
@@ -394,10 +457,15 @@ def main(argv: list[str] | None = None) -> int:
     floors["met"] = floors["ratio_met"] and floors["codec_met"]
     report = {
         "benchmark": "protocol",
-        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(), "platform": platform.platform(),
-                    "zenoh": metadata.version("eclipse-zenoh"), "msgpack": metadata.version("msgpack"),
-                    "load_average_before": [round(x, 2) for x in load_before],
-                    "load_average_after": [round(x, 2) for x in os.getloadavg()]},
+        "machine": {
+            "cpus": os.cpu_count(),
+            "python": platform.python_version(),
+            "platform": platform.platform(),
+            "zenoh": metadata.version("eclipse-zenoh"),
+            "msgpack": metadata.version("msgpack"),
+            "load_average_before": [round(x, 2) for x in load_before],
+            "load_average_after": [round(x, 2) for x in os.getloadavg()],
+        },
         "codec": codec,
         "latency": latency,
         "floors": floors,

@@ -38,8 +38,18 @@ from mcap.reader import make_reader
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-MISSION = ["--services", "planner,restrictor,sim,ar", "--camera", "tablet", "--seed", "1", "--progress", "off",
-           "--log-level", "WARNING"]
+MISSION = [
+    "--services",
+    "planner,restrictor,sim,ar",
+    "--camera",
+    "tablet",
+    "--seed",
+    "1",
+    "--progress",
+    "off",
+    "--log-level",
+    "WARNING",
+]
 
 
 def up(run_base: Path, *args: str, timeout: float) -> Path:
@@ -60,8 +70,13 @@ def bytes_per_kind(path: Path) -> tuple[dict[str, int], dict[str, int], float]:
     with open(path, "rb") as f:
         for _schema, channel, message in make_reader(f).iter_messages():
             topic = channel.topic
-            kind = "camera" if "/camera/" in topic or topic.startswith("/arroch/ar/") else \
-                "poses" if topic == "/tf" or topic.endswith("/pose") else "other"
+            kind = (
+                "camera"
+                if "/camera/" in topic or topic.startswith("/arroch/ar/")
+                else "poses"
+                if topic == "/tf" or topic.endswith("/pose")
+                else "other"
+            )
             sizes[kind] = sizes.get(kind, 0) + len(message.data)
             counts[kind] = counts.get(kind, 0) + 1
             first = message.log_time if first is None else min(first, message.log_time)
@@ -88,7 +103,7 @@ def rerecord(recording: Path, image_scale: float = 1.0, passes: int = 5) -> tupl
             start = time.perf_counter()
             profile.start(0.0)
             for rec in recorded:
-                profile.handle(rec.message, f"{keys.prefix}/{rec.topic[len('/arroch/'):]}")
+                profile.handle(rec.message, f"{keys.prefix}/{rec.topic[len('/arroch/') :]}")
             profile.close()
             times.append(time.perf_counter() - start)
             size = path.stat().st_size
@@ -97,14 +112,23 @@ def rerecord(recording: Path, image_scale: float = 1.0, passes: int = 5) -> tupl
 
 def processing(recording: Path, wall: float) -> dict:
     cpu, count, _size = rerecord(recording)
-    return {"messages": count, "seconds": round(cpu, 4), "us_per_message": round(cpu / count * 1e6, 1),
-            "share_of_run_wall": round(cpu / wall, 4)}
+    return {
+        "messages": count,
+        "seconds": round(cpu, 4),
+        "us_per_message": round(cpu / count * 1e6, 1),
+        "share_of_run_wall": round(cpu / wall, 4),
+    }
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--pairs", type=int, default=3, help="interleaved pairs of missions (default 3)")
-    parser.add_argument("--realtime-seconds", type=float, default=60.0, help="wall seconds of the real-time run (default 60; 0 skips it)")
+    parser.add_argument(
+        "--realtime-seconds",
+        type=float,
+        default=60.0,
+        help="wall seconds of the real-time run (default 60; 0 skips it)",
+    )
     args = parser.parse_args()
     out: dict = {"benchmark": "recording"}
     with tempfile.TemporaryDirectory(prefix="arroch-bench-rec-") as tmp:
@@ -129,37 +153,58 @@ def main() -> int:
                 if variant == "recorded":
                     recording = run / "run.mcap"
             ratios.append(pair["recorded"] / pair["not_recorded"])
-            print(f"pair {k}: recorded {pair['recorded']:.1f} s, not recorded {pair['not_recorded']:.1f} s, "
-                  f"ratio {ratios[-1]:.3f}", file=sys.stderr, flush=True)
+            print(
+                f"pair {k}: recorded {pair['recorded']:.1f} s, not recorded {pair['not_recorded']:.1f} s, "
+                f"ratio {ratios[-1]:.3f}",
+                file=sys.stderr,
+                flush=True,
+            )
         out["lockstep_mission"] = {
-            "pairs": args.pairs, "wall_s_recorded": walls["recorded"], "wall_s_not_recorded": walls["not_recorded"],
-            "ratios": [round(r, 3) for r in ratios], "ratio_median": round(statistics.median(ratios), 3),
+            "pairs": args.pairs,
+            "wall_s_recorded": walls["recorded"],
+            "wall_s_not_recorded": walls["not_recorded"],
+            "ratios": [round(r, 3) for r in ratios],
+            "ratio_median": round(statistics.median(ratios), 3),
         }
         assert recording is not None
         sizes, counts, span = bytes_per_kind(recording)
         with open(recording, "rb") as f:
             summary = make_reader(f).get_summary()
-        out["recording"] = {"bytes": recording.stat().st_size, "messages": sum(counts.values()),
-                            "channels": len(summary.channels), "site_seconds": round(span, 1),
-                            "payload_bytes_by_kind": sizes, "messages_by_kind": counts}
+        out["recording"] = {
+            "bytes": recording.stat().st_size,
+            "messages": sum(counts.values()),
+            "channels": len(summary.channels),
+            "site_seconds": round(span, 1),
+            "payload_bytes_by_kind": sizes,
+            "messages_by_kind": counts,
+        }
         out["processing"] = processing(recording, float(statistics.median(walls["recorded"])))
         if args.realtime_seconds > 0:
             print(f"real-time mission for {args.realtime_seconds:g} s", file=sys.stderr, flush=True)
-            run = up(base / "realtime", "--mode", "realtime", "--timeout", f"{args.realtime_seconds:g}",
-                     timeout=args.realtime_seconds)
+            run = up(
+                base / "realtime",
+                "--mode",
+                "realtime",
+                "--timeout",
+                f"{args.realtime_seconds:g}",
+                timeout=args.realtime_seconds,
+            )
             path = run / "run.mcap"
             sizes, counts, span = bytes_per_kind(path)
             size = path.stat().st_size
             per_s = size / span if span > 0 else 0.0
             out["realtime_30min"] = {
-                "measured_site_seconds": round(span, 1), "file_bytes": size, "bytes_per_second": round(per_s),
+                "measured_site_seconds": round(span, 1),
+                "file_bytes": size,
+                "bytes_per_second": round(per_s),
                 "payload_bytes_per_second_by_kind": {k: round(v / span) for k, v in sizes.items()},
                 "messages_per_second_by_kind": {k: round(v / span, 1) for k, v in counts.items()},
                 "estimate_30min_mb": round(per_s * 1800 / 1e6, 1),
                 # Frames kept at half size (arroch record --image-scale 0.5): the file shrinks as the same
                 # messages recorded again at 0.5 do against recorded again at 1.
                 "estimate_30min_mb_image_scale_0.5": round(
-                    per_s * 1800 / 1e6 * rerecord(path, 0.5, passes=1)[2] / rerecord(path, 1.0, passes=1)[2], 1),
+                    per_s * 1800 / 1e6 * rerecord(path, 0.5, passes=1)[2] / rerecord(path, 1.0, passes=1)[2], 1
+                ),
                 "camera": "640x480 JPEG at 2 frames per wall second (the sim's defaults)",
             }
     print(json.dumps(out, indent=2))

@@ -49,17 +49,28 @@ def codec_figures() -> dict:
     messages = {
         "Twist": (ros.TWIST, ros.twist(0.4, -0.2)),
         "Odometry": (ros.ODOMETRY, ros.odometry(1.0, "odom", "base_link", 1, 2, 0.3, 0.4, 0.1)),
-        "TFMessage_1": (ros.TF_MESSAGE, ros.t(ros.TF_MESSAGE)(transforms=[ros.transform_stamped(1.0, "map", "r0/base_link", 1, 2, 0.3)])),
-        "Path_200": (ros.PATH, ros.t(ros.PATH)(header=ros.header(1.0, "map"),
-                                                poses=[PoseStamped(header=ros.header(i, "map"), pose=ros.pose(i * 0.1, 1, 0)) for i in range(200)])),
+        "TFMessage_1": (
+            ros.TF_MESSAGE,
+            ros.t(ros.TF_MESSAGE)(transforms=[ros.transform_stamped(1.0, "map", "r0/base_link", 1, 2, 0.3)]),
+        ),
+        "Path_200": (
+            ros.PATH,
+            ros.t(ros.PATH)(
+                header=ros.header(1.0, "map"),
+                poses=[PoseStamped(header=ros.header(i, "map"), pose=ros.pose(i * 0.1, 1, 0)) for i in range(200)],
+            ),
+        ),
         "MarkerArray_office": (ros.MARKER_ARRAY, site_markers(site, SiteState(), 1.0)),
     }
     out = {}
     for name, (typename, msg) in messages.items():
         payload = ros.serialize(msg, typename)
         n = 20 if "Marker" in name or "Path" in name else 200
-        out[name] = {"bytes": len(payload), "encode_us": round(micro(lambda: ros.serialize(msg, typename), n), 1),
-                     "decode_us": round(micro(lambda: ros.deserialize(payload, typename), n), 1)}
+        out[name] = {
+            "bytes": len(payload),
+            "encode_us": round(micro(lambda: ros.serialize(msg, typename), n), 1),
+            "decode_us": round(micro(lambda: ros.deserialize(payload, typename), n), 1),
+        }
     return out
 
 
@@ -87,7 +98,9 @@ def main() -> int:
         client = TestClient(namespace, endpoint)
         client.open()
         base = FakeBase(client, "r0", start, Ros2Config())
-        driver = Proc(arroch("robot", "--ros2", "--robot", "r0", "--connect", endpoint, "--namespace", namespace), name="robot")
+        driver = Proc(
+            arroch("robot", "--ros2", "--robot", "r0", "--connect", endpoint, "--namespace", namespace), name="robot"
+        )
         procs.append(driver)
         driver.wait_for("robot robot-r0-", timeout=20)
         base.first_zero_after(0.0, timeout=10)
@@ -97,8 +110,14 @@ def main() -> int:
             for kind in ("stale", "refused"):
                 action += 1
                 base.odometry_on = True
-                client.publish(client.keys.robot_command("r0"), straight_command("r0", base.map_pose(), 6.0, action_id=action))
-                moving = base.wait_moving() if action == 1 else base._wait(lambda tw: not tw.zero, base.now(), 15, "motion").site_time
+                client.publish(
+                    client.keys.robot_command("r0"), straight_command("r0", base.map_pose(), 6.0, action_id=action)
+                )
+                moving = (
+                    base.wait_moving()
+                    if action == 1
+                    else base._wait(lambda tw: not tw.zero, base.now(), 15, "motion").site_time
+                )
                 time.sleep(1.0)
                 with base._lock:
                     twists = [tw.site_time for tw in base.twists if tw.site_time > moving]
@@ -113,16 +132,25 @@ def main() -> int:
                     base.odometry_on = False
                 else:
                     action += 1
-                    client.publish(client.keys.robot_command("r0"), straight_command("r0", base.map_pose(), 6.0, action_id=action, offset=3.0))
+                    client.publish(
+                        client.keys.robot_command("r0"),
+                        straight_command("r0", base.map_pose(), 6.0, action_id=action, offset=3.0),
+                    )
                 stop = base.first_zero_after(t)
                 (stale if kind == "stale" else refused).append(stop.site_time - t)
                 base.odometry_on = True
                 time.sleep(0.3)
             print(f"round {i + 1}/{args.repeats}", file=sys.stderr)
-        result["control"] = {"odometry_to_twist_ms_p50": round(pct(answers, 0.5) * 1e3, 2), "p90": round(pct(answers, 0.9) * 1e3, 2),
-                             "p99": round(pct(answers, 0.99) * 1e3, 2), "samples": len(answers)}
-        result["stops"] = {name: {"median_s": round(statistics.median(v), 3), "max_s": round(max(v), 3), "runs": len(v)}
-                           for name, v in (("stale_pose", stale), ("refused_command", refused))}
+        result["control"] = {
+            "odometry_to_twist_ms_p50": round(pct(answers, 0.5) * 1e3, 2),
+            "p90": round(pct(answers, 0.9) * 1e3, 2),
+            "p99": round(pct(answers, 0.99) * 1e3, 2),
+            "samples": len(answers),
+        }
+        result["stops"] = {
+            name: {"median_s": round(statistics.median(v), 3), "max_s": round(max(v), 3), "runs": len(v)}
+            for name, v in (("stale_pose", stale), ("refused_command", refused))
+        }
     finally:
         if base is not None:
             base.close()

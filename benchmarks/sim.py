@@ -44,7 +44,12 @@ def engine_only(text: str, seed: int) -> dict:
     started = time.perf_counter()
     run_mission(engine)
     wall = time.perf_counter() - started
-    return {"sim_time": engine.time, "wall_time": round(wall, 3), "realtime_factor": round(engine.time / wall, 1), "completed": engine.completed}
+    return {
+        "sim_time": engine.time,
+        "wall_time": round(wall, 3),
+        "realtime_factor": round(engine.time / wall, 1),
+        "completed": engine.completed,
+    }
 
 
 def lockstep(text: str, seed: int, router: str, workdir: Path, tag: str) -> dict:
@@ -56,8 +61,27 @@ def lockstep(text: str, seed: int, router: str, workdir: Path, tag: str) -> dict
     planner.open()
     thread = threading.Thread(target=planner.run, daemon=True)
     thread.start()
-    sim = Proc(arroch("sim", "--site", str(site_file), "--connect", router, "--namespace", tag, "--mode", "lockstep",
-                      "--seed", str(seed), "--until-done", "--metrics-out", str(metrics), "--log-level", "WARNING"), name="sim")
+    sim = Proc(
+        arroch(
+            "sim",
+            "--site",
+            str(site_file),
+            "--connect",
+            router,
+            "--namespace",
+            tag,
+            "--mode",
+            "lockstep",
+            "--seed",
+            str(seed),
+            "--until-done",
+            "--metrics-out",
+            str(metrics),
+            "--log-level",
+            "WARNING",
+        ),
+        name="sim",
+    )
     try:
         code = sim.popen.wait(600)
     finally:

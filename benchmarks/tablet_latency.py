@@ -39,14 +39,12 @@ sys.path.insert(0, str(ROOT))
 
 from benchmarks.lib import figures  # noqa: E402
 from benchmarks.lib.figures import log  # noqa: E402
-
 from protocol.messages import Intent, RobotPose  # noqa: E402
 from protocol.service import Service  # noqa: E402
 from protocol.transport import ZenohOptions, free_tcp_port  # noqa: E402
 from services.ar_client.web.headless import Browser, chromium_path  # noqa: E402
 from tests.procs import Proc, arroch  # noqa: E402
 from tests.tablet.helpers import ROBOT_XY, fake_camera, snapshots, start_tablet  # noqa: E402
-
 
 
 def summary(values: list[float]) -> dict[str, float]:
@@ -73,10 +71,15 @@ def measure(width: int, height: int, seconds: float, warmup: float, workdir: Pat
         x, y = ROBOT_XY
         now = time.time()
         client.publish(client.keys.robot_pose("r0"), RobotPose(robot="r0", x=x, y=y, theta=0.0))
-        client.publish(client.keys.intent("r0"), Intent(robot="r0", trajectory=[[now + 2.0 * k, x + 0.5 * k, y, 0.0] for k in range(60)]))
+        client.publish(
+            client.keys.intent("r0"),
+            Intent(robot="r0", trajectory=[[now + 2.0 * k, x + 0.5 * k, y, 0.0] for k in range(60)]),
+        )
         with Browser(fake_camera=video, window=(1280, 800)) as page:
             page.navigate(server.url)
-            page.wait_for("window.arroch && window.arroch.state().overlay && window.arroch.state().overlay.ok", timeout=60)
+            page.wait_for(
+                "window.arroch && window.arroch.state().overlay && window.arroch.state().overlay.ok", timeout=60
+            )
             time.sleep(warmup)
             before = page.evaluate("window.arroch.stats()")
             started = time.monotonic()
@@ -111,7 +114,11 @@ def main() -> int:
     parser.add_argument("--sizes", default="640x480,1280x720", help="camera sizes (default 640x480,1280x720)")
     args = parser.parse_args()
     if chromium_path() is None:
-        print(json.dumps({"benchmark": "tablet_latency", "skipped": "no Chromium on this machine (apt-get install chromium)"}))
+        print(
+            json.dumps(
+                {"benchmark": "tablet_latency", "skipped": "no Chromium on this machine (apt-get install chromium)"}
+            )
+        )
         return 0
     results = []
     for size in args.sizes.split(","):
@@ -120,13 +127,18 @@ def main() -> int:
         with tempfile.TemporaryDirectory(prefix="arroch-tablet-bench-") as tmp:
             results.append(measure(w, h, args.seconds, args.warmup, Path(tmp)))
         log(json.dumps(results[-1]))
-    print(json.dumps({
-        "benchmark": "tablet_latency",
-        "what": "page: camera frame captured/sent -> its overlay drawn, localhost, performance.now() in the page",
-        "machine": {"python": platform.python_version(), "cpus": __import__("os").cpu_count()},
-        "chromium": chromium_path(),
-        "results": results,
-    }, indent=2))
+    print(
+        json.dumps(
+            {
+                "benchmark": "tablet_latency",
+                "what": "page: camera frame captured/sent -> its overlay drawn, localhost, performance.now() in the page",
+                "machine": {"python": platform.python_version(), "cpus": __import__("os").cpu_count()},
+                "chromium": chromium_path(),
+                "results": results,
+            },
+            indent=2,
+        )
+    )
     return 0
 
 

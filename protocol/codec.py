@@ -21,14 +21,24 @@ import math
 import re
 import types
 import typing
-from typing import Any, Callable, Mapping, TypeVar
+from collections.abc import Callable, Mapping
+from typing import Any, TypeVar
 
 import msgpack
 
 from .errors import ProtocolError
 from .messages import BY_TYPE, Message
-from .schema import (ID_FIRST, ID_REST, MAX_STR, from_wire_function, plan_for, record_source, to_wire_function,
-                     whole_record_source, wire_map_source)
+from .schema import (
+    ID_FIRST,
+    ID_REST,
+    MAX_STR,
+    from_wire_function,
+    plan_for,
+    record_source,
+    to_wire_function,
+    whole_record_source,
+    wire_map_source,
+)
 
 M = TypeVar("M", bound=Message)
 
@@ -134,8 +144,14 @@ def _generate_decoder(cls: type[M], *, build: bool) -> Callable[[Any], Any]:
     whole = whole_record_source(cls, lead, build=build)
     if whole is not None:
         consts.update(whole[1])
-    consts.update(unpackb=_unpackb, checked=_decode_checked, ProtocolError=ProtocolError,
-                  TYPE=cls.TYPE, VERSION=cls.VERSION, LIMIT=limit)
+    consts.update(
+        unpackb=_unpackb,
+        checked=_decode_checked,
+        ProtocolError=ProtocolError,
+        TYPE=cls.TYPE,
+        VERSION=cls.VERSION,
+        LIMIT=limit,
+    )
     # msgpack's own limits are the payload's length (half of it for maps), which no valid payload
     # exceeds and which the size check above keeps within the class's: only the limits those do
     # not imply are passed (each keyword is work on every call), and ext types are refused.
@@ -153,8 +169,11 @@ def _generate_decoder(cls: type[M], *, build: bool) -> Callable[[Any], Any]:
         consts["CANONICAL"] = canonical.fullmatch
     source = [
         "def decode_msg(payload):",
-        *(["    if type(payload) is bytes and CANONICAL(payload) is not None:",
-           "        return None"] if canonical is not None else []),
+        *(
+            ["    if type(payload) is bytes and CANONICAL(payload) is not None:", "        return None"]
+            if canonical is not None
+            else []
+        ),
         "    if type(payload) is not bytes or not 0 < len(payload) <= LIMIT:",
         "        return checked(payload, cls)",
         "    try:",
@@ -187,9 +206,14 @@ _MAX_FIXSTR = 31  # msgpack's one-byte-header strings: 0xa0 + length in bytes
 _INT_FORMATS = (
     (b"[\\x00-\\x7f]", 0, 0, 127),  # positive fixint
     (b"[\\xe0-\\xff]", 0, -32, -1),  # negative fixint
-    (b"\\xcc", 1, 0, 2**8 - 1), (b"\\xcd", 2, 0, 2**16 - 1), (b"\\xce", 4, 0, 2**32 - 1),
-    (b"\\xcf[\\x00-\\x7f]", 7, 0, 2**63 - 1), (b"\\xcf[\\x80-\\xff]", 7, 2**63, 2**64 - 1),  # uint 64, in halves
-    (b"\\xd0", 1, -(2**7), 2**7 - 1), (b"\\xd1", 2, -(2**15), 2**15 - 1), (b"\\xd2", 4, -(2**31), 2**31 - 1),
+    (b"\\xcc", 1, 0, 2**8 - 1),
+    (b"\\xcd", 2, 0, 2**16 - 1),
+    (b"\\xce", 4, 0, 2**32 - 1),
+    (b"\\xcf[\\x00-\\x7f]", 7, 0, 2**63 - 1),
+    (b"\\xcf[\\x80-\\xff]", 7, 2**63, 2**64 - 1),  # uint 64, in halves
+    (b"\\xd0", 1, -(2**7), 2**7 - 1),
+    (b"\\xd1", 2, -(2**15), 2**15 - 1),
+    (b"\\xd2", 4, -(2**31), 2**31 - 1),
     (b"\\xd3", 8, -(2**63), 2**63 - 1),
 )
 
@@ -236,8 +260,11 @@ def _value_pattern(hint: Any, meta: Mapping[str, Any], check: Callable[[Any, str
         return b"[\\xc2\\xc3]", 1
     if hint is int:
         lo, hi = meta.get("lo"), meta.get("hi")
-        formats = [(lead + (_ANY + b"{%d}" % size if size else b""), 1 + size) for lead, size, least, most in _INT_FORMATS
-                   if (lo is None or lo <= least) and (hi is None or most <= hi)]
+        formats = [
+            (lead + (_ANY + b"{%d}" % size if size else b""), 1 + size)
+            for lead, size, least, most in _INT_FORMATS
+            if (lo is None or lo <= least) and (hi is None or most <= hi)
+        ]
         return (b"(?:" + b"|".join(f for f, _ in formats) + b")", max(n for _, n in formats)) if formats else None
     if hint is float:
         pattern = _float_pattern(meta.get("lo"), meta.get("hi"))
@@ -250,8 +277,10 @@ def _value_pattern(hint: Any, meta: Mapping[str, Any], check: Callable[[Any, str
         longest = min(_MAX_FIXSTR, meta.get("max_len") or MAX_STR)
         first, rest = (ID_FIRST.encode(), ID_REST.encode()) if meta.get("ident") else (_ASCII, _ASCII)
         # The header byte says how many bytes follow; "" is valid whether an identifier is asked or not.
-        lengths = [b"\\xa0"] + [b"\\x%02x" % (0xA0 + n) + first + (rest + b"{%d}" % (n - 1) if n > 1 else b"")
-                               for n in range(1, longest + 1)]
+        lengths = [b"\\xa0"] + [
+            b"\\x%02x" % (0xA0 + n) + first + (rest + b"{%d}" % (n - 1) if n > 1 else b"")
+            for n in range(1, longest + 1)
+        ]
         return b"(?:" + b"|".join(lengths) + b")", 1 + longest
     return None
 
@@ -271,8 +300,11 @@ def _float_pattern(lo: float | None, hi: float | None) -> bytes | None:
     None when a bound excludes 0 (a lower bound above 0, say), which exponents cannot express."""
     if (lo is not None and lo > 0) or (hi is not None and hi < 0):
         return None
-    sides = [(sign, _max_exponent(bound)) for sign, bound in ((0x00, hi), (0x80, None if lo is None else -lo))
-             if bound is None or bound > 0]
+    sides = [
+        (sign, _max_exponent(bound))
+        for sign, bound in ((0x00, hi), (0x80, None if lo is None else -lo))
+        if bound is None or bound > 0
+    ]
     alternatives = []
     for sign, top in sides:
         if top < 0:

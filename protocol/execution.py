@@ -48,7 +48,9 @@ def command_problem(site: Site, x: float, y: float, cmd: RobotCommand, start_tol
     return ""
 
 
-def dwell_problem(site: Site, x: float, y: float, cmd: RobotCommand, object_xy: tuple[float, float], reach: float = REACH) -> str:
+def dwell_problem(
+    site: Site, x: float, y: float, cmd: RobotCommand, object_xy: tuple[float, float], reach: float = REACH
+) -> str:
     """Why the ``load``/``unload`` ``cmd``, its drive over at (x, y), cannot dwell; ``""`` if it can.
     ``object_xy``: where the object is (for a load)."""
     oid = cmd.args[0]

@@ -35,7 +35,7 @@ class CameraPose:
         return rvec.reshape(3), self.t_cw.reshape(3)
 
     @staticmethod
-    def from_rvec_tvec(rvec: np.ndarray, tvec: np.ndarray) -> "CameraPose":
+    def from_rvec_tvec(rvec: np.ndarray, tvec: np.ndarray) -> CameraPose:
         R_cw, _ = cv2.Rodrigues(np.asarray(rvec, dtype=np.float64).reshape(3, 1))
         t = np.asarray(tvec, dtype=np.float64).reshape(3)
         return CameraPose(R_wc=R_cw.T, position=-R_cw.T @ t)
@@ -44,7 +44,7 @@ class CameraPose:
         return quat_from_matrix(self.R_wc)
 
     @staticmethod
-    def from_position_quaternion(position, quaternion) -> "CameraPose":  # noqa: ANN001
+    def from_position_quaternion(position, quaternion) -> CameraPose:  # noqa: ANN001
         return CameraPose(R_wc=matrix_from_quat(quaternion), position=np.asarray(position, dtype=np.float64).reshape(3))
 
     def to_camera(self, points_world: np.ndarray) -> np.ndarray:

@@ -228,7 +228,9 @@ class CameraFrame(Message):
     width: int = spec(lo=1, hi=16384)
     height: int = spec(lo=1, hi=16384)
     intrinsics: list[float] = spec(max_len=4, lengths=(4,), lo=-1e6, hi=1e6)  # fx, fy, cx, cy
-    distortion: list[float] = spec(factory=lambda: [0.0] * 5, max_len=5, lengths=(5,), lo=-1e6, hi=1e6)  # k1 k2 p1 p2 k3
+    distortion: list[float] = spec(
+        factory=lambda: [0.0] * 5, max_len=5, lengths=(5,), lo=-1e6, hi=1e6
+    )  # k1 k2 p1 p2 k3
     # The device's gravity at capture in the camera frame (OpenCV axes, pointing down, m/s²), as its
     # accelerometer measured it; empty when unknown. Optional: frames without it decode as before.
     gravity: list[float] = spec(factory=list, max_len=3, lengths=(0, 3), lo=-1000.0, hi=1000.0)

@@ -9,7 +9,7 @@ bright enough to stand out against grey walls and floors.
 from __future__ import annotations
 
 import colorsys
-from typing import Iterable
+from collections.abc import Iterable
 
 #: Hue of robot 0, and the step between consecutive robots (golden-ratio conjugate).
 FIRST_HUE = 0.08

@@ -22,8 +22,8 @@ import math
 import queue
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Sequence
 
 from .clock import make_clock
 from .codec import encode
@@ -194,7 +194,9 @@ class PingSender(Service):
             pad -= 1
         return b"\0" * pad
 
-    def run_pings(self, count: int, rate: float, *, timeout: float = 1.0, warmup: int = 10, pad: bytes | None = None) -> list[float]:
+    def run_pings(
+        self, count: int, rate: float, *, timeout: float = 1.0, warmup: int = 10, pad: bytes | None = None
+    ) -> list[float]:
         """``count`` timed round trips at most ``rate`` per second (0: back to back); their µs."""
         for n in range(warmup):
             if self.stopping:
@@ -251,44 +253,68 @@ def run_send(args: argparse.Namespace) -> int:
         if not sender.wait_for_server(args.wait):
             if sender.stopping:
                 return 0
-            log.error("no ping server answered on %s within %.0f s (is `arroch ping serve` running in namespace %s?)",
-                      sender.keys.ping_reply(), args.wait, sender.keys.site)
+            log.error(
+                "no ping server answered on %s within %.0f s (is `arroch ping serve` running in namespace %s?)",
+                sender.keys.ping_reply(),
+                args.wait,
+                sender.keys.site,
+            )
             return 1
         pad = sender.padding_for(args.payload_bytes) if args.payload_bytes else None
         payload_len = len(sender.typical_payload(pad))
         samples = sender.run_pings(args.count, args.rate, timeout=args.timeout, warmup=args.warmup, pad=pad)
         summary = summarize(samples, sender.sent)
-        summary.extra = {"payload_bytes": payload_len, "rate_hz": args.rate, "namespace": sender.keys.site,
-                         "interrupted": sender.stopping}
+        summary.extra = {
+            "payload_bytes": payload_len,
+            "rate_hz": args.rate,
+            "namespace": sender.keys.site,
+            "interrupted": sender.stopping,
+        }
     finally:
         sender.close()
     if args.json:
         print(json.dumps(summary.to_dict()))
     else:
-        print(f"ping {summary.extra['namespace']}: {summary.received}/{summary.sent} echoes of a {payload_len}-byte RobotPose; "
-              f"round trip p50 {summary.p50_us:.0f} µs, p90 {summary.p90_us:.0f} µs, p99 {summary.p99_us:.0f} µs "
-              f"(min {summary.min_us:.0f}, max {summary.max_us:.0f})")
+        print(
+            f"ping {summary.extra['namespace']}: {summary.received}/{summary.sent} echoes of a {payload_len}-byte RobotPose; "
+            f"round trip p50 {summary.p50_us:.0f} µs, p90 {summary.p90_us:.0f} µs, p99 {summary.p99_us:.0f} µs "
+            f"(min {summary.min_us:.0f}, max {summary.max_us:.0f})"
+        )
     sys.stdout.flush()
     return 0
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser("ping", help="RobotPose round trips through the protocol layer (serve | send)",
-                            description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = sub.add_parser(
+        "ping",
+        help="RobotPose round trips through the protocol layer (serve | send)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     actions = parser.add_subparsers(dest="ping_command", metavar="ACTION", required=True)
 
     serve = actions.add_parser("serve", help="echo every robot/*/pose onto ping/reply until SIGINT/SIGTERM")
     add_common_arguments(serve)
-    serve.add_argument("--worker", action="store_true",
-                       help="echo on the service's worker thread instead of inline on Zenoh's thread (slower; for measuring)")
+    serve.add_argument(
+        "--worker",
+        action="store_true",
+        help="echo on the service's worker thread instead of inline on Zenoh's thread (slower; for measuring)",
+    )
     serve.set_defaults(func=run_serve)
 
     send = actions.add_parser("send", help="send RobotPoses, time their echoes, print p50/p90/p99")
     add_common_arguments(send)
     send.add_argument("--count", type=_positive_int, default=100, help="timed pings (default 100)")
-    send.add_argument("--rate", type=float, default=100.0, help="pings per second at most; 0 = back to back (default 100)")
-    send.add_argument("--payload-bytes", type=int, default=0, metavar="N",
-                      help="pad each ping with a field receivers ignore, to N bytes on the wire (an inline server's echoes come back padded too)")
+    send.add_argument(
+        "--rate", type=float, default=100.0, help="pings per second at most; 0 = back to back (default 100)"
+    )
+    send.add_argument(
+        "--payload-bytes",
+        type=int,
+        default=0,
+        metavar="N",
+        help="pad each ping with a field receivers ignore, to N bytes on the wire (an inline server's echoes come back padded too)",
+    )
     send.add_argument("--robot", default="ping", help="robot id in the pose key robot/<id>/pose (default ping)")
     send.add_argument("--timeout", type=float, default=1.0, help="seconds before a ping counts as lost (default 1)")
     send.add_argument("--warmup", type=int, default=10, help="uncounted pings first (default 10)")

@@ -94,7 +94,9 @@ class Path:
         return best_s, best_d
 
 
-def path_crossings(path: Path, gaps: dict[str, tuple[tuple[float, float], tuple[float, float]]]) -> list[tuple[float, str]]:
+def path_crossings(
+    path: Path, gaps: dict[str, tuple[tuple[float, float], tuple[float, float]]]
+) -> list[tuple[float, str]]:
     """Where ``path`` first crosses each gap (``{id: (end a, end b)}``, e.g. door openings), as
     ``(arc length, id)`` in path order. A robot following the path meets the doors in this order."""
     found: list[tuple[float, str]] = []

@@ -49,8 +49,12 @@ def run_router(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser("router", help="run a Zenoh router (zenoh-python in router mode)",
-                            description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = sub.add_parser(
+        "router",
+        help="run a Zenoh router (zenoh-python in router mode)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     add_zenoh_arguments(parser)
     parser.add_argument("--log-level", default=None, choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     parser.set_defaults(func=run_router)

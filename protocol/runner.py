@@ -6,7 +6,7 @@ import argparse
 import logging
 import os
 import sys
-from typing import Callable
+from collections.abc import Callable
 
 from .transport import add_zenoh_arguments, options_from
 
@@ -24,15 +24,33 @@ def setup_logging(level: str | None = None) -> None:
 def add_common_arguments(parser: argparse.ArgumentParser, *, site: bool = True, zenoh: bool = True) -> None:
     """--site, --namespace, --clock, --log-level and the Zenoh options."""
     if site:
-        parser.add_argument("--site", "--config", dest="site", metavar="FILE", help="site file (TOML); default: the packaged 'office' site")
-        parser.add_argument("--namespace", metavar="NAME", help="key namespace arroch/<NAME>/...; default: the site's name")
-        parser.add_argument("--clock", choices=("sim", "wall"), default="sim", help="site clock source (default sim: the simulator's clock messages)")
-    parser.add_argument("--log-level", default=None, choices=("DEBUG", "INFO", "WARNING", "ERROR"), help="log level (env ARROCH_LOG_LEVEL, default INFO)")
+        parser.add_argument(
+            "--site",
+            "--config",
+            dest="site",
+            metavar="FILE",
+            help="site file (TOML); default: the packaged 'office' site",
+        )
+        parser.add_argument(
+            "--namespace", metavar="NAME", help="key namespace arroch/<NAME>/...; default: the site's name"
+        )
+        parser.add_argument(
+            "--clock",
+            choices=("sim", "wall"),
+            default="sim",
+            help="site clock source (default sim: the simulator's clock messages)",
+        )
+    parser.add_argument(
+        "--log-level",
+        default=None,
+        choices=("DEBUG", "INFO", "WARNING", "ERROR"),
+        help="log level (env ARROCH_LOG_LEVEL, default INFO)",
+    )
     if zenoh:
         add_zenoh_arguments(parser)
 
 
-def run_service(build: Callable[[], "object"]) -> int:
+def run_service(build: Callable[[], object]) -> int:
     """Build a service, open it, run until SIGINT/SIGTERM, close. Returns the exit code.
 
     ``build`` may raise ``ValueError``/``FileNotFoundError`` for bad configuration: that is

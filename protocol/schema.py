@@ -26,7 +26,8 @@ import re
 import sys
 import types
 import typing
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -73,8 +74,15 @@ def spec(
     ``lengths`` lists the lengths a list may have (``(3,)`` for a position, ``(0, 4)`` for an
     optional quaternion).
     """
-    meta = {"lo": lo, "hi": hi, "max_len": max_len, "choices": choices, "ident": ident, "row_len": row_len,
-            "lengths": lengths}
+    meta = {
+        "lo": lo,
+        "hi": hi,
+        "max_len": max_len,
+        "choices": choices,
+        "ident": ident,
+        "row_len": row_len,
+        "lengths": lengths,
+    }
     if factory is not None:
         return dataclasses.field(default_factory=factory, metadata=meta)
     return dataclasses.field(default=default, metadata=meta)
@@ -183,11 +191,7 @@ def _float_rows_checker(max_len: int, row_len: int, lo: float | None, hi: float 
             if not value:
                 return value
             arr = np.fromiter(itertools.chain.from_iterable(value), dtype=np.float64, count=len(value) * row_len)
-            if (
-                np.isfinite(arr).all()
-                and (lo is None or arr.min() >= lo)
-                and (hi is None or arr.max() <= hi)
-            ):
+            if np.isfinite(arr).all() and (lo is None or arr.min() >= lo) and (hi is None or arr.max() <= hi):
                 return value
         return check_each(value, path)
 
@@ -310,7 +314,9 @@ def checker_for(hint: Any, meta: typing.Mapping[str, Any]) -> Checker:
         return _float_rows_checker(max_len or MAX_LIST, meta["row_len"], meta.get("lo"), meta.get("hi"))
     if origin is list:
         item_meta = {k: meta.get(k) for k in ("lo", "hi", "choices", "ident")}
-        return _list_checker(checker_for(args[0], item_meta), max_len or MAX_LIST, meta.get("row_len"), meta.get("lengths"))
+        return _list_checker(
+            checker_for(args[0], item_meta), max_len or MAX_LIST, meta.get("row_len"), meta.get("lengths")
+        )
     if origin is dict:
         if args[0] is not str:
             raise TypeError(f"wire maps must have str keys, not {args[0]}")
@@ -586,7 +592,9 @@ def from_wire_function(cls: type) -> Callable[[dict, str], Any]:
     return fn
 
 
-def wire_map_source(cls: type, trailer: typing.Mapping[str, Any] | None = None, var: str = "r") -> tuple[str, dict[str, Any]]:
+def wire_map_source(
+    cls: type, trailer: typing.Mapping[str, Any] | None = None, var: str = "r"
+) -> tuple[str, dict[str, Any]]:
     """A dict display turning the record bound to ``var`` into plain msgpack data, and the constants
     it refers to. ``trailer`` adds constant entries after the fields (the codec adds ``v``, ``type``)."""
     consts: dict[str, Any] = {}

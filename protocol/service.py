@@ -40,8 +40,9 @@ import os
 import queue
 import threading
 import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping, TypeVar
+from typing import Any, TypeVar
 
 import zenoh
 
@@ -157,11 +158,13 @@ class Service:
             raise RuntimeError("service is not open: call open() first")
         return self._session
 
-    def open(self) -> "Service":
+    def open(self) -> Service:
         self._session = open_session(self._options)
         token = self._session.liveliness().declare_token(self.keys.liveliness(self.name, self.instance))
         self._declared.append(token)
-        self._declared.append(self._session.declare_queryable(self.keys.stats(self.name, self.instance), self._answer_stats))
+        self._declared.append(
+            self._session.declare_queryable(self.keys.stats(self.name, self.instance), self._answer_stats)
+        )
         if isinstance(self.clock, SimClock):
             # Inline: SimClock.update is cheap and locked, and the clock must not lag behind a slow
             # handler on the worker (nor stall in processes that never call run()).
@@ -234,7 +237,7 @@ class Service:
             self.log.warning("zenoh session did not close within %.1f s; exiting anyway", CLOSE_TIMEOUT)
         self.log.info("%s %s stopped", self.name, self.instance)
 
-    def __enter__(self) -> "Service":
+    def __enter__(self) -> Service:
         return self.open()
 
     def __exit__(self, *exc: Any) -> None:
@@ -394,10 +397,19 @@ class Service:
 
         # Inline: on Zenoh's receive thread itself, not on the Python thread zenoh-python would
         # hand the sample to (one thread wake-up less per message).
-        self._declared.append(self.session.declare_subscriber(key, on_zenoh_thread(on_sample) if inline or ordered else on_sample))
+        self._declared.append(
+            self.session.declare_subscriber(key, on_zenoh_thread(on_sample) if inline or ordered else on_sample)
+        )
 
-    def subscribe_foreign(self, key: str, decode_payload: Callable[[bytes], Any], handler: Callable[[Any, str], None], *,
-                          latest: bool = False, ordered: bool = False) -> None:
+    def subscribe_foreign(
+        self,
+        key: str,
+        decode_payload: Callable[[bytes], Any],
+        handler: Callable[[Any, str], None],
+        *,
+        latest: bool = False,
+        ordered: bool = False,
+    ) -> None:
         """Like :meth:`subscribe`, for payloads that are not ARROCH messages (e.g. ROS 2 CDR):
         ``decode_payload(bytes)`` runs on arrival, and whatever it raises counts the payload as a bad
         message (dropped, logged at most once a minute); its result goes to ``handler(value, key)``
@@ -414,7 +426,9 @@ class Service:
                 return
             self._enqueue(sub, str(sample.key_expr), value)
 
-        self._declared.append(self.session.declare_subscriber(key, on_zenoh_thread(on_sample) if ordered else on_sample))
+        self._declared.append(
+            self.session.declare_subscriber(key, on_zenoh_thread(on_sample) if ordered else on_sample)
+        )
 
     def hold(self, entity: Any) -> Any:
         """Undeclare ``entity`` (a token, publisher, subscriber... declared on :attr:`session`) when
@@ -527,7 +541,12 @@ class Service:
                         del self._last_bad_log[s]
                 self._last_bad_log[sender] = now
         if should_log:
-            self.log.warning("dropped bad message on %s from %s: %s (further ones from it counted, logged once a minute)", key, sender, exc)
+            self.log.warning(
+                "dropped bad message on %s from %s: %s (further ones from it counted, logged once a minute)",
+                key,
+                sender,
+                exc,
+            )
 
     # ------------------------------------------------------------------ publishing
 
@@ -553,7 +572,9 @@ class Service:
                     self._declared.append(publisher)
         return publisher
 
-    def sender(self, key: str, msg_type: type[M], *, stamp: bool = True, express: bool = EXPRESS) -> Callable[[M], None]:
+    def sender(
+        self, key: str, msg_type: type[M], *, stamp: bool = True, express: bool = EXPRESS
+    ) -> Callable[[M], None]:
         """A function publishing ``msg_type`` messages on ``key``: ``send(msg)`` does what
         ``publish(key, msg, stamp=stamp)`` does, with the publisher declared, the encoder and the
         counter looked up once, here. For a stream published often (on a cold cache, publish()'s
@@ -622,9 +643,18 @@ class Service:
         # same key for every service, and Zenoh's reply consolidation would keep only one of them.
         try:
             # Gauges beside the counters: how much waits on the worker now, and the most that ever did.
-            gauges = {"inbox_depth": self._inbox.qsize(), "inbox_depth_max": self._inbox_max, "latest_waiting": len(self._latest)}
-            stats = Event(kind="stats", data={"service": self.name, "instance": self.instance, **self.counters_snapshot(), **gauges})
-            query.reply(self.keys.stats(self.name, self.instance), encode(self.stamp(stats)), encoding=zenoh.Encoding(ENCODING))
+            gauges = {
+                "inbox_depth": self._inbox.qsize(),
+                "inbox_depth_max": self._inbox_max,
+                "latest_waiting": len(self._latest),
+            }
+            stats = Event(
+                kind="stats",
+                data={"service": self.name, "instance": self.instance, **self.counters_snapshot(), **gauges},
+            )
+            query.reply(
+                self.keys.stats(self.name, self.instance), encode(self.stamp(stats)), encoding=zenoh.Encoding(ENCODING)
+            )
         except Exception:
             self.count("handler_errors")
             self.log.exception("answering a stats query failed")
@@ -632,8 +662,13 @@ class Service:
 
 def publisher_options(*, express: bool = EXPRESS) -> dict[str, Any]:
     """The options every Service publisher is declared with (``declare_publisher(key, **options)``)."""
-    return {"encoding": zenoh.Encoding(ENCODING), "congestion_control": CONGESTION_CONTROL, "priority": PRIORITY,
-            "express": express, "reliability": RELIABILITY}
+    return {
+        "encoding": zenoh.Encoding(ENCODING),
+        "congestion_control": CONGESTION_CONTROL,
+        "priority": PRIORITY,
+        "express": express,
+        "reliability": RELIABILITY,
+    }
 
 
 _instances_lock = threading.Lock()

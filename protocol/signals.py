@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import signal
 import time
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 

@@ -27,9 +27,10 @@ import json
 import os
 import socket
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, TypeVar
+from typing import TypeVar
 
 import zenoh
 
@@ -66,11 +67,24 @@ def _split(value: str | None) -> list[str]:
 def add_zenoh_arguments(parser: argparse.ArgumentParser) -> None:
     """The Zenoh options every service's command line has."""
     group = parser.add_argument_group("zenoh transport")
-    group.add_argument("--zenoh-config", metavar="FILE", help="Zenoh JSON5 config file, used as it is (env ARROCH_ZENOH_CONFIG)")
+    group.add_argument(
+        "--zenoh-config", metavar="FILE", help="Zenoh JSON5 config file, used as it is (env ARROCH_ZENOH_CONFIG)"
+    )
     group.add_argument("--mode", choices=MODES, help="Zenoh mode (default client; env ARROCH_ZENOH_MODE)")
-    group.add_argument("--connect", metavar="ENDPOINTS", help=f"comma-separated endpoints to connect to (default {DEFAULT_ROUTER} in client mode; env ARROCH_ZENOH_CONNECT)")
-    group.add_argument("--listen", metavar="ENDPOINTS", help="comma-separated endpoints to listen on (env ARROCH_ZENOH_LISTEN)")
-    group.add_argument("--multicast", action="store_true", default=None, help="turn multicast scouting on (off by default; env ARROCH_ZENOH_MULTICAST=1)")
+    group.add_argument(
+        "--connect",
+        metavar="ENDPOINTS",
+        help=f"comma-separated endpoints to connect to (default {DEFAULT_ROUTER} in client mode; env ARROCH_ZENOH_CONNECT)",
+    )
+    group.add_argument(
+        "--listen", metavar="ENDPOINTS", help="comma-separated endpoints to listen on (env ARROCH_ZENOH_LISTEN)"
+    )
+    group.add_argument(
+        "--multicast",
+        action="store_true",
+        default=None,
+        help="turn multicast scouting on (off by default; env ARROCH_ZENOH_MULTICAST=1)",
+    )
 
 
 def options_from(args: argparse.Namespace | None = None, env: dict[str, str] | None = None) -> ZenohOptions:

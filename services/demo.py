@@ -30,8 +30,9 @@ import argparse
 import re
 import subprocess
 import sys
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable, TextIO
+from typing import TextIO
 
 from protocol.site import default_site_path
 
@@ -76,8 +77,12 @@ class TabletAnnouncement:
         _step("tablet page (viewer: the tablet camera with its overlay, and a map of the robots):", self.out)
         for url in dict.fromkeys([*local, *self.urls]):
             print(f"      {url}", file=self.out)
-        print(f"    access token: {self.token}  (this run's key; the browser will warn about the certificate:"
-              f" its authority is at /ca.pem)", file=self.out, flush=True)
+        print(
+            f"    access token: {self.token}  (this run's key; the browser will warn about the certificate:"
+            f" its authority is at /ca.pem)",
+            file=self.out,
+            flush=True,
+        )
 
 
 def relay(lines: Iterable[str], out: TextIO, announcement: TabletAnnouncement) -> None:
@@ -98,13 +103,35 @@ def run_demo(args: argparse.Namespace) -> int:
     run_root.mkdir(parents=True, exist_ok=True)
     before = set(run_root.iterdir())
 
-    _step(f"running one mission ({args.method}, seed {args.seed}, {args.mode}) with router, planner, restrictor, "
-          f"sim (+ tablet camera), AR client and tablet page")
+    _step(
+        f"running one mission ({args.method}, seed {args.seed}, {args.mode}) with router, planner, restrictor, "
+        f"sim (+ tablet camera), AR client and tablet page"
+    )
     command = _arroch(
-        "up", "--site", site_file, "--services", SERVICES, "--camera", CAMERA, "--method", args.method,
-        "--mode", args.mode, "--seed", str(args.seed), "--until-done", "--timeout", str(args.timeout),
-        "--run-dir", str(run_root), "--progress", "line", "--log-level", args.log_level or "WARNING",
-        "--record" if args.record else "--no-record", *(["--view", "--view-port", str(args.view_port)] if args.view else []),
+        "up",
+        "--site",
+        site_file,
+        "--services",
+        SERVICES,
+        "--camera",
+        CAMERA,
+        "--method",
+        args.method,
+        "--mode",
+        args.mode,
+        "--seed",
+        str(args.seed),
+        "--until-done",
+        "--timeout",
+        str(args.timeout),
+        "--run-dir",
+        str(run_root),
+        "--progress",
+        "line",
+        "--log-level",
+        args.log_level or "WARNING",
+        "--record" if args.record else "--no-record",
+        *(["--view", "--view-port", str(args.view_port)] if args.view else []),
     )
     # Line by line through us, so the tablet's URL can be repeated where it is seen; the supervisor
     # stops its children on SIGINT/SIGTERM, which a terminal's Ctrl-C sends it (same process group).
@@ -119,30 +146,50 @@ def run_demo(args: argparse.Namespace) -> int:
                 pass  # the supervisor got the same Ctrl-C and is stopping everything: wait for it
     new_runs = sorted(set(run_root.iterdir()) - before)
     run_dir = new_runs[-1] if new_runs else run_root
-    subprocess.run(_arroch("site", "show", site_file, "--png", str(run_dir / "site.png")), check=False, stdout=subprocess.DEVNULL)
+    subprocess.run(
+        _arroch("site", "show", site_file, "--png", str(run_dir / "site.png")), check=False, stdout=subprocess.DEVNULL
+    )
     if code != 0:
         print(f"the mission did not complete (exit {code}); see {run_dir}", file=sys.stderr)
         return code
     frames = sorted((run_dir / "overlays").glob("*.png"))
     _step(f"done; metrics, event log, site picture and {len(frames)} overlay frame(s) (overlays/) in {run_dir}")
     if (run_dir / "run.mcap").is_file():
-        _step(f"recording {run_dir / 'run.mcap'}: open it in Foxglove (layout docs/foxglove-layout.json), "
-              f"`arroch runs show {run_dir}` for its summary and timeline, `arroch replay` to play it back")
+        _step(
+            f"recording {run_dir / 'run.mcap'}: open it in Foxglove (layout docs/foxglove-layout.json), "
+            f"`arroch runs show {run_dir}` for its summary and timeline, `arroch replay` to play it back"
+        )
     return 0
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser("demo", help="run one mission on the default site (localhost), with the AR view, and print its metrics",
-                            description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = sub.add_parser(
+        "demo",
+        help="run one mission on the default site (localhost), with the AR view, and print its metrics",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     parser.add_argument("--site", help="site file (default: the packaged office site)")
-    parser.add_argument("--method", default="arroch", choices=("arroch", "no-feedback", "no-comm"), help="method (default arroch)")
-    parser.add_argument("--mode", default="lockstep", choices=("lockstep", "realtime", "rate"), help="sim clock mode (default lockstep)")
+    parser.add_argument(
+        "--method", default="arroch", choices=("arroch", "no-feedback", "no-comm"), help="method (default arroch)"
+    )
+    parser.add_argument(
+        "--mode", default="lockstep", choices=("lockstep", "realtime", "rate"), help="sim clock mode (default lockstep)"
+    )
     parser.add_argument("--seed", type=int, default=1, help="seed of the simulated human (default 1)")
-    parser.add_argument("--timeout", type=float, default=600.0, help="give up after this many wall seconds (default 600)")
+    parser.add_argument(
+        "--timeout", type=float, default=600.0, help="give up after this many wall seconds (default 600)"
+    )
     parser.add_argument("--run-dir", default="runs", help="folder of run folders (default runs/)")
-    parser.add_argument("--record", action=argparse.BooleanOptionalAction, default=True,
-                        help="record the run to <run folder>/run.mcap (default; --no-record turns it off)")
-    parser.add_argument("--view", action="store_true", help="serve the run live to Foxglove (ws://127.0.0.1:--view-port)")
+    parser.add_argument(
+        "--record",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="record the run to <run folder>/run.mcap (default; --no-record turns it off)",
+    )
+    parser.add_argument(
+        "--view", action="store_true", help="serve the run live to Foxglove (ws://127.0.0.1:--view-port)"
+    )
     parser.add_argument("--view-port", type=int, default=8765, help="with --view: the port (default 8765)")
     parser.add_argument("--log-level", default=None, choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     parser.set_defaults(func=run_demo)

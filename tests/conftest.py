@@ -6,7 +6,8 @@ from __future__ import annotations
 import queue
 import time
 import uuid
-from typing import Callable, Iterator, TypeVar
+from collections.abc import Callable, Iterator
+from typing import TypeVar
 
 import pytest
 
@@ -54,10 +55,15 @@ class TestClient(Service):
     __test__ = False  # not a test class
 
     def __init__(self, namespace: str, endpoint: str) -> None:
-        super().__init__("testclient", namespace, ZenohOptions(mode="client", connect=[endpoint]), instance=f"test-{uuid.uuid4().hex[:6]}")
+        super().__init__(
+            "testclient",
+            namespace,
+            ZenohOptions(mode="client", connect=[endpoint]),
+            instance=f"test-{uuid.uuid4().hex[:6]}",
+        )
         self.queues: dict[str, queue.Queue] = {}
 
-    def collect(self, key: str, msg_type: type[M]) -> "queue.Queue[tuple[M, str]]":
+    def collect(self, key: str, msg_type: type[M]) -> queue.Queue[tuple[M, str]]:
         """Decode messages on ``key`` straight from Zenoh's thread into a queue the test reads."""
         q: queue.Queue = queue.Queue()
 

@@ -9,8 +9,8 @@ import sys
 import threading
 import time
 from collections import deque
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -65,7 +65,9 @@ class Proc:
                         return line
                 seen = len(lines)
                 if self.popen.poll() is not None and not self._reader.is_alive():
-                    raise AssertionError(f"{self.name} exited ({self.popen.returncode}) before printing {text!r}:\n{self.output}")
+                    raise AssertionError(
+                        f"{self.name} exited ({self.popen.returncode}) before printing {text!r}:\n{self.output}"
+                    )
                 remaining = deadline - time.monotonic()
                 if remaining <= 0:
                     raise AssertionError(f"{self.name} did not print {text!r} within {timeout} s:\n{self.output}")

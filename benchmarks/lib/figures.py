@@ -12,7 +12,9 @@ def log(*args: object) -> None:
     print(*args, file=sys.stderr, flush=True)
 
 
-def summary(values: list[float], *, percentiles: tuple[int, ...] = (50, 99), scale: float = 1.0, digits: int = 2) -> dict[str, float]:
+def summary(
+    values: list[float], *, percentiles: tuple[int, ...] = (50, 99), scale: float = 1.0, digits: int = 2
+) -> dict[str, float]:
     """n, the given percentiles (``p50``...), mean and max of ``values`` times ``scale`` (e.g. 1000
     for s → ms), rounded to ``digits``; ``{"n": 0}`` for no values."""
     if not values:

@@ -27,11 +27,11 @@ class Attachment:
         return _HEAD.pack(self.sequence_number, self.source_timestamp) + bytes((GID_SIZE,)) + self.gid
 
     @classmethod
-    def decode(cls, data: bytes) -> "Attachment":
+    def decode(cls, data: bytes) -> Attachment:
         if len(data) != _HEAD.size + 1 + GID_SIZE or data[_HEAD.size] != GID_SIZE:
             raise ValueError(f"not an rmw_zenoh attachment ({len(data)} bytes)")
         seq, stamp = _HEAD.unpack_from(data)
-        return cls(seq, stamp, bytes(data[_HEAD.size + 1:]))
+        return cls(seq, stamp, bytes(data[_HEAD.size + 1 :]))
 
 
 def gid_of(token: str) -> bytes:

@@ -89,11 +89,20 @@ class Ros2Config:
     def link(self, robot: str) -> RobotLink:
         return self.robots.get(robot) or RobotLink(robot, f"/{robot}")
 
-    def with_overrides(self, *, key_format: str | None = None, domain: int | None = None) -> "Ros2Config":
+    def with_overrides(self, *, key_format: str | None = None, domain: int | None = None) -> Ros2Config:
         """The command line's key format and domain, for every robot."""
-        robots = {rid: replace(link, key_format=key_format or link.key_format, domain=link.domain if domain is None else domain)
-                  for rid, link in self.robots.items()}
-        changed = replace(self, key_format=key_format or self.key_format, domain=self.domain if domain is None else domain, robots=robots)
+        robots = {
+            rid: replace(
+                link, key_format=key_format or link.key_format, domain=link.domain if domain is None else domain
+            )
+            for rid, link in self.robots.items()
+        }
+        changed = replace(
+            self,
+            key_format=key_format or self.key_format,
+            domain=self.domain if domain is None else domain,
+            robots=robots,
+        )
         changed.naming()  # checks them
         return changed
 
@@ -162,8 +171,11 @@ def _parse_link(rid: str, entry: Any, fail: Any) -> RobotLink:
             values[key] = float(value)
     if "map_to_odom" in entry:
         value = entry["map_to_odom"]
-        if (not isinstance(value, list) or len(value) != 3
-                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)):
+        if (
+            not isinstance(value, list)
+            or len(value) != 3
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+        ):
             raise fail("map_to_odom", f"expected [x, y, yaw] (metres, radians), got {value!r}")
         values["map_to_odom"] = tuple(float(v) for v in value)
     if "key_format" in entry:
@@ -187,8 +199,14 @@ def _parse_link(rid: str, entry: Any, fail: Any) -> RobotLink:
 
 def add_ros2_link_arguments(parser: Any) -> None:
     """The ROS 2 options every ROS 2 facing command shares (robot driver, simulated bases, bridge)."""
-    parser.add_argument("--ros2-config", metavar="FILE", help="robot config file with [ros2] tables (docs/ros2.md); default: built-in defaults")
-    parser.add_argument("--key-format", choices=KEY_FORMATS, help="ROS 2 key format (overrides the config file; default rmw_zenoh)")
+    parser.add_argument(
+        "--ros2-config",
+        metavar="FILE",
+        help="robot config file with [ros2] tables (docs/ros2.md); default: built-in defaults",
+    )
+    parser.add_argument(
+        "--key-format", choices=KEY_FORMATS, help="ROS 2 key format (overrides the config file; default rmw_zenoh)"
+    )
     parser.add_argument("--domain", type=int, metavar="N", help="ROS domain id (overrides the config file; default 0)")
 
 

@@ -76,13 +76,41 @@ class TopicNaming:
         return self.data_key(topic, typename)
 
     def node_token(self, zid: str, node_id: int, namespace: str, node: str) -> str:
-        return "/".join((ADMIN_SPACE, str(self.domain), zid, str(node_id), str(node_id), "NN", "%", mangle(namespace), node))
+        return "/".join(
+            (ADMIN_SPACE, str(self.domain), zid, str(node_id), str(node_id), "NN", "%", mangle(namespace), node)
+        )
 
-    def endpoint_token(self, zid: str, node_id: int, entity_id: int, kind: str, namespace: str, node: str,
-                       topic: str, typename: str, *, reliable: bool = True) -> str:
+    def endpoint_token(
+        self,
+        zid: str,
+        node_id: int,
+        entity_id: int,
+        kind: str,
+        namespace: str,
+        node: str,
+        topic: str,
+        typename: str,
+        *,
+        reliable: bool = True,
+    ) -> str:
         """The token announcing a publisher (``kind="MP"``) or subscription (``"MS"``) of ``topic``."""
         if kind not in ("MP", "MS"):
             raise ValueError(f"endpoint kind {kind!r}: expected MP or MS")
         qos = QOS_RELIABLE if reliable else QOS_BEST_EFFORT
-        return "/".join((ADMIN_SPACE, str(self.domain), zid, str(node_id), str(entity_id), kind, "%", mangle(namespace), node,
-                         mangle(topic), dds_type_name(typename), type_hash(typename), qos))
+        return "/".join(
+            (
+                ADMIN_SPACE,
+                str(self.domain),
+                zid,
+                str(node_id),
+                str(entity_id),
+                kind,
+                "%",
+                mangle(namespace),
+                node,
+                mangle(topic),
+                dds_type_name(typename),
+                type_hash(typename),
+                qos,
+            )
+        )

@@ -12,7 +12,8 @@ from __future__ import annotations
 import itertools
 import threading
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import zenoh
 
@@ -58,7 +59,11 @@ class RosNode:
         self._zid = str(service.session.info.zid())
         self._node_id = 0
         if naming.rmw_zenoh:
-            service.hold(service.session.liveliness().declare_token(naming.node_token(self._zid, self._node_id, self.namespace, name)))
+            service.hold(
+                service.session.liveliness().declare_token(
+                    naming.node_token(self._zid, self._node_id, self.namespace, name)
+                )
+            )
 
     def topic(self, topic: str) -> str:
         return full_topic(self.namespace, topic)
@@ -66,8 +71,17 @@ class RosNode:
     def _token(self, kind: str, topic: str, typename: str, reliable: bool) -> str | None:
         if not self.naming.rmw_zenoh:
             return None
-        token = self.naming.endpoint_token(self._zid, self._node_id, next(self._entities), kind, self.namespace, self.name,
-                                           topic, typename, reliable=reliable)
+        token = self.naming.endpoint_token(
+            self._zid,
+            self._node_id,
+            next(self._entities),
+            kind,
+            self.namespace,
+            self.name,
+            topic,
+            typename,
+            reliable=reliable,
+        )
         self.service.hold(self.service.session.liveliness().declare_token(token))
         return token
 
@@ -76,17 +90,31 @@ class RosNode:
         name = self.topic(topic)
         token = self._token("MP", name, typename, reliable)
         key = self.naming.data_key(name, typename)
-        publisher = self.service.hold(self.service.session.declare_publisher(
-            key, congestion_control=zenoh.CongestionControl.BLOCK if reliable else zenoh.CongestionControl.DROP, express=True))
+        publisher = self.service.hold(
+            self.service.session.declare_publisher(
+                key,
+                congestion_control=zenoh.CongestionControl.BLOCK if reliable else zenoh.CongestionControl.DROP,
+                express=True,
+            )
+        )
         return RosPublisher(publisher, typename, gid_of(token) if token else None)
 
-    def subscribe(self, topic: str, typename: str, handler: Callable[[Any, str], None], *, latest: bool = False,
-                  ordered: bool = True) -> str:
+    def subscribe(
+        self,
+        topic: str,
+        typename: str,
+        handler: Callable[[Any, str], None],
+        *,
+        latest: bool = False,
+        ordered: bool = True,
+    ) -> str:
         """Call ``handler(message, key)`` on the service's worker for each ``typename`` sample on
         ``topic``; samples that are not valid CDR of that type are counted as bad messages.
         ``ordered`` (default): queued in arrival order with the service's other ordered subscriptions."""
         name = self.topic(topic)
         self._token("MS", name, typename, True)
         key = self.naming.subscription_key(name, typename)
-        self.service.subscribe_foreign(key, lambda payload: ros.deserialize(payload, typename), handler, latest=latest, ordered=ordered)
+        self.service.subscribe_foreign(
+            key, lambda payload: ros.deserialize(payload, typename), handler, latest=latest, ordered=ordered
+        )
         return key

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache, lru_cache
 from typing import Any
 
 import numpy as np
@@ -65,7 +65,7 @@ def dds_type_name(typename: str) -> str:
     return f"{package}::{kind}::dds_::{name}_"
 
 
-@lru_cache(maxsize=None)
+@cache
 def type_hash(typename: str) -> str:
     """The RIHS01 hash of ``typename`` (``RIHS01_<64 hex digits>``)."""
     return typestore().hash_rihs01(typename)
@@ -119,7 +119,9 @@ def vector3(x: float = 0.0, y: float = 0.0, z: float = 0.0) -> Any:
 
 
 def pose(x: float, y: float, yaw: float, z: float = 0.0) -> Any:
-    return t("geometry_msgs/msg/Pose")(position=t("geometry_msgs/msg/Point")(x=float(x), y=float(y), z=float(z)), orientation=quaternion(yaw))
+    return t("geometry_msgs/msg/Pose")(
+        position=t("geometry_msgs/msg/Point")(x=float(x), y=float(y), z=float(z)), orientation=quaternion(yaw)
+    )
 
 
 def twist(v: float, omega: float) -> Any:
@@ -140,8 +142,10 @@ def odometry(at: float, frame: str, child_frame: str, x: float, y: float, yaw: f
 
 def pose_with_covariance_stamped(at: float, frame: str, x: float, y: float, yaw: float) -> Any:
     """``geometry_msgs/PoseWithCovarianceStamped`` (what a localiser such as amcl publishes)."""
-    return t(POSE_COV_STAMPED)(header=header(at, frame), pose=t("geometry_msgs/msg/PoseWithCovariance")(
-        pose=pose(x, y, yaw), covariance=np.zeros(36, dtype=np.float64)))
+    return t(POSE_COV_STAMPED)(
+        header=header(at, frame),
+        pose=t("geometry_msgs/msg/PoseWithCovariance")(pose=pose(x, y, yaw), covariance=np.zeros(36, dtype=np.float64)),
+    )
 
 
 def transform_stamped(at: float, parent: str, child: str, x: float, y: float, yaw: float) -> Any:
@@ -176,11 +180,25 @@ def pose_2d(msg: Any, typename: str) -> Pose2D:
     if typename == ODOMETRY:
         p = msg.pose.pose
         tw = msg.twist.twist
-        return Pose2D(p.position.x, p.position.y, yaw_of(p.orientation), tw.linear.x, tw.angular.z,
-                      msg.header.frame_id, msg.child_frame_id, seconds(msg.header.stamp))
+        return Pose2D(
+            p.position.x,
+            p.position.y,
+            yaw_of(p.orientation),
+            tw.linear.x,
+            tw.angular.z,
+            msg.header.frame_id,
+            msg.child_frame_id,
+            seconds(msg.header.stamp),
+        )
     if typename == POSE_COV_STAMPED:
         p = msg.pose.pose
-        return Pose2D(p.position.x, p.position.y, yaw_of(p.orientation), frame=msg.header.frame_id, stamp=seconds(msg.header.stamp))
+        return Pose2D(
+            p.position.x,
+            p.position.y,
+            yaw_of(p.orientation),
+            frame=msg.header.frame_id,
+            stamp=seconds(msg.header.stamp),
+        )
     raise ValueError(f"no planar pose in a {typename}")
 
 

@@ -109,21 +109,41 @@ class _Builder:
             raise self.fail(e, f"center {_fmt(cx, cy)} {where} (they share no wall)")
         along, across = (cx, cy) if edge.axis == "x" else (cy, cx)
         if abs(across - edge.coord) > EPS or not edge.lo - EPS <= along <= edge.hi + EPS:
-            raise self.fail(e, f"center {_fmt(cx, cy)} {where} (their shared edge is {_edge_text(edge.axis, edge.coord, edge.lo, edge.hi)})")
+            raise self.fail(
+                e,
+                f"center {_fmt(cx, cy)} {where} (their shared edge is {_edge_text(edge.axis, edge.coord, edge.lo, edge.hi)})",
+            )
         lo, hi = along - width / 2.0, along + width / 2.0
         if lo < edge.lo - EPS or hi > edge.hi + EPS:
-            raise self.fail(e, f"width {width:g} at center {_fmt(cx, cy)} does not fit on the edge shared by rooms \"{a_id}\" and \"{b_id}\" "
-                            f"({_edge_text(edge.axis, edge.coord, edge.lo, edge.hi)}): its whole width must lie on it")
+            raise self.fail(
+                e,
+                f'width {width:g} at center {_fmt(cx, cy)} does not fit on the edge shared by rooms "{a_id}" and "{b_id}" '
+                f"({_edge_text(edge.axis, edge.coord, edge.lo, edge.hi)}): its whole width must lie on it",
+            )
         half = self.params.wall_thickness / 2.0
         if lo < edge.lo + half - EPS or hi > edge.hi - half + EPS:
-            raise self.fail(e, f"the gap [{lo:g}, {hi:g}] must stay {half:g} m (half a wall) from the ends of the shared edge "
-                            f"({_edge_text(edge.axis, edge.coord, edge.lo, edge.hi)}), where another wall meets it")
+            raise self.fail(
+                e,
+                f"the gap [{lo:g}, {hi:g}] must stay {half:g} m (half a wall) from the ends of the shared edge "
+                f"({_edge_text(edge.axis, edge.coord, edge.lo, edge.hi)}), where another wall meets it",
+            )
         needed = 2.0 * self.params.robot_radius
         if width <= needed:
-            raise self.fail(e, f"width {width:g} is too narrow for a robot of radius {self.params.robot_radius:g} (needs more than {needed:g})")
+            raise self.fail(
+                e,
+                f"width {width:g} is too narrow for a robot of radius {self.params.robot_radius:g} (needs more than {needed:g})",
+            )
         normals = ((a_id, normal_into(a, edge.axis, edge.coord)), (b_id, normal_into(b, edge.axis, edge.coord)))
-        return Opening(id=e["id"], kind=kind, rooms=(a_id, b_id), center=(cx, cy), width=width,
-                       human_operated=bool(e.values.get("human_operated") or False), axis=edge.axis, normals=normals)
+        return Opening(
+            id=e["id"],
+            kind=kind,
+            rooms=(a_id, b_id),
+            center=(cx, cy),
+            width=width,
+            human_operated=bool(e.values.get("human_operated") or False),
+            axis=edge.axis,
+            normals=normals,
+        )
 
     def openings(self, rooms: dict[str, Room]) -> tuple[dict[str, Opening], dict[str, Entry]]:
         openings: dict[str, Opening] = {}
@@ -135,7 +155,10 @@ class _Builder:
                 for other in openings.values():
                     olo, ohi = opening_interval(other)
                     if opening_line(other) == opening_line(o) and min(hi, ohi) - max(lo, olo) > -EPS:
-                        raise self.fail(e, f"its gap [{lo:g}, {hi:g}] overlaps or touches {entries[other.id].label} [{olo:g}, {ohi:g}] on the same wall")
+                        raise self.fail(
+                            e,
+                            f"its gap [{lo:g}, {hi:g}] overlaps or touches {entries[other.id].label} [{olo:g}, {ohi:g}] on the same wall",
+                        )
                 openings[o.id] = o
                 entries[o.id] = e
         return openings, entries
@@ -148,7 +171,9 @@ class _Builder:
                 aliases[f"p_{b}_{a}"] = o.id
         return aliases
 
-    def leaves(self, openings: dict[str, Opening], entries: dict[str, Entry], rooms: dict[str, Room]) -> dict[str, DoorLeaf]:
+    def leaves(
+        self, openings: dict[str, Opening], entries: dict[str, Entry], rooms: dict[str, Room]
+    ) -> dict[str, DoorLeaf]:
         human_room = self.doc["human"]["room"]
         leaves: dict[str, DoorLeaf] = {}
         for o in openings.values():
@@ -157,39 +182,62 @@ class _Builder:
             e = entries[o.id]
             explicit = e["swing_into"]
             if explicit is not None and explicit not in o.rooms:
-                raise self.fail(e, f'swing_into: "{explicit}" is not one of the door\'s rooms ("{o.rooms[0]}", "{o.rooms[1]}")')
+                raise self.fail(
+                    e, f'swing_into: "{explicit}" is not one of the door\'s rooms ("{o.rooms[0]}", "{o.rooms[1]}")'
+                )
             leaf = build_leaf(o, swing_room(o, explicit, human_room))
             room = rooms[leaf.swing_into]
             depth = room.size[1] if o.axis == "x" else room.size[0]
             if leaf.length > depth - self.params.wall_thickness / 2.0 + EPS:
-                raise self.fail(e, f'its leaf ({leaf.length:g} m) does not fit in room "{room.id}" (depth {depth:g} m) when open')
+                raise self.fail(
+                    e, f'its leaf ({leaf.length:g} m) does not fit in room "{room.id}" (depth {depth:g} m) when open'
+                )
             leaves[o.id] = leaf
         return leaves
 
     # --- landmarks --------------------------------------------------------------------------------
 
-    def landmark(self, e: Entry, rooms: dict[str, Room], lines: dict, openings: dict[str, Opening], opening_entries: dict[str, Entry],
-                 leaves: dict[str, DoorLeaf]) -> Landmark:
+    def landmark(
+        self,
+        e: Entry,
+        rooms: dict[str, Room],
+        lines: dict,
+        openings: dict[str, Opening],
+        opening_entries: dict[str, Entry],
+        leaves: dict[str, DoorLeaf],
+    ) -> Landmark:
         lm = Landmark(tag=e["tag"], size=e["size"], position=e["position"], yaw=e["yaw"])
         t = self.params.wall_thickness
         quarter = round(lm.yaw / (math.pi / 2.0))
         if abs(lm.yaw - quarter * math.pi / 2.0) > YAW_TOLERANCE:
-            raise self.fail(e, f"yaw {lm.yaw:g} is not perpendicular to any wall (walls run along x or y: use a multiple of pi/2)")
+            raise self.fail(
+                e, f"yaw {lm.yaw:g} is not perpendicular to any wall (walls run along x or y: use a multiple of pi/2)"
+            )
         nx, ny = round(math.cos(quarter * math.pi / 2.0)), round(math.sin(quarter * math.pi / 2.0))
         axis = "y" if nx else "x"  # the wall the tag hangs on runs perpendicular to its normal
         sign = nx or ny
         px, py, pz = lm.position
         along, across = (py, px) if axis == "y" else (px, py)
         max_offset = max(LANDMARK_OFFSET_MAX, t / 2.0 + 0.05)
-        front = sorted(((across - coord) * sign, coord) for (ax, coord) in lines if ax == axis and 0.0 <= (across - coord) * sign <= max_offset + EPS)
+        front = sorted(
+            ((across - coord) * sign, coord)
+            for (ax, coord) in lines
+            if ax == axis and 0.0 <= (across - coord) * sign <= max_offset + EPS
+        )
         if not front:
             behind = [coord for (ax, coord) in lines if ax == axis and -max_offset <= (across - coord) * sign < 0.0]
             name = "x" if axis == "y" else "y"
             if behind:
-                raise self.fail(e, f"faces into the wall at {name} = {behind[0]:g} (yaw {lm.yaw:g} points away from the room it should face)")
+                raise self.fail(
+                    e,
+                    f"faces into the wall at {name} = {behind[0]:g} (yaw {lm.yaw:g} points away from the room it should face)",
+                )
             nearest = min((abs(across - coord), coord) for (ax, coord) in lines if ax == axis)
-            raise self.fail(e, f"position {_fmt(px, py, pz)} is not on a wall: the nearest wall parallel to its face ({name} = {nearest[1]:g}) "
-                            f"is {nearest[0]:.3g} m away; a tag must be within {max_offset:g} m of a wall's centre line, on the side it faces")
+            raise self.fail(
+                e,
+                f"position {_fmt(px, py, pz)} is not on a wall: the nearest wall parallel to its face ({name} = {nearest[1]:g}) "
+                f"is {nearest[0]:.3g} m away; a tag must be within {max_offset:g} m of a wall's centre line, on the side it faces",
+            )
         _, coord = front[0]
         half = lm.printed_size / 2.0
         lo, hi = along - half, along + half
@@ -197,7 +245,10 @@ class _Builder:
             if opening_line(o) == (axis, coord):
                 glo, ghi = opening_interval(o)
                 if min(hi, ghi) - max(lo, glo) > EPS:
-                    raise self.fail(e, f"is over {opening_entries[o.id].label}: the printed tag spans [{lo:g}, {hi:g}], the gap [{glo:g}, {ghi:g}]")
+                    raise self.fail(
+                        e,
+                        f"is over {opening_entries[o.id].label}: the printed tag spans [{lo:g}, {hi:g}], the gap [{glo:g}, {ghi:g}]",
+                    )
         if not any(ilo - EPS <= lo and hi <= ihi + EPS for ilo, ihi in lines[(axis, coord)]):
             raise self.fail(e, f"extends past the end of the wall (the printed tag spans [{lo:g}, {hi:g}])")
         ahead = t / 2.0 + 0.05
@@ -205,23 +256,43 @@ class _Builder:
         if facing is None:
             raise self.fail(e, "faces no room (in front of it is outside the building)")
         x0, y0, x1, y1 = facing.rect
-        flo, fhi = ((y0, y1) if axis == "y" else (x0, x1))
+        flo, fhi = (y0, y1) if axis == "y" else (x0, x1)
         if lo < flo + t / 2.0 - EPS or hi > fhi - t / 2.0 + EPS:
-            raise self.fail(e, f'extends past the corner of room "{facing.id}": the printed tag spans [{lo:g}, {hi:g}], '
-                            f"the wall face [{flo + t / 2.0:g}, {fhi - t / 2.0:g}]")
+            raise self.fail(
+                e,
+                f'extends past the corner of room "{facing.id}": the printed tag spans [{lo:g}, {hi:g}], '
+                f"the wall face [{flo + t / 2.0:g}, {fhi - t / 2.0:g}]",
+            )
         for leaf in leaves.values():
             bx0, by0, bx1, by1 = leaf.box(open=True)
             llo, lhi, alo, ahi = (by0, by1, bx0, bx1) if axis == "y" else (bx0, bx1, by0, by1)
             if alo - EPS <= across <= ahi + EPS and min(hi, lhi) - max(lo, llo) > EPS:
-                raise self.fail(e, f'is covered by door "{leaf.door}"\'s leaf when it is open (the leaf spans [{llo:g}, {lhi:g}] along this wall)')
+                raise self.fail(
+                    e,
+                    f'is covered by door "{leaf.door}"\'s leaf when it is open (the leaf spans [{llo:g}, {lhi:g}] along this wall)',
+                )
         if pz - half < 0.0 or pz + half > self.params.wall_height + EPS:
-            raise self.fail(e, f"height z = {pz:g} puts the printed tag at [{pz - half:g}, {pz + half:g}] m, "
-                            f"not within the wall (0 to {self.params.wall_height:g} m)")
+            raise self.fail(
+                e,
+                f"height z = {pz:g} puts the printed tag at [{pz - half:g}, {pz + half:g}] m, "
+                f"not within the wall (0 to {self.params.wall_height:g} m)",
+            )
         return lm
 
     # --- things in rooms --------------------------------------------------------------------------
 
-    def placed(self, e: Entry, key: str, x: float, y: float, rooms: dict[str, Room], walls: list, leaves: dict[str, DoorLeaf], clearance: float, what: str) -> Room:
+    def placed(
+        self,
+        e: Entry,
+        key: str,
+        x: float,
+        y: float,
+        rooms: dict[str, Room],
+        walls: list,
+        leaves: dict[str, DoorLeaf],
+        clearance: float,
+        what: str,
+    ) -> Room:
         """The room a robot or object at (x, y) lies in, refusing walls, their surroundings and door swings."""
         room = next((r for r in rooms.values() if r.contains(x, y)), None)
         if room is None:
@@ -230,10 +301,15 @@ class _Builder:
         if gap <= EPS:
             raise self.fail(e, f"{key} {_fmt(x, y)} is inside a wall")
         if gap < clearance - EPS:
-            raise self.fail(e, f"{key} {_fmt(x, y)} is {gap:.3g} m from a wall; {what} needs {clearance:g} m (the robot radius)")
+            raise self.fail(
+                e, f"{key} {_fmt(x, y)} is {gap:.3g} m from a wall; {what} needs {clearance:g} m (the robot radius)"
+            )
         for leaf in leaves.values():
             if in_swing(leaf, x, y, clearance):
-                raise self.fail(e, f"{key} {_fmt(x, y)} is where door \"{leaf.door}\"'s leaf swings (hinge {_fmt(*leaf.hinge)}, length {leaf.length:g})")
+                raise self.fail(
+                    e,
+                    f'{key} {_fmt(x, y)} is where door "{leaf.door}"\'s leaf swings (hinge {_fmt(*leaf.hinge)}, length {leaf.length:g})',
+                )
         return room
 
     def robots(self, rooms: dict[str, Room], walls: list, leaves: dict[str, DoorLeaf]) -> dict[str, RobotSpec]:
@@ -244,19 +320,28 @@ class _Builder:
             room = self.placed(e, "start", x, y, rooms, walls, leaves, r, "a robot")
             for other in robots.values():
                 if math.dist((x, y), other.start[:2]) < 2.0 * r - EPS:
-                    raise self.fail(e, f"start {_fmt(x, y)} overlaps robot \"{other.id}\" at {_fmt(*other.start[:2])} (robots are {2 * r:g} m wide)")
+                    raise self.fail(
+                        e,
+                        f'start {_fmt(x, y)} overlaps robot "{other.id}" at {_fmt(*other.start[:2])} (robots are {2 * r:g} m wide)',
+                    )
             robots[e["id"]] = RobotSpec(id=e["id"], start=(x, y, theta), room=room.id)
         return robots
 
-    def objects(self, rooms: dict[str, Room], robots: dict[str, RobotSpec], walls: list, leaves: dict[str, DoorLeaf]) -> dict[str, ObjectSpec]:
+    def objects(
+        self, rooms: dict[str, Room], robots: dict[str, RobotSpec], walls: list, leaves: dict[str, DoorLeaf]
+    ) -> dict[str, ObjectSpec]:
         objects: dict[str, ObjectSpec] = {}
         for e in self.doc["objects"]:
             self.room_ref(e, "deliver_to", e["deliver_to"], rooms)
             if e["robot"] not in robots:
                 raise self.fail(e, f'robot: unknown robot "{e["robot"]}" (robots are {", ".join(robots)})')
             x, y = e["position"]
-            room = self.placed(e, "position", x, y, rooms, walls, leaves, self.params.robot_radius, "a robot reaching it")
-            objects[e["id"]] = ObjectSpec(id=e["id"], position=(x, y), deliver_to=e["deliver_to"], robot=e["robot"], room=room.id)
+            room = self.placed(
+                e, "position", x, y, rooms, walls, leaves, self.params.robot_radius, "a robot reaching it"
+            )
+            objects[e["id"]] = ObjectSpec(
+                id=e["id"], position=(x, y), deliver_to=e["deliver_to"], robot=e["robot"], room=room.id
+            )
         return objects
 
     def human(self, rooms: dict[str, Room]) -> HumanSpec:
@@ -264,7 +349,9 @@ class _Builder:
         room = self.room_ref(e, "room", e["room"], rooms)
         x, y = e["position"]
         if not room.contains(x, y, margin=self.params.wall_thickness / 2.0):
-            raise self.fail(e, f'position {_fmt(x, y)} is outside her room "{room.id}" {_fmt(*room.rect)} (or inside its walls)')
+            raise self.fail(
+                e, f'position {_fmt(x, y)} is outside her room "{room.id}" {_fmt(*room.rect)} (or inside its walls)'
+            )
         return HumanSpec(room=room.id, position=(x, y))
 
     def reachable(self, rooms: dict[str, Room], openings: dict[str, Opening], robots: dict[str, RobotSpec]) -> None:

@@ -35,7 +35,8 @@ def summary(site: Site) -> str:
         f"  passages ({len(site.passages)}): {passages}",
         f"  landmarks ({len(site.landmarks)}): tags {_ranges([lm.tag for lm in site.landmarks]) or 'none'}",
         f"  robots ({len(site.robots)}): " + ", ".join(f"{r.id} in {r.room}" for r in site.robots.values()),
-        f"  objects ({len(site.objects)}): " + "; ".join(f"{rid}: {', '.join(objs) or '-'}" for rid, objs in by_robot.items()),
+        f"  objects ({len(site.objects)}): "
+        + "; ".join(f"{rid}: {', '.join(objs) or '-'}" for rid, objs in by_robot.items()),
         f"  human: in {site.human.room} at ({site.human.position[0]:g}, {site.human.position[1]:g})",
         f"  walls: {len(site.walls)} segments, {site.params.wall_thickness:g} m thick, {site.params.wall_height:g} m high",
     ]
@@ -100,7 +101,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("site", help="check, draw or generate site files", description=__doc__)
     sub = parser.add_subparsers(dest="site_command", metavar="SUBCOMMAND", required=True)
 
-    check = sub.add_parser("check", help="validate a site file and print a summary (exit 1 with the reason if it is refused)")
+    check = sub.add_parser(
+        "check", help="validate a site file and print a summary (exit 1 with the reason if it is refused)"
+    )
     check.add_argument("file", help="site file (TOML)")
     check.set_defaults(func=cmd_check)
 

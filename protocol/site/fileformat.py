@@ -12,8 +12,9 @@ from __future__ import annotations
 import json
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 from .errors import SiteError
 from .model import TAG36H11_CODES, Params
@@ -111,7 +112,9 @@ def ident(v: Any) -> str:
     """An id the planner can write into ASP as a constant (and use in a key expression)."""
     s = string(v)
     if not ID_RE.match(s) or s in ASP_KEYWORDS or len(s) > ID_MAX:
-        raise Bad(f"{_describe(s)} is not a valid lower-case ASP constant (^[a-z][a-z0-9_]*$, at most {ID_MAX} characters, not 'not')")
+        raise Bad(
+            f"{_describe(s)} is not a valid lower-case ASP constant (^[a-z][a-z0-9_]*$, at most {ID_MAX} characters, not 'not')"
+        )
     return s
 
 
@@ -271,7 +274,9 @@ def check_document(file: str, doc: dict[str, Any]) -> dict[str, Any]:
     # What is there is checked first, so a malformed table is reported before a missing one.
     for key in REQUIRED_TOP:
         if key not in doc:
-            raise SiteError(file, key, f"missing required table [{key}]" if key in TABLES else f"missing required [[{key}]] entries")
+            raise SiteError(
+                file, key, f"missing required table [{key}]" if key in TABLES else f"missing required [[{key}]] entries"
+            )
     for key in ("rooms", "robots"):
         if not out[key]:
             raise SiteError(file, key, f"at least one [[{key}]] entry is required")

@@ -77,7 +77,9 @@ def _split_options(options: dict[str, Any]) -> tuple[Layout, dict[str, Any]]:
         elif key in param_fields:
             params[key] = value
         else:
-            raise TypeError(f"generate_site: unknown option {key!r} (layout: {', '.join(sorted(layout_fields))}; params: {', '.join(sorted(param_fields))})")
+            raise TypeError(
+                f"generate_site: unknown option {key!r} (layout: {', '.join(sorted(layout_fields))}; params: {', '.join(sorted(param_fields))})"
+            )
     return Layout(**layout_opts), params
 
 
@@ -96,7 +98,12 @@ def _structure(n_robots: int, layout: Layout, params: dict[str, Any], name: str,
     rooms = [{"id": "corridor", "rect": [0.0, _r(y_cs), _r(length), _r(y_cn)]}]
     north_w = length / n_north
     for i in range(n_north):
-        rooms.append({"id": f"north_{i + 1}", "rect": [_r(i * north_w), _r(y_cn), _r((i + 1) * north_w), _r(y_cn + layout.room_depth)]})
+        rooms.append(
+            {
+                "id": f"north_{i + 1}",
+                "rect": [_r(i * north_w), _r(y_cn), _r((i + 1) * north_w), _r(y_cn + layout.room_depth)],
+            }
+        )
     south_w = (length - layout.storage_width) / n_south
     storage_at = n_south // 2  # storage sits in the middle of the south row
     x = 0.0
@@ -113,8 +120,15 @@ def _structure(n_robots: int, layout: Layout, params: dict[str, Any], name: str,
     half_t = params.get("wall_thickness", Params.wall_thickness) / 2.0
     storage = next(r for r in rooms if r["id"] == "storage")
     sx0 = storage["rect"][0]
-    doors = [{"id": "d_storage", "rooms": ["corridor", "storage"], "center": [_r(sx0 + half_t + layout.storage_door_width / 2.0), _r(y_cs)],
-              "width": layout.storage_door_width, "human_operated": True}]
+    doors = [
+        {
+            "id": "d_storage",
+            "rooms": ["corridor", "storage"],
+            "center": [_r(sx0 + half_t + layout.storage_door_width / 2.0), _r(y_cs)],
+            "width": layout.storage_door_width,
+            "human_operated": True,
+        }
+    ]
     passages = []
     for room in rooms[1:]:
         if room["id"] == "storage":
@@ -139,12 +153,26 @@ def _structure(n_robots: int, layout: Layout, params: dict[str, Any], name: str,
             near_corridor = 1.6  # keep clear of the corridor doors' leaves
             lo, hi = (y0 + 0.8, y1 - near_corridor) if side == "south" else (y0 + near_corridor, y1 - 0.8)
             y = _r(rng.uniform(lo, hi)) if hi > lo else _r((y0 + y1) / 2.0)
-            passages.append({"rooms": [west["id"], east["id"]], "center": [_r(west["rect"][2]), y], "width": layout.passage_width})
-    robots = [{"id": f"r{i}", "start": [_r((i + 0.5) * length / n_robots), _r((y_cs + y_cn) / 2.0), 0.0]} for i in range(n_robots)]
+            passages.append(
+                {"rooms": [west["id"], east["id"]], "center": [_r(west["rect"][2]), y], "width": layout.passage_width}
+            )
+    robots = [
+        {"id": f"r{i}", "start": [_r((i + 0.5) * length / n_robots), _r((y_cs + y_cn) / 2.0), 0.0]}
+        for i in range(n_robots)
+    ]
     sx1 = storage["rect"][2]
     human = {"room": "storage", "position": [_r(sx1 - 1.2), 1.2]}
-    return {"site": {"name": name}, "params": params, "rooms": rooms, "doors": doors, "passages": passages,
-            "landmarks": [], "robots": robots, "objects": [], "human": human}
+    return {
+        "site": {"name": name},
+        "params": params,
+        "rooms": rooms,
+        "doors": doors,
+        "passages": passages,
+        "landmarks": [],
+        "robots": robots,
+        "objects": [],
+        "human": human,
+    }
 
 
 def _place_objects(site: Site, n_robots: int, per_robot: int, rng: random.Random) -> list[dict[str, Any]]:
@@ -155,7 +183,10 @@ def _place_objects(site: Site, n_robots: int, per_robot: int, rng: random.Random
         for _ in range(PLACEMENT_TRIES):
             room = rng.choice(candidates)
             x0, y0, x1, y1 = room.rect
-            x, y = _r(rng.uniform(x0 + OBJECT_CLEARANCE, x1 - OBJECT_CLEARANCE)), _r(rng.uniform(y0 + OBJECT_CLEARANCE, y1 - OBJECT_CLEARANCE))
+            x, y = (
+                _r(rng.uniform(x0 + OBJECT_CLEARANCE, x1 - OBJECT_CLEARANCE)),
+                _r(rng.uniform(y0 + OBJECT_CLEARANCE, y1 - OBJECT_CLEARANCE)),
+            )
             if min(box_distance(w.box, x, y) for w in site.walls) < OBJECT_CLEARANCE:
                 continue
             if any(in_swing(leaf, x, y, OBJECT_CLEARANCE) for leaf in site.door_leaves.values()):
@@ -164,7 +195,9 @@ def _place_objects(site: Site, n_robots: int, per_robot: int, rng: random.Random
                 continue
             break
         else:
-            raise ValueError(f"generate_site: no free place for object o{i} after {PLACEMENT_TRIES} tries (rooms too small for {n_robots * per_robot} objects)")
+            raise ValueError(
+                f"generate_site: no free place for object o{i} after {PLACEMENT_TRIES} tries (rooms too small for {n_robots * per_robot} objects)"
+            )
         placed.append((x, y))
         objects.append({"id": f"o{i}", "position": [x, y], "deliver_to": "storage", "robot": f"r{i // per_robot}"})
     return objects
@@ -181,7 +214,10 @@ def generate_site(robots: int, objects_per_robot: int = 3, seed: int = 0, **opti
     Deterministic for the same arguments; see the module docstring for the layout and options.
     Raises ``ValueError``/``TypeError`` for impossible or unknown options.
     """
-    for label, value, low, high in (("robots", robots, 1, MAX_ROBOTS), ("objects_per_robot", objects_per_robot, 0, MAX_OBJECTS_PER_ROBOT)):
+    for label, value, low, high in (
+        ("robots", robots, 1, MAX_ROBOTS),
+        ("objects_per_robot", objects_per_robot, 0, MAX_OBJECTS_PER_ROBOT),
+    ):
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise ValueError(f"generate_site: {label} must be an integer >= {low}, got {value!r}")
         if value > high:
@@ -202,8 +238,11 @@ def generate_site(robots: int, objects_per_robot: int = 3, seed: int = 0, **opti
         size=layout.tag_size,
     )
     doc["objects"] = _place_objects(bare, robots, objects_per_robot, rng)
-    header = (f"Generated by protocol.site.generate_site(robots={robots}, objects_per_robot={objects_per_robot}, seed={seed}"
-              + "".join(f", {k}={v!r}" for k, v in sorted(options.items())) + ").\nRegenerate rather than edit: `arroch site generate`.")
+    header = (
+        f"Generated by protocol.site.generate_site(robots={robots}, objects_per_robot={objects_per_robot}, seed={seed}"
+        + "".join(f", {k}={v!r}" for k, v in sorted(options.items()))
+        + ").\nRegenerate rather than edit: `arroch site generate`."
+    )
     text = dump_site({k: v for k, v in doc.items() if v or k == "site"}, header=header)
     loads_site(text, f"{name}.toml")  # a generated site is always valid; this refuses a generator bug loudly
     return text

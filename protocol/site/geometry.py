@@ -7,8 +7,8 @@ here works on horizontal and vertical lines and intervals along them.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Iterable
 
 from .model import DoorLeaf, Opening, Point, Room, WallSegment
 
@@ -101,7 +101,9 @@ def wall_lines(rooms: Iterable[Room]) -> dict[tuple[str, float], list[tuple[floa
     return {line: _merge(iv) for line, iv in sorted(raw.items())}
 
 
-def build_walls(rooms: Iterable[Room], openings: Iterable[Opening], thickness: float, height: float) -> list[WallSegment]:
+def build_walls(
+    rooms: Iterable[Room], openings: Iterable[Opening], thickness: float, height: float
+) -> list[WallSegment]:
     """Wall segments: every room edge, shared edges once, with each opening's gap cut out."""
     gaps: dict[tuple[str, float], list[tuple[float, float]]] = {}
     for o in openings:

@@ -69,8 +69,14 @@ def _fill_centres(grid: np.ndarray, box: Box, origin: tuple[float, float], res: 
     """Set cells whose centre lies in ``box`` (edges included)."""
     x0, y0, x1, y1 = box
     ny, nx = grid.shape
-    cols = slice(max(math.ceil((x0 - origin[0]) / res - 0.5 - 1e-9), 0), min(math.floor((x1 - origin[0]) / res - 0.5 + 1e-9) + 1, nx))
-    rows = slice(max(math.ceil((y0 - origin[1]) / res - 0.5 - 1e-9), 0), min(math.floor((y1 - origin[1]) / res - 0.5 + 1e-9) + 1, ny))
+    cols = slice(
+        max(math.ceil((x0 - origin[0]) / res - 0.5 - 1e-9), 0),
+        min(math.floor((x1 - origin[0]) / res - 0.5 + 1e-9) + 1, nx),
+    )
+    rows = slice(
+        max(math.ceil((y0 - origin[1]) / res - 0.5 - 1e-9), 0),
+        min(math.floor((y1 - origin[1]) / res - 0.5 + 1e-9) + 1, ny),
+    )
     grid[rows, cols] = value
 
 
@@ -86,14 +92,16 @@ def inflate_occupied(occupied: np.ndarray, resolution: float, radius: float) -> 
     return occupied | ((dist - 0.5) * resolution < radius)
 
 
-def build_grid(site: "Site", resolution: float, open_doors: frozenset[str], inflate: float) -> OccupancyGrid:
+def build_grid(site: Site, resolution: float, open_doors: frozenset[str], inflate: float) -> OccupancyGrid:
     if not (resolution > 0 and math.isfinite(resolution)):
         raise ValueError(f"occupancy_grid: resolution must be a positive number, got {resolution!r}")
     if not (inflate >= 0 and math.isfinite(inflate)):
         raise ValueError(f"occupancy_grid: inflate must be a non-negative number, got {inflate!r}")
     unknown = sorted(d for d in open_doors if d not in site.door_leaves)
     if unknown:
-        raise ValueError(f"occupancy_grid: open_doors: unknown door(s) {', '.join(unknown)} (doors are {', '.join(site.door_leaves)})")
+        raise ValueError(
+            f"occupancy_grid: open_doors: unknown door(s) {', '.join(unknown)} (doors are {', '.join(site.door_leaves)})"
+        )
     bx0, by0, bx1, by1 = site.bounds
     margin = site.params.wall_thickness / 2.0 + resolution
     origin = (bx0 - margin, by0 - margin)

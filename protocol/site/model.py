@@ -8,8 +8,9 @@ counter-clockwise from +x. Records are immutable; a :class:`Site` is built once 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Iterable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -102,7 +103,9 @@ class Opening:
         for rid, normal in self.normals:
             if rid == room_id:
                 return normal
-        raise ValueError(f"opening {self.id!r} does not connect room {room_id!r} (it joins {self.rooms[0]!r} and {self.rooms[1]!r})")
+        raise ValueError(
+            f"opening {self.id!r} does not connect room {room_id!r} (it joins {self.rooms[0]!r} and {self.rooms[1]!r})"
+        )
 
     def beside(self, room_id: str, distance: float) -> Point:
         """The point ``distance`` metres in front of the opening's centre, on ``room_id``'s side."""
@@ -287,7 +290,9 @@ class Site:
             raise KeyError(f"site {self.name!r} has no room {room_id!r}")
         return [(o.id, o.other(room_id)) for o in self.openings.values() if room_id in o.rooms]
 
-    def occupancy_grid(self, resolution: float = 0.05, open_doors: Iterable[str] = (), inflate: float = 0.0) -> "OccupancyGrid":
+    def occupancy_grid(
+        self, resolution: float = 0.05, open_doors: Iterable[str] = (), inflate: float = 0.0
+    ) -> OccupancyGrid:
         """A top-down grid of what a robot centre cannot occupy (see :mod:`protocol.site.grid`).
 
         Results are cached per arguments and read-only, so planners may call this freely.

@@ -52,7 +52,19 @@ def _draw_door(ax, o: Opening, site: Site) -> None:  # noqa: ANN001
     start, end = sorted((math.degrees(leaf.closed_yaw), math.degrees(leaf.open_yaw)))
     if end - start > 180:  # take the 90° way round
         start, end = end, start + 360
-    ax.add_patch(Arc((hx, hy), 2 * leaf.length, 2 * leaf.length, theta1=start, theta2=end, color=colour, lw=0.8, ls="--", zorder=4))
+    ax.add_patch(
+        Arc(
+            (hx, hy),
+            2 * leaf.length,
+            2 * leaf.length,
+            theta1=start,
+            theta2=end,
+            color=colour,
+            lw=0.8,
+            ls="--",
+            zorder=4,
+        )
+    )
 
 
 def _draw_passage(ax, o: Opening) -> None:  # noqa: ANN001
@@ -77,8 +89,27 @@ def render_site(site: Site, out: str | Path, dpi: int = 150) -> Path:
 
     for room in site.rooms.values():
         x0, y0, x1, y1 = room.rect
-        ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, facecolor=HUMAN_ROOM if room.id == site.human.room else ROOM, edgecolor="none", zorder=0))
-        ax.text(x0 + 0.2, y1 - 0.2, room.id, ha="left", va="top", fontsize=text_size + 1.5, color="#6d6a63", weight="bold", zorder=1)
+        ax.add_patch(
+            Rectangle(
+                (x0, y0),
+                x1 - x0,
+                y1 - y0,
+                facecolor=HUMAN_ROOM if room.id == site.human.room else ROOM,
+                edgecolor="none",
+                zorder=0,
+            )
+        )
+        ax.text(
+            x0 + 0.2,
+            y1 - 0.2,
+            room.id,
+            ha="left",
+            va="top",
+            fontsize=text_size + 1.5,
+            color="#6d6a63",
+            weight="bold",
+            zorder=1,
+        )
     for wall in site.walls:
         x0, y0, x1, y1 = wall.box
         ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, facecolor=WALL, edgecolor="none", zorder=3))
@@ -86,8 +117,18 @@ def render_site(site: Site, out: str | Path, dpi: int = 150) -> Path:
         _draw_door(ax, o, site) if o.kind == "door" else _draw_passage(ax, o)
         x, y, ha, va = _opening_label_pos(o, site, 0.12)
         colour = PASSAGE if o.kind == "passage" else (HUMAN_DOOR if o.human_operated else ROBOT_DOOR)
-        ax.text(x, y, o.id, ha=ha, va=va, fontsize=text_size - 0.5, color=colour, zorder=6,
-                rotation=0 if o.axis == "x" else 90, rotation_mode="anchor")
+        ax.text(
+            x,
+            y,
+            o.id,
+            ha=ha,
+            va=va,
+            fontsize=text_size - 0.5,
+            color=colour,
+            zorder=6,
+            rotation=0 if o.axis == "x" else 90,
+            rotation_mode="anchor",
+        )
 
     for lm in site.landmarks:
         corners = lm.corners(printed=True)
@@ -95,9 +136,23 @@ def render_site(site: Site, out: str | Path, dpi: int = 150) -> Path:
         ax.plot([x0, x1], [y0, y1], color=LANDMARK, lw=3.0, solid_capstyle="butt", zorder=6)
         nx, ny = math.cos(lm.yaw), math.sin(lm.yaw)
         px, py = lm.position[0], lm.position[1]
-        ax.annotate("", xy=(px + 0.28 * nx, py + 0.28 * ny), xytext=(px, py), zorder=6,
-                    arrowprops={"arrowstyle": "-|>", "color": LANDMARK, "lw": 0.7, "mutation_scale": 5})
-        ax.text(px + 0.42 * nx, py + 0.42 * ny, str(lm.tag), ha="center", va="center", fontsize=text_size - 1.5, color=LANDMARK, zorder=6)
+        ax.annotate(
+            "",
+            xy=(px + 0.28 * nx, py + 0.28 * ny),
+            xytext=(px, py),
+            zorder=6,
+            arrowprops={"arrowstyle": "-|>", "color": LANDMARK, "lw": 0.7, "mutation_scale": 5},
+        )
+        ax.text(
+            px + 0.42 * nx,
+            py + 0.42 * ny,
+            str(lm.tag),
+            ha="center",
+            va="center",
+            fontsize=text_size - 1.5,
+            color=LANDMARK,
+            zorder=6,
+        )
 
     robot_index = {rid: i for i, rid in enumerate(site.robots)}
     for obj in site.objects.values():
@@ -106,20 +161,35 @@ def render_site(site: Site, out: str | Path, dpi: int = 150) -> Path:
         ax.add_patch(Rectangle((x - 0.15, y - 0.15), 0.3, 0.3, facecolor=colour, edgecolor="black", lw=0.6, zorder=7))
         # Write towards the room's middle, so the label stays inside the room.
         left = x > site.rooms[obj.room].center[0]
-        ax.text(x - 0.25 if left else x + 0.25, y, f"{obj.id} ({obj.robot}) \u2192 {obj.deliver_to}", ha="right" if left else "left",
-                va="center", fontsize=text_size - 0.5, zorder=7)
+        ax.text(
+            x - 0.25 if left else x + 0.25,
+            y,
+            f"{obj.id} ({obj.robot}) \u2192 {obj.deliver_to}",
+            ha="right" if left else "left",
+            va="center",
+            fontsize=text_size - 0.5,
+            zorder=7,
+        )
     radius = site.params.robot_radius
     for rid, robot in site.robots.items():
         colour = _robot_colour(robot_index[rid])
         x, y, theta = robot.start
         ax.add_patch(Circle((x, y), radius, facecolor=colour, edgecolor="black", lw=0.8, zorder=7))
-        ax.plot([x, x + 1.6 * radius * math.cos(theta)], [y, y + 1.6 * radius * math.sin(theta)], color="black", lw=1.4, zorder=8)
+        ax.plot(
+            [x, x + 1.6 * radius * math.cos(theta)],
+            [y, y + 1.6 * radius * math.sin(theta)],
+            color="black",
+            lw=1.4,
+            zorder=8,
+        )
         # The id goes behind the robot (opposite its heading), so the heading line never hides it.
         lx, ly = x - (radius + 0.2) * math.cos(theta), y - (radius + 0.2) * math.sin(theta)
         ax.text(lx, ly, rid, ha="center", va="center", fontsize=text_size + 0.5, weight="bold", zorder=8)
     hx, hy = site.human.position
     ax.plot([hx], [hy], marker="*", markersize=16, color=HUMAN, markeredgecolor="black", zorder=8)
-    ax.text(hx, hy - 0.3, "human", ha="center", va="top", fontsize=text_size + 0.5, color=HUMAN, weight="bold", zorder=8)
+    ax.text(
+        hx, hy - 0.3, "human", ha="center", va="top", fontsize=text_size + 0.5, color=HUMAN, weight="bold", zorder=8
+    )
 
     _scale_bar(ax, bx0 + 0.3, by0 - 0.75, 5.0 if width >= 12 else 1.0)
     ax.set_xlim(bx0 - 0.5, bx1 + 0.5)
@@ -130,17 +200,47 @@ def render_site(site: Site, out: str | Path, dpi: int = 150) -> Path:
     ax.tick_params(labelsize=7)
     ax.grid(True, color="#dddddd", lw=0.4, zorder=-1)
     ax.set_axisbelow(True)
-    ax.set_title(f"site {site.name}: {len(site.rooms)} rooms, {len(site.doors)} doors, {len(site.passages)} passages, "
-                 f"{len(site.landmarks)} landmarks, {len(site.robots)} robots, {len(site.objects)} objects", fontsize=10)
+    ax.set_title(
+        f"site {site.name}: {len(site.rooms)} rooms, {len(site.doors)} doors, {len(site.passages)} passages, "
+        f"{len(site.landmarks)} landmarks, {len(site.robots)} robots, {len(site.objects)} objects",
+        fontsize=10,
+    )
     handles = [
         Patch(facecolor=WALL, label=f"wall ({site.params.wall_thickness:g} m, {site.params.wall_height:g} m high)"),
         Line2D([], [], color=HUMAN_DOOR, lw=3, label="human-operated door (leaf, swing)"),
         Line2D([], [], color=ROBOT_DOOR, lw=3, label="door robots open (leaf, swing)"),
         Line2D([], [], color=PASSAGE, lw=2, ls=(0, (1.5, 1.2)), label="passage (no door)"),
         Line2D([], [], color=LANDMARK, lw=3, marker=">", markersize=4, label="landmark: tag id, facing"),
-        Line2D([], [], marker="o", color="none", markerfacecolor=_robot_colour(0), markeredgecolor="black", markersize=9, label="robot, heading"),
-        Line2D([], [], marker="s", color="none", markerfacecolor=_robot_colour(0), markeredgecolor="black", markersize=7, label="object (owner) \u2192 destination"),
-        Line2D([], [], marker="*", color="none", markerfacecolor=HUMAN, markeredgecolor="black", markersize=12, label="human"),
+        Line2D(
+            [],
+            [],
+            marker="o",
+            color="none",
+            markerfacecolor=_robot_colour(0),
+            markeredgecolor="black",
+            markersize=9,
+            label="robot, heading",
+        ),
+        Line2D(
+            [],
+            [],
+            marker="s",
+            color="none",
+            markerfacecolor=_robot_colour(0),
+            markeredgecolor="black",
+            markersize=7,
+            label="object (owner) \u2192 destination",
+        ),
+        Line2D(
+            [],
+            [],
+            marker="*",
+            color="none",
+            markerfacecolor=HUMAN,
+            markeredgecolor="black",
+            markersize=12,
+            label="human",
+        ),
     ]
     fig.legend(handles=handles, loc="lower center", ncol=4, fontsize=8, frameon=False)
     fig.tight_layout(rect=(0, 0.08, 1, 1))

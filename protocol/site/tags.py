@@ -13,8 +13,8 @@ door leaf, never pass a corner). Heights alternate between ``heights`` along eac
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Iterable
 
 from .model import TAG_PRINT_SCALE, DoorLeaf, Opening, Room
 
@@ -62,7 +62,9 @@ def _walls(room: Room, thickness: float) -> list[_Wall]:
     ]
 
 
-def _blocked(wall: _Wall, openings: Iterable[Opening], leaves: Iterable[DoorLeaf], thickness: float) -> list[tuple[float, float]]:
+def _blocked(
+    wall: _Wall, openings: Iterable[Opening], leaves: Iterable[DoorLeaf], thickness: float
+) -> list[tuple[float, float]]:
     """Intervals along the wall where no printed tag may go: openings' gaps and open leaves."""
     blocked = []
     for o in openings:
@@ -127,7 +129,9 @@ def _sweep(wall: _Wall, blocked: list[tuple[float, float]], size: float, view: V
         while sum(inside(c, x) for c in chosen) < 2:
             fits = [c for c in candidates if inside(c, x) and all(abs(c - o) >= printed + CLEARANCE for o in chosen)]
             if not fits:
-                raise ValueError(f"no room for two tags in view of a camera at {x:.2f} m along the wall {wall.axis} = {wall.coord:g}")
+                raise ValueError(
+                    f"no room for two tags in view of a camera at {x:.2f} m along the wall {wall.axis} = {wall.coord:g}"
+                )
             chosen.append(max(fits))
         x += STEP
     return sorted(chosen)
@@ -151,7 +155,9 @@ def place_room_tags(
     reach = view.min_wall_distance * view.tan_half_v
     for z in heights:
         if z - size / 2.0 < view.camera_height - reach or z + size / 2.0 > view.camera_height + reach:
-            raise ValueError(f"tags at {z:g} m are out of the vertical view ({view.camera_height - reach:.2f}..{view.camera_height + reach:.2f} m)")
+            raise ValueError(
+                f"tags at {z:g} m are out of the vertical view ({view.camera_height - reach:.2f}..{view.camera_height + reach:.2f} m)"
+            )
     openings, leaves = list(openings), list(leaves)
     out: list[dict] = []
     tag = first_tag

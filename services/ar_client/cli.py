@@ -108,8 +108,10 @@ def _localize(args: argparse.Namespace) -> int:
         print(json.dumps(data))
     elif result.ok:
         x, y, z = data["position"]
-        print(f"position {x:.4f} {y:.4f} {z:.4f} m, quaternion {' '.join(f'{v:.5f}' for v in data['quaternion'])}, "
-              f"tags {data['tags']}, RMSE {data['reprojection_rmse_px']:.3f} px")
+        print(
+            f"position {x:.4f} {y:.4f} {z:.4f} m, quaternion {' '.join(f'{v:.5f}' for v in data['quaternion'])}, "
+            f"tags {data['tags']}, RMSE {data['reprojection_rmse_px']:.3f} px"
+        )
     else:
         print(f"no pose: {result.reason}")
     return 0 if result.ok else EXIT_NO_POSE
@@ -144,7 +146,9 @@ def _render(args: argparse.Namespace) -> int:
         return _error(ValueError(f"cannot write {args.out}"))
     loc = pipeline.last_localization
     if overlay.ok:
-        print(f"wrote {args.out}: pose from tags {overlay.tags}, RMSE {overlay.reprojection_rmse:.3f} px, {len(overlay.primitives)} primitives")
+        print(
+            f"wrote {args.out}: pose from tags {overlay.tags}, RMSE {overlay.reprojection_rmse:.3f} px, {len(overlay.primitives)} primitives"
+        )
     else:
         print(f"wrote {args.out}: no pose ({loc.reason if loc else 'lost'}); only the status is drawn")
     return 0
@@ -166,7 +170,9 @@ def _tags_sheet(args: argparse.Namespace) -> int:
         files = write_sheet(site, args.out, dpi=args.dpi)
     except (ValueError, FileNotFoundError) as exc:
         return _error(exc)
-    print(f"wrote {len(site.landmarks)} tag page(s) to {', '.join(str(f) for f in files[:3])}{' ...' if len(files) > 3 else ''}")
+    print(
+        f"wrote {len(site.landmarks)} tag page(s) to {', '.join(str(f) for f in files[:3])}{' ...' if len(files) > 3 else ''}"
+    )
     return 0
 
 
@@ -174,14 +180,22 @@ def _tags_sheet(args: argparse.Namespace) -> int:
 
 
 def _add_detector(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--detector", choices=("opencv", "apriltag"), default="opencv",
-                        help="tag detector: OpenCV ArUco + edge-fit corners (default), or the AprilTag 3 library (pupil-apriltags)")
+    parser.add_argument(
+        "--detector",
+        choices=("opencv", "apriltag"),
+        default="opencv",
+        help="tag detector: OpenCV ArUco + edge-fit corners (default), or the AprilTag 3 library (pupil-apriltags)",
+    )
 
 
 def _add_image_args(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--site", "--config", dest="site", metavar="FILE", help="site file (TOML); default: the packaged 'office' site")
+    parser.add_argument(
+        "--site", "--config", dest="site", metavar="FILE", help="site file (TOML); default: the packaged 'office' site"
+    )
     parser.add_argument("--image", required=True, metavar="IMG", help="camera image (PNG/JPEG)")
-    parser.add_argument("--intrinsics", required=True, metavar="fx,fy,cx,cy,w,h", help="camera intrinsics (optionally ,k1,k2,p1,p2,k3)")
+    parser.add_argument(
+        "--intrinsics", required=True, metavar="fx,fy,cx,cy,w,h", help="camera intrinsics (optionally ,k1,k2,p1,p2,k3)"
+    )
     _add_detector(parser)
     parser.add_argument("--log-level", default=None, choices=("DEBUG", "INFO", "WARNING", "ERROR"))
 
@@ -189,35 +203,67 @@ def _add_image_args(parser: argparse.ArgumentParser) -> None:
 def register(sub: argparse._SubParsersAction) -> None:
     from . import __doc__ as package_doc
 
-    ar = sub.add_parser("ar", help="AR client: localise the tablet from wall tags, overlay robots and plans, feedback buttons",
-                        description=package_doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ar = sub.add_parser(
+        "ar",
+        help="AR client: localise the tablet from wall tags, overlay robots and plans, feedback buttons",
+        description=package_doc,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     add_common_arguments(ar)
-    ar.add_argument("--source", default="sim", metavar="SRC", help="sim (camera/<cid>/frame over Zenoh, default), video:PATH, device:N or images:DIR")
-    ar.add_argument("--camera", default="tablet", metavar="CID", help="camera id: frames on camera/<CID>/frame, overlays on ar/<CID>/overlay (default tablet)")
-    ar.add_argument("--intrinsics", metavar="fx,fy,cx,cy,w,h", help="calibration for video/device/images sources (images: or DIR/intrinsics.json)")
+    ar.add_argument(
+        "--source",
+        default="sim",
+        metavar="SRC",
+        help="sim (camera/<cid>/frame over Zenoh, default), video:PATH, device:N or images:DIR",
+    )
+    ar.add_argument(
+        "--camera",
+        default="tablet",
+        metavar="CID",
+        help="camera id: frames on camera/<CID>/frame, overlays on ar/<CID>/overlay (default tablet)",
+    )
+    ar.add_argument(
+        "--intrinsics",
+        metavar="fx,fy,cx,cy,w,h",
+        help="calibration for video/device/images sources (images: or DIR/intrinsics.json)",
+    )
     ar.add_argument("--record", metavar="OUT.mp4", help="also write the annotated frames to this video file")
     ar.add_argument("--no-feedback", action="store_true", help="no feedback buttons")
-    ar.add_argument("--snapshots", metavar="DIR", help="keep a few annotated frames there, spread over the run, as PNG (+ the Overlay "
-                                                   "as JSON): frames with a pose, a robot and an intent drawn, whose drawing matches the image")
+    ar.add_argument(
+        "--snapshots",
+        metavar="DIR",
+        help="keep a few annotated frames there, spread over the run, as PNG (+ the Overlay "
+        "as JSON): frames with a pose, a robot and an intent drawn, whose drawing matches the image",
+    )
     ar.add_argument("--snapshot-count", type=int, metavar="N", help="frames kept with --snapshots (default 5)")
     _add_detector(ar)
     ar.set_defaults(func=_run_service)
     ar_sub = ar.add_subparsers(dest="ar_command", metavar="{localize,render}")
 
-    loc = ar_sub.add_parser("localize", help="tablet pose from one image, as text or JSON",
-                            description="Estimate the camera pose of one image from the site's landmark tags. "
-                            "JSON: {ok, position [x,y,z], quaternion [x,y,z,w] of R_world_camera, tags, reprojection_rmse_px} "
-                            "or {ok: false, reason}. Exit 1 when there is no pose.")
+    loc = ar_sub.add_parser(
+        "localize",
+        help="tablet pose from one image, as text or JSON",
+        description="Estimate the camera pose of one image from the site's landmark tags. "
+        "JSON: {ok, position [x,y,z], quaternion [x,y,z,w] of R_world_camera, tags, reprojection_rmse_px} "
+        "or {ok: false, reason}. Exit 1 when there is no pose.",
+    )
     _add_image_args(loc)
     loc.add_argument("--json", action="store_true", help="print JSON")
-    loc.add_argument("--gravity", metavar="GX,GY,GZ", help="gravity measured at capture, in the camera frame (OpenCV axes: x right, "
-                     "y down, z forward; pointing down, any unit): picks a single tag's right planar solution, adds gravity_error_deg")
+    loc.add_argument(
+        "--gravity",
+        metavar="GX,GY,GZ",
+        help="gravity measured at capture, in the camera frame (OpenCV axes: x right, "
+        "y down, z forward; pointing down, any unit): picks a single tag's right planar solution, adds gravity_error_deg",
+    )
     loc.set_defaults(func=_localize)
 
-    ren = ar_sub.add_parser("render", help="draw a given world state over an image",
-                            description="Localise the image, then draw robots, intents and doors from STATE.json over it. "
-                            "STATE.json: {\"time\": t, \"poses\": {rid: [x, y, theta]}, \"intents\": {rid: [[t, x, y, theta], ...]}, "
-                            "\"doors\": {did: true|false (open)}, \"status\": {rid: state}} (all optional).")
+    ren = ar_sub.add_parser(
+        "render",
+        help="draw a given world state over an image",
+        description="Localise the image, then draw robots, intents and doors from STATE.json over it. "
+        'STATE.json: {"time": t, "poses": {rid: [x, y, theta]}, "intents": {rid: [[t, x, y, theta], ...]}, '
+        '"doors": {did: true|false (open)}, "status": {rid: state}} (all optional).',
+    )
     _add_image_args(ren)
     ren.add_argument("--state", required=True, metavar="STATE.json", help="world state to draw")
     ren.add_argument("--out", required=True, metavar="OUT.png", help="annotated image to write")
@@ -225,9 +271,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     tags = sub.add_parser("tags", help="printable landmark tags")
     tags_sub = tags.add_subparsers(dest="tags_command", metavar="{sheet}")
-    sheet = tags_sub.add_parser("sheet", help="one page per landmark: the tag at true size, its id, where it goes, which way is up")
-    sheet.add_argument("--site", "--config", dest="site", metavar="FILE", help="site file (TOML); default: the packaged 'office' site")
-    sheet.add_argument("--out", required=True, metavar="tags.pdf", help="a .pdf file, or a .png name / folder for one PNG per tag")
+    sheet = tags_sub.add_parser(
+        "sheet", help="one page per landmark: the tag at true size, its id, where it goes, which way is up"
+    )
+    sheet.add_argument(
+        "--site", "--config", dest="site", metavar="FILE", help="site file (TOML); default: the packaged 'office' site"
+    )
+    sheet.add_argument(
+        "--out", required=True, metavar="tags.pdf", help="a .pdf file, or a .png name / folder for one PNG per tag"
+    )
     sheet.add_argument("--dpi", type=int, default=300, help="PNG resolution (default 300)")
     sheet.add_argument("--log-level", default=None, choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     sheet.set_defaults(func=_tags_sheet)

@@ -32,8 +32,8 @@ from __future__ import annotations
 import atexit
 import logging
 import threading
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Iterable, Sequence
 
 import cv2
 import numpy as np
@@ -112,7 +112,9 @@ def apriltag_available() -> bool:
 def touches_border(corners: np.ndarray, width: int, height: int, margin: float = BORDER_MARGIN_PX) -> bool:
     """True when any corner lies within ``margin`` pixels of the image edge (or outside it)."""
     u, v = corners[:, 0], corners[:, 1]
-    return bool((u < margin).any() or (v < margin).any() or (u > width - 1 - margin).any() or (v > height - 1 - margin).any())
+    return bool(
+        (u < margin).any() or (v < margin).any() or (u > width - 1 - margin).any() or (v > height - 1 - margin).any()
+    )
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:
@@ -144,7 +146,9 @@ class TagDetector:
         if method not in ("apriltag", "opencv"):
             raise ValueError(f"unknown detector {method!r} (expected 'apriltag' or 'opencv')")
         if method == "apriltag" and not apriltag_available():
-            log.warning("pupil-apriltags is not installed: falling back to OpenCV's ArUco detector (less accurate corners)")
+            log.warning(
+                "pupil-apriltags is not installed: falling back to OpenCV's ArUco detector (less accurate corners)"
+            )
             method = "opencv"
         self.method = method
         self.known_ids = None if known_ids is None else frozenset(int(i) for i in known_ids)
@@ -193,7 +197,15 @@ class TagDetector:
                 dets = self._pupil.detect(gray)
             for d in dets:
                 if d.hamming <= self.max_hamming and self._keep(d.tag_id):
-                    out.append(TagDetection(int(d.tag_id), apriltag_corners(d.corners), "apriltag", float(d.decision_margin), int(d.hamming)))
+                    out.append(
+                        TagDetection(
+                            int(d.tag_id),
+                            apriltag_corners(d.corners),
+                            "apriltag",
+                            float(d.decision_margin),
+                            int(d.hamming),
+                        )
+                    )
         else:
             corners, ids, rejected = self._aruco.detectMarkers(gray)
             if ids is not None:
@@ -206,7 +218,9 @@ class TagDetector:
                 out += self._small(gray, rejected, out, lens)
         return out
 
-    def _small(self, gray: np.ndarray, rejected: Sequence[np.ndarray], found: list[TagDetection], lens: Lens | None) -> list[TagDetection]:
+    def _small(
+        self, gray: np.ndarray, rejected: Sequence[np.ndarray], found: list[TagDetection], lens: Lens | None
+    ) -> list[TagDetection]:
         """Small tags read from ArUco's rejected quads (:mod:`smalltags`), away from tags already found."""
         centres = np.array([d.corners.mean(axis=0) for d in found]).reshape(-1, 2)
         quads = []
@@ -215,7 +229,10 @@ class TagDetector:
             if len(centres) and (np.linalg.norm(centres - q.mean(axis=0), axis=1) < 4.0).any():
                 continue
             quads.append(q)
-        return [TagDetection(i, opencv_corners(q), "opencv", score) for i, q, score in decode_quads(gray, quads, self.known_ids, lens)]
+        return [
+            TagDetection(i, opencv_corners(q), "opencv", score)
+            for i, q, score in decode_quads(gray, quads, self.known_ids, lens)
+        ]
 
     def detect(self, image: np.ndarray, lens: Lens | None = None) -> list[TagDetection]:
         """All known tags in the frame, wholly inside it, one detection per id (the most confident).
@@ -227,7 +244,9 @@ class TagDetector:
         found = [d for d in self._run(gray, self._decimation_for(gray), lens) if not touches_border(d.corners, w, h)]
         return _one_per_id(found)
 
-    def detect_regions(self, image: np.ndarray, regions: Sequence[tuple[int, np.ndarray]], lens: Lens | None = None) -> list[TagDetection]:
+    def detect_regions(
+        self, image: np.ndarray, regions: Sequence[tuple[int, np.ndarray]], lens: Lens | None = None
+    ) -> list[TagDetection]:
         """Search crops for specific tags: ``regions`` holds ``(tag_id, predicted corners (4, 2))``.
 
         Each crop is the predicted quad's bounding box grown by its own size, searched at full

@@ -16,7 +16,7 @@ opacity.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import cv2
 import numpy as np
@@ -105,7 +105,9 @@ def _draw_one(img: np.ndarray, p: Primitive) -> None:
     elif p.kind == "circle":
         if len(pts) >= 1:
             centre = tuple(int(v) for v in _int_pts(pts[0]))
-            cv2.circle(img, centre, int(round(p.radius * 16.0)), colour, -1 if p.width <= 0 else width, cv2.LINE_AA, shift=4)
+            cv2.circle(
+                img, centre, int(round(p.radius * 16.0)), colour, -1 if p.width <= 0 else width, cv2.LINE_AA, shift=4
+            )
     elif p.kind == "arrow":
         if len(pts) >= 2:
             tail, head = pts[0], pts[-1]
@@ -113,7 +115,16 @@ def _draw_one(img: np.ndarray, p: Primitive) -> None:
             if length < 1.0:
                 return
             tip = min(0.4, 12.0 / length)  # head about 12 px, never more than 40 % of the arrow
-            cv2.arrowedLine(img, tuple(int(v) for v in _int_pts(tail)), tuple(int(v) for v in _int_pts(head)), colour, width, cv2.LINE_AA, shift=4, tipLength=tip)
+            cv2.arrowedLine(
+                img,
+                tuple(int(v) for v in _int_pts(tail)),
+                tuple(int(v) for v in _int_pts(head)),
+                colour,
+                width,
+                cv2.LINE_AA,
+                shift=4,
+                tipLength=tip,
+            )
     elif p.kind == "text":
         if len(pts) >= 1 and p.text:
             height = p.radius if p.radius > 0 else 16.0
@@ -184,4 +195,13 @@ def _bounds(prims: Sequence[Primitive], w: int, h: int) -> tuple[int, int, int, 
 def _shift(p: Primitive, dx: float, dy: float) -> Primitive:
     """A copy of ``p`` moved by (dx, dy) pixels."""
     moved = [[x + dx, y + dy] for x, y in p.points]
-    return Primitive(kind=p.kind, points=moved, color=p.color, width=p.width, radius=p.radius, text=p.text, style=p.style, layer=p.layer)
+    return Primitive(
+        kind=p.kind,
+        points=moved,
+        color=p.color,
+        width=p.width,
+        radius=p.radius,
+        text=p.text,
+        style=p.style,
+        layer=p.layer,
+    )

@@ -23,9 +23,10 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Any, Callable
+from typing import Any
 
 from protocol.messages import ConstraintSet, FeedbackAck, Primitive
 
@@ -98,7 +99,7 @@ class FeedbackPanel:
         self._buttons: list[Button] = []
 
     @staticmethod
-    def for_site(site, sender: Sender | None = None) -> "FeedbackPanel":  # noqa: ANN001
+    def for_site(site, sender: Sender | None = None) -> FeedbackPanel:  # noqa: ANN001
         """The panel for ``site`` with the packaged constraint library (empty if the restrictor is absent)."""
         try:
             from services.restrictor.library import library_for_site
@@ -140,7 +141,11 @@ class FeedbackPanel:
         choices = self._choices(param)
         with self._lock:
             current = self._values[entry_id].get(name)
-            nxt = choices[(choices.index(current) + 1) % len(choices)] if current in choices else (choices[0] if choices else None)
+            nxt = (
+                choices[(choices.index(current) + 1) % len(choices)]
+                if current in choices
+                else (choices[0] if choices else None)
+            )
             self._values[entry_id][name] = nxt
             return nxt
 
@@ -176,7 +181,9 @@ class FeedbackPanel:
             if self._thread is not None and self._thread.is_alive():
                 return False  # one request at a time: the human sees each answer
             self.result = Result(entry_id, values, "pending", at=time.monotonic())
-            self._thread = threading.Thread(target=self._send, args=(entry_id, values), name="feedback-send", daemon=True)
+            self._thread = threading.Thread(
+                target=self._send, args=(entry_id, values), name="feedback-send", daemon=True
+            )
             self._thread.start()
         return True
 
@@ -192,7 +199,9 @@ class FeedbackPanel:
                 result = Result(entry_id, values, "no answer", reason="no restrictor answered", at=time.monotonic())
             else:
                 status = "accepted" if ack.accepted else "refused"
-                result = Result(entry_id, values, status, reason=ack.reason, constraint_id=ack.constraint_id, at=time.monotonic())
+                result = Result(
+                    entry_id, values, status, reason=ack.reason, constraint_id=ack.constraint_id, at=time.monotonic()
+                )
         log.info("feedback %s %s: %s %s", entry_id, values, result.status, result.reason)
         with self._lock:
             self.result = result
@@ -232,7 +241,11 @@ class FeedbackPanel:
             if y + 2 * row > height - 2 * row:
                 break  # no room for more entries on a small frame
             ready = self.ready(e["id"])
-            bg = BG_PENDING if pending and self.result and self.result.entry == e["id"] else (BG if ready else BG_DISABLED)
+            bg = (
+                BG_PENDING
+                if pending and self.result and self.result.entry == e["id"]
+                else (BG if ready else BG_DISABLED)
+            )
             rect = (x0, y, x0 + panel_w, y + row)
             prims += _box(rect, bg)
             prims.append(_label(rect, _fit(e["label"], panel_w - 2 * pad, text_px), text_px, FG if ready else FG_DIM))
@@ -252,7 +265,9 @@ class FeedbackPanel:
                     buttons.append(Button(crect, ("cycle", e["id"], p["name"])))
                 y += row * 0.85
             y += pad * 1.5
-        if self.result is not None and (self.result.status == "pending" or time.monotonic() - self.result.at < RESULT_SHOWN_FOR):
+        if self.result is not None and (
+            self.result.status == "pending" or time.monotonic() - self.result.at < RESULT_SHOWN_FOR
+        ):
             r = self.result
             colour = OK if r.status == "accepted" else (FG if r.status == "pending" else BAD)
             text = f"{r.entry}: {r.status}" + (f" - {r.reason}" if r.reason else "")
@@ -271,7 +286,9 @@ def _box(rect: tuple[float, float, float, float], colour: list[int]) -> list[Pri
 def _label(rect: tuple[float, float, float, float], text: str, size: float, colour: list[int]) -> Primitive:
     x0, y0, _x1, y1 = rect
     baseline = (y0 + y1) / 2.0 + size * 0.35
-    return Primitive(kind="text", points=[[x0 + size * 0.4, baseline]], text=text, color=list(colour), radius=size, layer="ui")
+    return Primitive(
+        kind="text", points=[[x0 + size * 0.4, baseline]], text=text, color=list(colour), radius=size, layer="ui"
+    )
 
 
 def _fit(text: str, max_px: float, size: float) -> str:

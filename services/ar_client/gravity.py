@@ -40,7 +40,7 @@ class GravityPrior:
     sigma_deg: float = 1.0
 
     @staticmethod
-    def from_vector(vector, sigma_deg: float = 1.0) -> "GravityPrior | None":  # noqa: ANN001
+    def from_vector(vector, sigma_deg: float = 1.0) -> GravityPrior | None:  # noqa: ANN001
         """A prior from a measured vector; None when there is none (empty, non-finite or ~zero)."""
         if vector is None:
             return None
@@ -95,7 +95,9 @@ def _rz(yaw: np.ndarray) -> np.ndarray:
     return out
 
 
-def yaw_scan(obj: np.ndarray, img: np.ndarray, K: np.ndarray, dist: np.ndarray, prior: GravityPrior) -> list[tuple[np.ndarray, np.ndarray]]:
+def yaw_scan(
+    obj: np.ndarray, img: np.ndarray, K: np.ndarray, dist: np.ndarray, prior: GravityPrior
+) -> list[tuple[np.ndarray, np.ndarray]]:
     """Candidate (rvec, tvec) pairs of the gravity-constrained pose, best first.
 
     Global over yaw: the reprojection error is evaluated on a :data:`YAW_STEP` grid (the position of

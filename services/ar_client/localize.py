@@ -31,15 +31,17 @@ gravity picks the right one where the pixels cannot. Without gravity nothing cha
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import cv2
 import numpy as np
 
-from .detect import TagDetection
 from protocol.frames import CameraPose, rotation_angle
-from .gravity import GravityPrior, gravity_error, refine as refine_with_gravity, yaw_scan
+
+from .detect import TagDetection
+from .gravity import GravityPrior, gravity_error, yaw_scan
+from .gravity import refine as refine_with_gravity
 from .project import Intrinsics
 
 #: Candidates within this factor (plus ``AMBIGUOUS_SLACK_PX``) of the best RMSE count as equally good fits.
@@ -116,9 +118,13 @@ class Localizer:
         gravity_gate_deg: float = 10.0,
     ) -> None:
         self.site = site
-        self.landmarks: dict[int, np.ndarray] = {lm.tag: np.asarray(lm.corners(), dtype=np.float64) for lm in site.landmarks}
+        self.landmarks: dict[int, np.ndarray] = {
+            lm.tag: np.asarray(lm.corners(), dtype=np.float64) for lm in site.landmarks
+        }
         self.normals: dict[int, np.ndarray] = {lm.tag: np.asarray(lm.normal, dtype=np.float64) for lm in site.landmarks}
-        self.centres: dict[int, np.ndarray] = {lm.tag: np.asarray(lm.position, dtype=np.float64) for lm in site.landmarks}
+        self.centres: dict[int, np.ndarray] = {
+            lm.tag: np.asarray(lm.position, dtype=np.float64) for lm in site.landmarks
+        }
         self.max_rmse_px = max_rmse_px
         self.outlier_px = outlier_px
         self.height_range = height_range
@@ -135,7 +141,9 @@ class Localizer:
 
     # ------------------------------------------------------------------ public
 
-    def localize(self, detections: Sequence[TagDetection], intrinsics: Intrinsics, stamp: float, gravity=None) -> Localization:  # noqa: ANN001
+    def localize(
+        self, detections: Sequence[TagDetection], intrinsics: Intrinsics, stamp: float, gravity=None
+    ) -> Localization:  # noqa: ANN001
         """Solve this frame's pose and update the tracking state (only good poses are remembered).
 
         ``gravity``: the measured gravity in the camera frame (pointing down, any magnitude), or None.
@@ -143,7 +151,11 @@ class Localizer:
         self._gravity = GravityPrior.from_vector(gravity, self.gravity_sigma_deg)
         known = [d for d in detections if d.tag_id in self.landmarks]
         if not known:
-            why = "no landmark tag in view" if not detections else f"tags {sorted(d.tag_id for d in detections)} are not in the site"
+            why = (
+                "no landmark tag in view"
+                if not detections
+                else f"tags {sorted(d.tag_id for d in detections)} are not in the site"
+            )
             return self._lost(stamp, why, [])
         prior = self.prior(stamp)
         self._failure = ""
@@ -167,9 +179,13 @@ class Localizer:
             break
         if result is None:
             detail = f": {self._failure}" if self._failure else ""
-            return self._lost(stamp, f"no plausible pose fits the detected tags{detail}", sorted(d.tag_id for d in known))
+            return self._lost(
+                stamp, f"no plausible pose fits the detected tags{detail}", sorted(d.tag_id for d in known)
+            )
         if result.rmse_px > self.max_rmse_px:
-            return self._lost(stamp, f"reprojection RMSE {result.rmse_px:.2f} px exceeds {self.max_rmse_px} px", result.tags)
+            return self._lost(
+                stamp, f"reprojection RMSE {result.rmse_px:.2f} px exceeds {self.max_rmse_px} px", result.tags
+            )
         result.rejected = sorted(rejected)
         self.last = result
         return result
@@ -187,7 +203,9 @@ class Localizer:
         age = stamp - self.last.stamp
         return self.last.pose if 0.0 <= age <= self.track_max_age else None
 
-    def _best_leave_one_out(self, used: list[TagDetection], K: Intrinsics, stamp: float, prior: CameraPose | None) -> Localization | None:
+    def _best_leave_one_out(
+        self, used: list[TagDetection], K: Intrinsics, stamp: float, prior: CameraPose | None
+    ) -> Localization | None:
         best: Localization | None = None
         for i in range(len(used)):
             r = self._solve(used[:i] + used[i + 1 :], K, stamp, prior)
@@ -195,7 +213,9 @@ class Localizer:
                 best = r
         return best
 
-    def _solve(self, used: list[TagDetection], K: Intrinsics, stamp: float, prior: CameraPose | None) -> Localization | None:
+    def _solve(
+        self, used: list[TagDetection], K: Intrinsics, stamp: float, prior: CameraPose | None
+    ) -> Localization | None:
         """Best plausible refined candidate for these tags, or None."""
         obj = np.concatenate([self.landmarks[d.tag_id] for d in used]).astype(np.float64)
         img = np.concatenate([d.corners for d in used]).astype(np.float64)
@@ -224,12 +244,19 @@ class Localizer:
             # A gravity-consistent minimum next to an unconstrained one would refine to the same pose.
             for rvec, tvec in yaw_scan(obj, img, Km, dist, gravity):
                 pose = CameraPose.from_rvec_tvec(rvec, tvec)
-                if not any(rotation_angle(pose.R_wc, c.pose.R_wc) < SAME_SEED_RAD and np.linalg.norm(pose.position - c.pose.position) < SAME_SEED_M
-                           for c in cands):
+                if not any(
+                    rotation_angle(pose.R_wc, c.pose.R_wc) < SAME_SEED_RAD
+                    and np.linalg.norm(pose.position - c.pose.position) < SAME_SEED_M
+                    for c in cands
+                ):
                     seeds.append((rvec, tvec))
             cands = self._refined(obj, img, Km, dist, seeds, gravity, sigma_px)
         n_cands = len(cands)
-        good = [c for c in cands if c.rmse <= self.max_rmse_px and c.tilt <= self.gravity_gate and self._plausible(c.pose, used)]
+        good = [
+            c
+            for c in cands
+            if c.rmse <= self.max_rmse_px and c.tilt <= self.gravity_gate and self._plausible(c.pose, used)
+        ]
         if not good:
             # Say why the best-fitting candidate failed: that is what a user can act on.
             if cands:
@@ -253,7 +280,12 @@ class Localizer:
             least = min(chi2.values())
             contenders = sorted((c for c in good if chi2[id(c)] <= least + AMBIGUOUS_CHI2), key=lambda c: chi2[id(c)])
         if prior is not None:
-            best = min(contenders, key=lambda c: rotation_angle(c.pose.R_wc, prior.R_wc) + np.linalg.norm(c.pose.position - prior.position))
+            best = min(
+                contenders,
+                key=lambda c: (
+                    rotation_angle(c.pose.R_wc, prior.R_wc) + np.linalg.norm(c.pose.position - prior.position)
+                ),
+            )
         elif gravity is not None:
             best = contenders[0]
         else:
@@ -276,12 +308,23 @@ class Localizer:
             gravity_error_deg=float(np.degrees(best.tilt)) if gravity is not None else None,
         )
 
-    def _refined(self, obj: np.ndarray, img: np.ndarray, Km: np.ndarray, dist: np.ndarray, seeds, gravity: GravityPrior | None = None,  # noqa: ANN001
-                 sigma_px: float = MIN_SIGMA_PX) -> list[_Candidate]:
+    def _refined(
+        self,
+        obj: np.ndarray,
+        img: np.ndarray,
+        Km: np.ndarray,
+        dist: np.ndarray,
+        seeds,
+        gravity: GravityPrior | None = None,  # noqa: ANN001
+        sigma_px: float = MIN_SIGMA_PX,
+    ) -> list[_Candidate]:
         """Each seed refined (Levenberg–Marquardt; with gravity as a prior when given), duplicates dropped."""
         cands: list[_Candidate] = []
         for rvec, tvec in seeds:
-            rvec, tvec = np.asarray(rvec, np.float64).reshape(3, 1).copy(), np.asarray(tvec, np.float64).reshape(3, 1).copy()
+            rvec, tvec = (
+                np.asarray(rvec, np.float64).reshape(3, 1).copy(),
+                np.asarray(tvec, np.float64).reshape(3, 1).copy(),
+            )
             if gravity is None:
                 rvec, tvec = cv2.solvePnPRefineLM(obj, img, Km, dist, rvec, tvec)
             else:
@@ -290,7 +333,11 @@ class Localizer:
             if not np.isfinite(rmse):
                 continue
             pose = CameraPose.from_rvec_tvec(rvec, tvec)
-            if any(rotation_angle(pose.R_wc, c.pose.R_wc) < np.radians(0.5) and np.linalg.norm(pose.position - c.pose.position) < 0.01 for c in cands):
+            if any(
+                rotation_angle(pose.R_wc, c.pose.R_wc) < np.radians(0.5)
+                and np.linalg.norm(pose.position - c.pose.position) < 0.01
+                for c in cands
+            ):
                 continue  # the same solution reached from another seed
             tilt = gravity_error(pose.R_wc, gravity) if gravity is not None else 0.0
             cands.append(_Candidate(rvec, tvec, rmse, pose, tilt))
@@ -315,7 +362,9 @@ class Localizer:
         return not self.plausibility(pose, [d.tag_id for d in used])
 
 
-def _rmse(obj: np.ndarray, img: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray, dist: np.ndarray) -> float:
+def _rmse(
+    obj: np.ndarray, img: np.ndarray, rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray, dist: np.ndarray
+) -> float:
     proj, _ = cv2.projectPoints(obj, rvec, tvec, K, dist)
     return float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - img) ** 2, axis=1))))
 

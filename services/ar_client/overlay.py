@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import colorsys
 import math
-from typing import Iterable
+from collections.abc import Iterable
 
 import numpy as np
 
@@ -113,27 +113,56 @@ class OverlayBuilder:
         nudged = pts + towards / np.maximum(dist, 1e-9) * np.minimum(0.06, dist * 0.5)
         return occ.blocked_many(eye[:2], nudged, eye_z=float(eye[2]))
 
-    def _lines(self, projector: Projector, pts3: np.ndarray, *, colour, style: str, layer: str, width: float = 2.0) -> list[Primitive]:
+    def _lines(
+        self, projector: Projector, pts3: np.ndarray, *, colour, style: str, layer: str, width: float = 2.0
+    ) -> list[Primitive]:
         out = []
         box = _keep_box(projector)
         for piece in projector.project_polyline(pts3):
             for part in clip_polyline(piece, box):
-                out.append(Primitive(kind="polyline", points=part.tolist(), color=list(colour), width=width, style=style, layer=layer))
+                out.append(
+                    Primitive(
+                        kind="polyline", points=part.tolist(), color=list(colour), width=width, style=style, layer=layer
+                    )
+                )
         return out
 
-    def _text(self, projector: Projector, at3: np.ndarray, text: str, colour, style: str, layer: str) -> list[Primitive]:
+    def _text(
+        self, projector: Projector, at3: np.ndarray, text: str, colour, style: str, layer: str
+    ) -> list[Primitive]:
         uv, front = projector.project_points(np.asarray(at3).reshape(1, 3))
         if not front[0] or not _in_box(uv, _keep_box(projector)):
             return []
-        return [Primitive(kind="text", points=[uv[0].tolist()], text=text, color=list(colour), radius=TEXT_PX, style=style, layer=layer)]
+        return [
+            Primitive(
+                kind="text",
+                points=[uv[0].tolist()],
+                text=text,
+                color=list(colour),
+                radius=TEXT_PX,
+                style=style,
+                layer=layer,
+            )
+        ]
 
-    def _arrow(self, projector: Projector, tail3: np.ndarray, head3: np.ndarray, colour, style: str, layer: str, width: float = 2.0) -> list[Primitive]:
+    def _arrow(
+        self,
+        projector: Projector,
+        tail3: np.ndarray,
+        head3: np.ndarray,
+        colour,
+        style: str,
+        layer: str,
+        width: float = 2.0,
+    ) -> list[Primitive]:
         uv, front = projector.project_points(np.stack([tail3, head3]))
         if not front.all() or not _in_box(uv, _keep_box(projector)):
             return []
         return [Primitive(kind="arrow", points=uv.tolist(), color=list(colour), width=width, style=style, layer=layer)]
 
-    def _robot(self, projector: Projector, occ: Occluders, eye: np.ndarray, rid: str, world: WorldSnapshot) -> list[Primitive]:
+    def _robot(
+        self, projector: Projector, occ: Occluders, eye: np.ndarray, rid: str, world: WorldSnapshot
+    ) -> list[Primitive]:
         rs = world.robots[rid]
         layer = f"robot:{rid}"
         colour = self.colour(rid)
@@ -154,7 +183,9 @@ class OverlayBuilder:
         prims += self._text(projector, np.array([rs.x, rs.y, AVATAR_HEIGHT + 0.15]), label, colour, style, layer)
         return prims
 
-    def _intent(self, projector: Projector, occ: Occluders, eye: np.ndarray, rid: str, world: WorldSnapshot) -> list[Primitive]:
+    def _intent(
+        self, projector: Projector, occ: Occluders, eye: np.ndarray, rid: str, world: WorldSnapshot
+    ) -> list[Primitive]:
         rows = world.intents[rid]
         if len(rows) == 0:
             return []
@@ -169,7 +200,9 @@ class OverlayBuilder:
         prims: list[Primitive] = []
         for is_hidden, piece in split_runs(pts, hidden):
             pts3 = np.column_stack([piece, np.full(len(piece), PATH_Z)])
-            prims += self._lines(projector, pts3, colour=colour, style="xray" if is_hidden else "solid", layer=layer, width=3.0)
+            prims += self._lines(
+                projector, pts3, colour=colour, style="xray" if is_hidden else "solid", layer=layer, width=3.0
+            )
         # Direction arrows by arc length, time marks by time.
         seg = np.linalg.norm(np.diff(pts, axis=0), axis=1)
         arc = np.concatenate([[0.0], np.cumsum(seg)])
@@ -180,7 +213,9 @@ class OverlayBuilder:
             if j <= i:
                 continue
             style = "xray" if hidden[i] else "solid"
-            prims += self._arrow(projector, np.array([*pts[i], PATH_Z]), np.array([*pts[j], PATH_Z]), colour, style, layer, width=3.0)
+            prims += self._arrow(
+                projector, np.array([*pts[i], PATH_Z]), np.array([*pts[j], PATH_Z]), colour, style, layer, width=3.0
+            )
         first = math.floor(world.now / TIME_MARK_STEP + 1.0) * TIME_MARK_STEP
         for k, t in enumerate(np.arange(first, times[-1], TIME_MARK_STEP)):
             if k >= MAX_TIME_MARKS:
@@ -190,14 +225,28 @@ class OverlayBuilder:
             p3 = np.array([*pts[i], PATH_Z])
             uv, front = projector.project_points(p3.reshape(1, 3))
             if front[0] and _in_box(uv, _keep_box(projector)):
-                prims.append(Primitive(kind="circle", points=[uv[0].tolist()], radius=4.0, width=0.0, color=list(colour), style=style, layer=layer))
+                prims.append(
+                    Primitive(
+                        kind="circle",
+                        points=[uv[0].tolist()],
+                        radius=4.0,
+                        width=0.0,
+                        color=list(colour),
+                        style=style,
+                        layer=layer,
+                    )
+                )
                 prims += self._text(projector, p3, f"+{t - world.now:.0f}s", colour, style, layer)
         # The goal: a ring on the floor where the path ends.
         goal = np.column_stack([pts[-1] + 0.6 * self.radius * self._ring, np.full(len(self._ring), PATH_Z)])
-        prims += self._lines(projector, goal, colour=colour, style="xray" if hidden[-1] else "solid", layer=layer, width=2.0)
+        prims += self._lines(
+            projector, goal, colour=colour, style="xray" if hidden[-1] else "solid", layer=layer, width=2.0
+        )
         return prims
 
-    def _door(self, projector: Projector, occ: Occluders, eye: np.ndarray, did: str, world: WorldSnapshot) -> list[Primitive]:
+    def _door(
+        self, projector: Projector, occ: Occluders, eye: np.ndarray, did: str, world: WorldSnapshot
+    ) -> list[Primitive]:
         leaf = self.site.door_leaves[did]
         state = world.doors.get(did)
         is_open = bool(state and state.open)
@@ -255,6 +304,13 @@ def status_primitives(loc: Localization, latency: float, width: int, height: int
     lines = [line, f"latency {latency * 1000.0:.0f} ms"]
     size = max(14.0, height / 36.0)
     return [
-        Primitive(kind="text", points=[[10.0, 10.0 + size * (k + 1) * 1.3]], text=txt, color=list(colour), radius=size, layer="status")
+        Primitive(
+            kind="text",
+            points=[[10.0, 10.0 + size * (k + 1) * 1.3]],
+            text=txt,
+            color=list(colour),
+            radius=size,
+            layer="status",
+        )
         for k, txt in enumerate(lines)
     ]

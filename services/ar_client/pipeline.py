@@ -13,22 +13,22 @@ A frame that cannot be decoded raises :class:`BadFrame`; the caller counts and d
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import cv2
 import numpy as np
 
+from protocol.frames import CameraPose
 from protocol.messages import Overlay
 
 from .detect import TagDetection, TagDetector, to_gray
 from .draw import draw
 from .feedback import FeedbackPanel
-from protocol.frames import CameraPose
 from .gravity import GravityPrior
 from .localize import Localization, Localizer
-from .posefilter import FilteredPose, PoseFilter
 from .overlay import OverlayBuilder, status_primitives
+from .posefilter import FilteredPose, PoseFilter
 from .project import Intrinsics, Projector
 from .refine import Lens
 from .world import WorldSnapshot, WorldView
@@ -171,7 +171,13 @@ class Pipeline:
         uv, front = uv.reshape(-1, 4, 2), front.reshape(-1, 4).all(axis=1)
         w, h = intrinsics.width, intrinsics.height
         with np.errstate(invalid="ignore"):
-            inside = front & (uv[..., 0].min(axis=1) >= 2) & (uv[..., 1].min(axis=1) >= 2) & (uv[..., 0].max(axis=1) <= w - 3) & (uv[..., 1].max(axis=1) <= h - 3)
+            inside = (
+                front
+                & (uv[..., 0].min(axis=1) >= 2)
+                & (uv[..., 1].min(axis=1) >= 2)
+                & (uv[..., 0].max(axis=1) <= w - 3)
+                & (uv[..., 1].max(axis=1) <= h - 3)
+            )
             size = np.linalg.norm(np.roll(uv, -1, axis=1) - uv, axis=2).max(axis=1)
         keep = inside & (size >= MIN_GUIDED_PX)
         if not keep.any():
@@ -227,7 +233,9 @@ class Pipeline:
         started = time.perf_counter()
         image = self.decode(frame, colour=annotate)
         if intrinsics.width != image.shape[1] or intrinsics.height != image.shape[0]:
-            raise BadFrame(f"frame is {image.shape[1]}x{image.shape[0]} but its intrinsics say {intrinsics.width}x{intrinsics.height}")
+            raise BadFrame(
+                f"frame is {image.shape[1]}x{image.shape[0]} but its intrinsics say {intrinsics.width}x{intrinsics.height}"
+            )
         gray = to_gray(image)
         t_decoded = time.perf_counter()
         self.timings = Timings(decode=t_decoded - started)

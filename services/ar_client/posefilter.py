@@ -85,9 +85,15 @@ class PoseFilter:
         """One measured pose at ``stamp``: the pose to draw."""
         o = self.options
         predicted = self.predict(stamp)
-        if predicted is not None and gravity is not None and gravity_error(measured.R_wc, gravity) > np.radians(o.gravity_gate_deg):
+        if (
+            predicted is not None
+            and gravity is not None
+            and gravity_error(measured.R_wc, gravity) > np.radians(o.gravity_gate_deg)
+        ):
             self.rejected += 1
-            return FilteredPose(predicted, False, f"tilted {np.degrees(gravity_error(measured.R_wc, gravity)):.1f}° from gravity")
+            return FilteredPose(
+                predicted, False, f"tilted {np.degrees(gravity_error(measured.R_wc, gravity)):.1f}° from gravity"
+            )
         if predicted is None:
             self._restart(measured, stamp)
             return FilteredPose(measured, True)

@@ -43,7 +43,7 @@ class Intrinsics:
         return any(d != 0.0 for d in self.distortion)
 
     @staticmethod
-    def parse(text: str) -> "Intrinsics":
+    def parse(text: str) -> Intrinsics:
         """``"fx,fy,cx,cy,w,h"`` optionally followed by ``,k1,k2,p1,p2,k3``."""
         parts = [p.strip() for p in text.split(",") if p.strip()]
         if len(parts) not in (6, 11):
@@ -59,7 +59,7 @@ class Intrinsics:
         return Intrinsics(fx, fy, cx, cy, int(w), int(h), dist)
 
     @staticmethod
-    def from_fov(width: int, height: int, fov_y_deg: float) -> "Intrinsics":
+    def from_fov(width: int, height: int, fov_y_deg: float) -> Intrinsics:
         """An ideal pinhole with vertical field of view ``fov_y_deg`` and the principal point at the centre."""
         f = height / (2.0 * np.tan(np.radians(fov_y_deg) / 2.0))
         return Intrinsics(f, f, (width - 1) / 2.0, (height - 1) / 2.0, width, height)
@@ -151,7 +151,9 @@ class Projector:
         return self.to_camera(points_world)[:, 2]
 
 
-def clip_segment(a: np.ndarray, b: np.ndarray, box: tuple[float, float, float, float]) -> tuple[np.ndarray, np.ndarray] | None:
+def clip_segment(
+    a: np.ndarray, b: np.ndarray, box: tuple[float, float, float, float]
+) -> tuple[np.ndarray, np.ndarray] | None:
     """The part of the 2-D segment a-b inside ``box`` = (x0, y0, x1, y1) (Liang-Barsky), or None."""
     d = b - a
     t0, t1 = 0.0, 1.0

@@ -39,7 +39,9 @@ MIN_CONTRAST = 20.0
 _ROW = 1024
 
 
-def refine_corners(gray: np.ndarray, quads: list[np.ndarray], passes: int = 1, lens: Lens | None = None) -> list[np.ndarray]:
+def refine_corners(
+    gray: np.ndarray, quads: list[np.ndarray], passes: int = 1, lens: Lens | None = None
+) -> list[np.ndarray]:
     """:func:`refine_once` ``passes`` times: a corner far off (a blurred small tag's, 1-2 px) moves
     up to a module per pass, each pass starting from the previous one's corners."""
     for _ in range(passes):
@@ -61,14 +63,22 @@ class Lens:
 
     def undistort(self, points: np.ndarray) -> np.ndarray:
         pts = np.asarray(points, np.float64)
-        flat = cv2.undistortPoints(pts.reshape(-1, 1, 2), self.K, self.dist, R=None, P=self.K,
-                                   criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 1e-8))
+        flat = cv2.undistortPoints(
+            pts.reshape(-1, 1, 2),
+            self.K,
+            self.dist,
+            R=None,
+            P=self.K,
+            criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 1e-8),
+        )
         return flat.reshape(pts.shape)
 
     def distort(self, points: np.ndarray) -> np.ndarray:
         pts = np.asarray(points, np.float64)
         flat = pts.reshape(-1, 2)
-        norm = np.column_stack([(flat[:, 0] - self.K[0, 2]) / self.K[0, 0], (flat[:, 1] - self.K[1, 2]) / self.K[1, 1], np.ones(len(flat))])
+        norm = np.column_stack(
+            [(flat[:, 0] - self.K[0, 2]) / self.K[0, 0], (flat[:, 1] - self.K[1, 2]) / self.K[1, 1], np.ones(len(flat))]
+        )
         image, _ = cv2.projectPoints(norm, np.zeros(3), np.zeros(3), self.K, self.dist)
         return image.reshape(pts.shape)
 
@@ -147,5 +157,7 @@ def sample_bilinear(gray: np.ndarray, grid: np.ndarray) -> np.ndarray:
     padded = np.zeros((rows * _ROW, 2), np.float32)
     padded[:total] = coords
     padded = padded.reshape(rows, _ROW, 2)
-    values = cv2.remap(gray, padded[..., 0], padded[..., 1], interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    values = cv2.remap(
+        gray, padded[..., 0], padded[..., 1], interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+    )
     return values.reshape(-1)[:total].astype(np.float64).reshape(shape)

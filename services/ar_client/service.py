@@ -83,7 +83,9 @@ class ArService(Service):
         self.snapshots = snapshots
         self._writer: cv2.VideoWriter | None = None
         self._writer_size: tuple[int, int] | None = None
-        self._last_bad_frame_log = -BAD_FRAME_LOG_INTERVAL  # not _last_bad_log: the Service base keeps its per-sender table there
+        self._last_bad_frame_log = (
+            -BAD_FRAME_LOG_INTERVAL
+        )  # not _last_bad_log: the Service base keeps its per-sender table there
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -122,7 +124,12 @@ class ArService(Service):
     # ------------------------------------------------------------------ frames
 
     def _on_frame(self, msg: CameraFrame, _key: str) -> None:
-        if len(msg.intrinsics) != 4 or not all(np.isfinite(msg.intrinsics)) or msg.intrinsics[0] <= 0 or msg.intrinsics[1] <= 0:
+        if (
+            len(msg.intrinsics) != 4
+            or not all(np.isfinite(msg.intrinsics))
+            or msg.intrinsics[0] <= 0
+            or msg.intrinsics[1] <= 0
+        ):
             self._bad_frame(f"frame {msg.src}/{msg.seq} has unusable intrinsics {msg.intrinsics}")
             return
         fx, fy, cx, cy = msg.intrinsics
@@ -134,12 +141,16 @@ class ArService(Service):
         assert self.source is not None
         frame = self.source.read()
         if frame is None:
-            self.log.info("source finished after %d frames", self.counters.get("frames", 0) + self.counters.get("bad_frames", 0))
+            self.log.info(
+                "source finished after %d frames", self.counters.get("frames", 0) + self.counters.get("bad_frames", 0)
+            )
             self.stop()
             return
         self._process(frame.image, frame.intrinsics, frame.stamp, frame.seq)
 
-    def _process(self, frame: bytes | np.ndarray, K: Intrinsics, stamp: float, seq: int, gravity: list[float] | None = None) -> None:
+    def _process(
+        self, frame: bytes | np.ndarray, K: Intrinsics, stamp: float, seq: int, gravity: list[float] | None = None
+    ) -> None:
         if not self.clock.synced:
             # No site clock yet (no sim clock messages): time frames on the wall clock, so tracking
             # and the "lost for N s" age still measure real intervals.
@@ -153,7 +164,9 @@ class ArService(Service):
         # Drawing costs time: only when recording, or when a kept frame may be due.
         annotate = self.record_path is not None or (self.snapshots is not None and self.snapshots.wanted(now))
         try:
-            overlay, annotated = self.pipeline.process(frame, K, stamp, frame_seq=seq, annotate=annotate, now=now, gravity=gravity)
+            overlay, annotated = self.pipeline.process(
+                frame, K, stamp, frame_seq=seq, annotate=annotate, now=now, gravity=gravity
+            )
         except BadFrame as exc:
             self._bad_frame(str(exc))
             return

@@ -24,8 +24,8 @@ go through one ``cv2.remap`` and one vectorised code match, about 0.1 ms for a f
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from functools import lru_cache
-from typing import Iterable
 
 import cv2
 import numpy as np
@@ -50,7 +50,13 @@ _SUB = np.array([[-0.22, -0.22], [0.22, -0.22], [-0.22, 0.22], [0.22, 0.22]])
 def _dictionary_bits() -> np.ndarray:
     """(587, 36) bool: each code's 6 x 6 data bits (True = white), generator orientation, row-major."""
     d = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11)
-    return np.array([cv2.aruco.Dictionary.getBitsFromByteList(d.bytesList[i : i + 1], d.markerSize).reshape(-1) for i in range(len(d.bytesList))], bool)
+    return np.array(
+        [
+            cv2.aruco.Dictionary.getBitsFromByteList(d.bytesList[i : i + 1], d.markerSize).reshape(-1)
+            for i in range(len(d.bytesList))
+        ],
+        bool,
+    )
 
 
 @lru_cache(maxsize=1)
@@ -79,8 +85,12 @@ def _grid() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     data = centres[~ring]  # 36, row-major over the inner 6 x 6
     frame = centres[ring]  # 28
     # The quiet zone: module centres of the white ring around the black square (one module wide).
-    quiet = np.array([[c + 0.5, -0.5] for c in range(-1, 9)] + [[c + 0.5, 8.5] for c in range(-1, 9)]
-                     + [[-0.5, r + 0.5] for r in range(8)] + [[8.5, r + 0.5] for r in range(8)])
+    quiet = np.array(
+        [[c + 0.5, -0.5] for c in range(-1, 9)]
+        + [[c + 0.5, 8.5] for c in range(-1, 9)]
+        + [[-0.5, r + 0.5] for r in range(8)]
+        + [[8.5, r + 0.5] for r in range(8)]
+    )
     return data, frame, quiet
 
 
@@ -89,8 +99,9 @@ _POINTS = np.concatenate([_DATA, _FRAME, _QUIET])  # 36 + 28 + 36
 _SQUARE = np.array([[0.0, 0.0], [8.0, 0.0], [8.0, 8.0], [0.0, 8.0]])
 
 
-def decode_quads(gray: np.ndarray, quads: Iterable[np.ndarray], known_ids: frozenset[int] | None = None,
-                 lens: Lens | None = None) -> list[tuple[int, np.ndarray, float]]:
+def decode_quads(
+    gray: np.ndarray, quads: Iterable[np.ndarray], known_ids: frozenset[int] | None = None, lens: Lens | None = None
+) -> list[tuple[int, np.ndarray, float]]:
     """Tags read from candidate quads: ``(tag id, corners in ArUco's order, correlation)``.
 
     ``quads`` are (4, 2) pixel corners in any order. The corners returned are refined and in the
@@ -127,10 +138,16 @@ def decode_quads(gray: np.ndarray, quads: Iterable[np.ndarray], known_ids: froze
     black, white = np.median(frame, axis=-1), np.median(quiet, axis=-1)
     threshold = (black + white) / 2.0
     contrast_ok = np.repeat(((white - black) >= MIN_CONTRAST)[:, None], 4, axis=1)
-    shape = ((frame > threshold[:, None]).sum(axis=-1) <= MAX_BAD_FRAME) & ((quiet < threshold[:, None]).sum(axis=-1) <= MAX_BAD_QUIET)
+    shape = ((frame > threshold[:, None]).sum(axis=-1) <= MAX_BAD_FRAME) & (
+        (quiet < threshold[:, None]).sum(axis=-1) <= MAX_BAD_QUIET
+    )
     shape_ok = np.repeat(shape[:, None], 4, axis=1)
     codes = _blurred_patterns()
-    ids = np.arange(len(codes)) if known_ids is None else np.array(sorted(i for i in known_ids if 0 <= i < len(codes)), int)
+    ids = (
+        np.arange(len(codes))
+        if known_ids is None
+        else np.array(sorted(i for i in known_ids if 0 <= i < len(codes)), int)
+    )
     if len(ids) == 0:
         return []
     centred = data - data.mean(axis=-1, keepdims=True)

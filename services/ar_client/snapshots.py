@@ -53,8 +53,13 @@ def least_needed(times: list[float]) -> int:
 class OverlaySnapshots:
     """Decides which annotated frames to keep and keeps them on disk (PNG + the Overlay as JSON)."""
 
-    def __init__(self, directory: str | Path, count: int = DEFAULT_COUNT, min_gap: float = MIN_GAP,
-                 max_latency: float = MAX_LATENCY) -> None:
+    def __init__(
+        self,
+        directory: str | Path,
+        count: int = DEFAULT_COUNT,
+        min_gap: float = MIN_GAP,
+        max_latency: float = MAX_LATENCY,
+    ) -> None:
         if count < 2:
             raise ValueError(f"--snapshot-count must be at least 2 (the first and the last), got {count}")
         self.directory = Path(directory)

@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterator
 
 import cv2
 import numpy as np
@@ -65,7 +65,9 @@ def folder_intrinsics(folder: str | Path) -> Intrinsics | None:
         values = list(data["intrinsics"]) + list(data.get("distortion", []))
         return Intrinsics.parse(",".join(str(float(v)) for v in values))
     except (KeyError, TypeError, ValueError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{path}: expected {{\"intrinsics\": [fx, fy, cx, cy, w, h], \"distortion\": [...]}} ({exc})") from None
+        raise ValueError(
+            f'{path}: expected {{"intrinsics": [fx, fy, cx, cy, w, h], "distortion": [...]}} ({exc})'
+        ) from None
 
 
 class ImageFolderSource:
@@ -125,7 +127,9 @@ def open_source(spec: SourceSpec, intrinsics: Intrinsics | None, clock: Callable
     if spec.kind == "images" and intrinsics is None:
         intrinsics = folder_intrinsics(spec.target)
     if intrinsics is None:
-        raise ValueError(f"--source {spec.kind}:{spec.target} needs --intrinsics fx,fy,cx,cy,w,h (the camera's calibration)")
+        raise ValueError(
+            f"--source {spec.kind}:{spec.target} needs --intrinsics fx,fy,cx,cy,w,h (the camera's calibration)"
+        )
     if spec.kind == "images":
         return ImageFolderSource(spec.target, intrinsics, clock)
     target: str | int = int(spec.target) if spec.kind == "device" else spec.target

@@ -20,8 +20,8 @@ import cv2
 import numpy as np
 
 from protocol.apriltag import tag_image
-
 from protocol.frames import CameraPose
+
 from .project import Intrinsics, Projector
 from .visibility import Occluders
 
@@ -94,13 +94,20 @@ def render(
         shift = np.array([[1, 0, -x0], [0, 1, -y0], [0, 0, 1]], np.float64)
         H = shift @ cv2.getPerspectiveTransform(src, dst)
         size = (x1 - x0, y1 - y0)
-        warped = cv2.warpPerspective(tex, H, size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        warped = cv2.warpPerspective(
+            tex, H, size, flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0
+        )
         mask = cv2.warpPerspective(np.full_like(tex, 255), H, size, flags=cv2.INTER_LINEAR, borderValue=0)
         roi = canvas[y0:y1, x0:x1]
         alpha = mask.astype(np.float32) / 255.0
         roi[:] = (warped * alpha + roi * (1.0 - alpha)).astype(np.uint8)
         corners[lm.tag] = uv_black
-        if (uv_printed[:, 0] >= 0).all() and (uv_printed[:, 0] <= w - 1).all() and (uv_printed[:, 1] >= 0).all() and (uv_printed[:, 1] <= h - 1).all():
+        if (
+            (uv_printed[:, 0] >= 0).all()
+            and (uv_printed[:, 0] <= w - 1).all()
+            and (uv_printed[:, 1] >= 0).all()
+            and (uv_printed[:, 1] <= h - 1).all()
+        ):
             in_view.append(lm.tag)
     image = cv2.resize(canvas, (w, h), interpolation=cv2.INTER_AREA)
     if blur_sigma > 0:
@@ -108,7 +115,6 @@ def render(
     if noise_sigma > 0:
         image = np.clip(image + rng.normal(0.0, noise_sigma, image.shape), 0, 255).astype(np.uint8)
     return SyntheticFrame(image=image, pose=pose, intrinsics=intrinsics, corners=corners, in_view=sorted(in_view))
-
 
 
 @dataclass(frozen=True)
@@ -167,10 +173,16 @@ def sample_views(
         if occ.blocked(xy, centre[:2] + 0.05 * np.asarray(lm.normal)[:2]):
             continue
         right = np.array([-np.sin(lm.yaw), np.cos(lm.yaw), 0.0])
-        target = centre + right * rng.uniform(-aim_jitter, aim_jitter) + np.array([0, 0, rng.uniform(-aim_jitter, aim_jitter) * 0.6])
+        target = (
+            centre
+            + right * rng.uniform(-aim_jitter, aim_jitter)
+            + np.array([0, 0, rng.uniform(-aim_jitter, aim_jitter) * 0.6])
+        )
         pose = look_at([xy[0], xy[1], h], target)
         roll = np.radians(rng.uniform(-max_roll_deg, max_roll_deg))
         c, s = np.cos(roll), np.sin(roll)
-        pose = CameraPose(R_wc=pose.R_wc @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), position=pose.position)
+        pose = CameraPose(
+            R_wc=pose.R_wc @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]), position=pose.position
+        )
         out.append(View(pose=pose, anchor=lm.tag, distance=d, obliquity=abs(ob)))
     return out

@@ -70,22 +70,37 @@ def _page(site, lm):  # noqa: ANN001, ANN202
     fig.text(0.5, top + 0.9 / page_h, "UP", ha="center", va="bottom", fontsize=20, weight="bold")
     fig.patches.append(
         matplotlib.patches.FancyArrow(
-            0.5, top + 0.2 / page_h, 0.0, 0.6 / page_h, width=0.06 / page_w, head_width=0.3 / page_w,
-            head_length=0.25 / page_h, length_includes_head=True, transform=fig.transFigure, color="black",
+            0.5,
+            top + 0.2 / page_h,
+            0.0,
+            0.6 / page_h,
+            width=0.06 / page_w,
+            head_width=0.3 / page_w,
+            head_length=0.25 / page_h,
+            length_includes_head=True,
+            transform=fig.transFigure,
+            color="black",
         )
     )
     fig.text(0.5, 1.0 - 0.5 / page_h, f"AprilTag 36h11  id {lm.tag}", ha="center", va="top", fontsize=22, weight="bold")
     fig.text(
-        0.5, 1.0 - 0.95 / page_h,
+        0.5,
+        1.0 - 0.95 / page_h,
         f"black square {lm.size * 1000:.0f} mm, with white border {quad_edge(lm.size, 1) * 1000:.0f} mm - print at 100 % (actual size)",
-        ha="center", va="top", fontsize=10,
+        ha="center",
+        va="top",
+        fontsize=10,
     )
     fig.text(0.5, (bottom - 0.35) / page_h, placement(site, lm), ha="center", va="top", fontsize=10, linespacing=1.6)
     # 100 mm scale bar to check the print.
     bar_in = 0.1 / INCH
     y = 0.6 / page_h
     x0 = (page_w - bar_in) / 2.0 / page_w
-    fig.add_artist(matplotlib.lines.Line2D([x0, x0 + bar_in / page_w], [y, y], transform=fig.transFigure, color="black", linewidth=2))
+    fig.add_artist(
+        matplotlib.lines.Line2D(
+            [x0, x0 + bar_in / page_w], [y, y], transform=fig.transFigure, color="black", linewidth=2
+        )
+    )
     fig.text(0.5, y + 0.08 / page_h, "100 mm (check the print scale)", ha="center", va="bottom", fontsize=8)
     fig.text(0.5, 0.2 / page_h, f"site '{site.name}'", ha="center", va="bottom", fontsize=7, color="0.4")
     return fig

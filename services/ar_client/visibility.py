@@ -11,8 +11,8 @@ office's ~50 walls costs well under a millisecond.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Iterable
 
 import numpy as np
 
@@ -30,7 +30,7 @@ class Occluders:
     height: float = 2.5
 
     @staticmethod
-    def from_site(site, open_doors: Iterable[str] | None = None) -> "Occluders":  # noqa: ANN001
+    def from_site(site, open_doors: Iterable[str] | None = None) -> Occluders:  # noqa: ANN001
         """Walls of ``site`` plus the leaves of its doors not in ``open_doors``.
 
         ``open_doors=None`` treats every door as closed (the state before any DoorState arrives).

@@ -19,8 +19,9 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -104,7 +105,7 @@ class WorldView:
     # ------------------------------------------------------------------ STATE.json
 
     @staticmethod
-    def from_state(data: Mapping[str, Any]) -> tuple["WorldView", float]:
+    def from_state(data: Mapping[str, Any]) -> tuple[WorldView, float]:
         """A view filled from a ``STATE.json`` document (shape in the module docstring) and its time.
 
         Raises ``ValueError`` naming the offending entry.

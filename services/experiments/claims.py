@@ -30,8 +30,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .comparisons import (DOOR_OPENINGS, HIGHER, LOWER, NO_DATA, REFERENCE, SUM_OF_TIMES, TEAM_TIME, Metric, Test,
-                          baselines, families)
+from .comparisons import (
+    DOOR_OPENINGS,
+    HIGHER,
+    LOWER,
+    NO_DATA,
+    REFERENCE,
+    SUM_OF_TIMES,
+    TEAM_TIME,
+    Metric,
+    Test,
+    baselines,
+    families,
+)
 from .results import Results
 
 COOPERATIVE_P = 0.1  # the paper's caption: ARROCH is best "as long as ... >= 0.1 probability"
@@ -77,8 +88,10 @@ def lowest_everywhere(results: Results, tests: list[Test], metric: Metric, title
     else:
         verdict = "not confirmed"
     lower = sum(v == LOWER for v in verdicts)
-    detail = (f"{lower} of {len(verdicts)} (level, baseline) comparisons of the {metric.label} are lower (significant) "
-              f"({_tally(tests)}). {_by_level(results, tests)}")
+    detail = (
+        f"{lower} of {len(verdicts)} (level, baseline) comparisons of the {metric.label} are lower (significant) "
+        f"({_tally(tests)}). {_by_level(results, tests)}"
+    )
     return Claim(title, statement, verdict, detail, tests)
 
 
@@ -94,8 +107,10 @@ def _crossing(tests: list[Test]) -> str:
 def crossover(results: Results, tests: list[Test]) -> Claim:
     """No-comm significantly faster than ARROCH at the lowest probability; ARROCH significantly lowest from 0.1 on."""
     title = "Laziness crossover"
-    statement = ("ARROCH has the lowest team completion time as long as the human opens the door with probability "
-                 f">= {COOPERATIVE_P:g}; at very low probabilities no-comm is faster.")
+    statement = (
+        "ARROCH has the lowest team completion time as long as the human opens the door with probability "
+        f">= {COOPERATIVE_P:g}; at very low probabilities no-comm is faster."
+    )
     if results.kind != "laziness":
         return Claim(title, statement, "cannot be checked", "needs the laziness sweep")
     if REFERENCE not in results.methods or BASELINE_FOR_CROSSOVER not in results.methods:
@@ -105,8 +120,13 @@ def crossover(results: Results, tests: list[Test]) -> Claim:
     at_low = next(t for t in nocomm if t.level == lowest)
     cooperative = [t for t in tests if t.level >= COOPERATIVE_P]  # type: ignore[operator]
     if lowest >= COOPERATIVE_P or at_low.verdict == NO_DATA:  # type: ignore[operator]
-        return Claim(title, statement, "cannot be checked",
-                     f"needs complete pairs at a probability below {COOPERATIVE_P:g} (lowest: {lowest:g})", tests)
+        return Claim(
+            title,
+            statement,
+            "cannot be checked",
+            f"needs complete pairs at a probability below {COOPERATIVE_P:g} (lowest: {lowest:g})",
+            tests,
+        )
     nocomm_faster = at_low.verdict == HIGHER
     lowest_after = [t.verdict == LOWER for t in cooperative]
     if nocomm_faster and lowest_after and all(lowest_after):
@@ -115,10 +135,12 @@ def crossover(results: Results, tests: list[Test]) -> Claim:
         verdict = "partly confirmed"
     else:
         verdict = "not confirmed"
-    detail = (f"at p = {lowest:g}, ARROCH − baseline {at_low.describe()}: "
-              f"{'no-comm significantly faster' if nocomm_faster else 'no-comm not significantly faster'}; "
-              f"from p = {COOPERATIVE_P:g} on: {sum(lowest_after)} of {len(lowest_after)} (level, baseline) comparisons "
-              f"lower (significant) ({_tally(cooperative)}). {_by_level(results, cooperative)} {_crossing(nocomm)}")
+    detail = (
+        f"at p = {lowest:g}, ARROCH − baseline {at_low.describe()}: "
+        f"{'no-comm significantly faster' if nocomm_faster else 'no-comm not significantly faster'}; "
+        f"from p = {COOPERATIVE_P:g} on: {sum(lowest_after)} of {len(lowest_after)} (level, baseline) comparisons "
+        f"lower (significant) ({_tally(cooperative)}). {_by_level(results, cooperative)} {_crossing(nocomm)}"
+    )
     return Claim(title, statement, verdict, detail, [at_low, *cooperative])
 
 
@@ -127,15 +149,36 @@ def check_claims(results: Results, tested: dict[str, list[Test]] | None = None) 
     already computed for ``results`` (else computed here)."""
     tested = tested if tested is not None else families(results, (DOOR_OPENINGS, TEAM_TIME, SUM_OF_TIMES))
     where = {"robots": "at every team size", "laziness": "at every door-opening probability"}.get(
-        results.kind, "in every cell of task length × interruption cost")
-    claims = [lowest_everywhere(results, tested[DOOR_OPENINGS.name], DOOR_OPENINGS, "Fewest door openings",
-                                f"ARROCH needs the fewest door openings by the human {where}.")]
+        results.kind, "in every cell of task length × interruption cost"
+    )
+    claims = [
+        lowest_everywhere(
+            results,
+            tested[DOOR_OPENINGS.name],
+            DOOR_OPENINGS,
+            "Fewest door openings",
+            f"ARROCH needs the fewest door openings by the human {where}.",
+        )
+    ]
     if results.kind == "laziness":
         claims.append(crossover(results, tested[TEAM_TIME.name]))
     else:
-        claims.append(lowest_everywhere(results, tested[TEAM_TIME.name], TEAM_TIME, "Lowest team completion time",
-                                        f"ARROCH gives the lowest team completion time (slowest agent) {where}."))
-    claims.append(lowest_everywhere(results, tested[SUM_OF_TIMES.name], SUM_OF_TIMES, "Lowest sum of times",
-                                    f"ARROCH gives the lowest sum of all agents' completion times (the paper's real-world "
-                                    f"measure) {where}."))
+        claims.append(
+            lowest_everywhere(
+                results,
+                tested[TEAM_TIME.name],
+                TEAM_TIME,
+                "Lowest team completion time",
+                f"ARROCH gives the lowest team completion time (slowest agent) {where}.",
+            )
+        )
+    claims.append(
+        lowest_everywhere(
+            results,
+            tested[SUM_OF_TIMES.name],
+            SUM_OF_TIMES,
+            "Lowest sum of times",
+            f"ARROCH gives the lowest sum of all agents' completion times (the paper's real-world measure) {where}.",
+        )
+    )
     return claims

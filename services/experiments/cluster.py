@@ -17,7 +17,8 @@ import logging
 import os
 import threading
 import time
-from typing import Any, Callable, Iterator
+from collections.abc import Callable, Iterator
+from typing import Any
 
 from .design import SweepSpec, TrialKey
 from .routers import Router, RouterError
@@ -65,16 +66,31 @@ class ClusterPool:
     def workers(self) -> int:
         return len(self.client.scheduler_info().get("workers", {}))
 
-    def run(self, spec: SweepSpec, keys: list[TrialKey], config: TrialConfig,
-            cancelled: Callable[[], bool], idle: Callable[[], None] = lambda: None) -> Iterator[TrialOutcome]:
+    def run(
+        self,
+        spec: SweepSpec,
+        keys: list[TrialKey],
+        config: TrialConfig,
+        cancelled: Callable[[], bool],
+        idle: Callable[[], None] = lambda: None,
+    ) -> Iterator[TrialOutcome]:
         """Every trial of ``keys``, submitted at once; outcomes in the order they finish. ``cancelled``
         is asked (and ``idle`` called) a few times a second; once it says so the rest is cancelled."""
         spec_json = spec.to_json()
         # events_dir and recordings_dir are paths on this machine: a worker elsewhere keeps no event
         # log and runs no recorder (a failed trial's reason and services' output still come back).
         remote = dataclasses.replace(config, events_dir=None, record="none", recordings_dir=None)
-        self._futures = [self.client.submit(run_on_worker, spec_json, dataclasses.astuple(key), remote,
-                                            key=f"arroch-trial-{key.ident()}", pure=False) for key in keys]
+        self._futures = [
+            self.client.submit(
+                run_on_worker,
+                spec_json,
+                dataclasses.astuple(key),
+                remote,
+                key=f"arroch-trial-{key.ident()}",
+                pure=False,
+            )
+            for key in keys
+        ]
         remaining = dict(zip(self._futures, keys))
         while remaining:
             if cancelled():

@@ -36,8 +36,8 @@ The paired t-test is reported alongside; it decides nothing. See :mod:`.stats` f
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Iterable
 
 from .results import COUNTS, Level, Results
 from .stats import Paired, holm, paired
@@ -127,9 +127,11 @@ class Test:
         r, d = self.result, self.metric.digits
         if r.n < 2:
             return f"vs {self.baseline}: no data ({r.n} complete pair{'s' if r.n != 1 else ''})"
-        return (f"vs {self.baseline}: {self.verdict}, Δ {r.mean_diff:+.{d}f}{self.metric.suffix} [{r.ci_low:+.{d}f}, {r.ci_high:+.{d}f}], "
-                f"{self.metric.primary_test} Holm p = {format_p_value(self.primary_p_holm)}, "
-                f"TOST Holm p = {format_p_value(self.tost_p_holm)}, {r.n} pairs")
+        return (
+            f"vs {self.baseline}: {self.verdict}, Δ {r.mean_diff:+.{d}f}{self.metric.suffix} [{r.ci_low:+.{d}f}, {r.ci_high:+.{d}f}], "
+            f"{self.metric.primary_test} Holm p = {format_p_value(self.primary_p_holm)}, "
+            f"TOST Holm p = {format_p_value(self.tost_p_holm)}, {r.n} pairs"
+        )
 
 
 def baselines(results: Results) -> list[str]:
@@ -142,8 +144,13 @@ def family(results: Results, metric: Metric) -> list[Test]:
     for level in results.levels:
         for baseline in baselines(results):
             pairs = results.pairs(metric.name, level, REFERENCE, baseline)
-            raw.append((level, baseline, paired([p.a for p in pairs], [p.b for p in pairs], margin=metric.margin,
-                                                permutation=metric.count)))
+            raw.append(
+                (
+                    level,
+                    baseline,
+                    paired([p.a for p in pairs], [p.b for p in pairs], margin=metric.margin, permutation=metric.count),
+                )
+            )
     primary = holm([(r.perm_p if metric.count else r.wilcoxon.p) for _, _, r in raw])
     equivalence = holm([r.tost_p for _, _, r in raw])
     return [Test(metric, level, baseline, r, hp, ht) for (level, baseline, r), hp, ht in zip(raw, primary, equivalence)]

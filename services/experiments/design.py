@@ -61,8 +61,10 @@ class TrialKey:
 
     def ident(self) -> str:
         """A file-name-safe id, e.g. ``arroch-n3-o3-p0.5-w600-c0-t07``."""
-        return (f"{self.method}-n{self.robots}-o{self.objects}-p{format_p(self.p)}-w{format_p(self.task)}"
-                f"-c{format_p(self.cost)}-t{self.trial:02d}")
+        return (
+            f"{self.method}-n{self.robots}-o{self.objects}-p{format_p(self.p)}-w{format_p(self.task)}"
+            f"-c{format_p(self.cost)}-t{self.trial:02d}"
+        )
 
     def pair(self) -> tuple[int, int, float, float, float, int]:
         """What pairs this trial with the other methods' (everything but the method)."""
@@ -125,12 +127,22 @@ class SweepSpec:
 
     def conditions(self) -> list[tuple[str, int, float, float, float]]:
         """(method, robots, p, task, cost) in report order: the swept variables, then the methods."""
-        return [(m, n, p, w, c) for n in self.robots for p in self.ps for w in self.tasks for c in self.costs
-                for m in self.methods]
+        return [
+            (m, n, p, w, c)
+            for n in self.robots
+            for p in self.ps
+            for w in self.tasks
+            for c in self.costs
+            for m in self.methods
+        ]
 
     def keys(self) -> list[TrialKey]:
         """Every trial, in the CSV's order (condition by condition, trial index last)."""
-        return [TrialKey(m, n, self.objects, p, w, c, i) for (m, n, p, w, c) in self.conditions() for i in range(self.trials)]
+        return [
+            TrialKey(m, n, self.objects, p, w, c, i)
+            for (m, n, p, w, c) in self.conditions()
+            for i in range(self.trials)
+        ]
 
     def schedule(self) -> list[TrialKey]:
         """Every trial, in the order to run them: repetition by repetition, so that at any moment
@@ -158,22 +170,27 @@ class SweepSpec:
         return data
 
     @classmethod
-    def from_json(cls, data: dict[str, Any]) -> "SweepSpec":
+    def from_json(cls, data: dict[str, Any]) -> SweepSpec:
         try:
             return cls(
-                kind=data["kind"], methods=tuple(data["methods"]), robots=tuple(int(n) for n in data["robots"]),
-                objects=int(data["objects"]), ps=tuple(float(p) for p in data["ps"]), trials=int(data["trials"]),
-                seed=int(data["seed"]), tasks=tuple(float(t) for t in data.get("tasks", (DEFAULT_TASK,))),
+                kind=data["kind"],
+                methods=tuple(data["methods"]),
+                robots=tuple(int(n) for n in data["robots"]),
+                objects=int(data["objects"]),
+                ps=tuple(float(p) for p in data["ps"]),
+                trials=int(data["trials"]),
+                seed=int(data["seed"]),
+                tasks=tuple(float(t) for t in data.get("tasks", (DEFAULT_TASK,))),
                 costs=tuple(float(c) for c in data.get("costs", (DEFAULT_COST,))),
-                human_config=data.get("human_config"), focus_reading=data.get("focus_reading"),
+                human_config=data.get("human_config"),
+                focus_reading=data.get("focus_reading"),
                 time_limit=data.get("time_limit"),
                 extra=dict(data.get("extra") or {}),
             )
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"not a sweep description ({exc})") from None
 
-    def differences(self, other: "SweepSpec") -> list[str]:
+    def differences(self, other: SweepSpec) -> list[str]:
         """What differs from ``other``, one ``name: ours vs theirs`` per field (empty when equal)."""
         mine, theirs = self.to_json(), other.to_json()
         return [f"{name}: {theirs[name]!r} vs {mine[name]!r}" for name in mine if mine[name] != theirs[name]]
-

@@ -21,8 +21,20 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.colors import CenteredNorm  # noqa: E402
 
-from .comparisons import (ALPHA, DOOR_OPENINGS, HIGHER, LOWER, NO_DATA, NOT_SIGNIFICANT, SUM_OF_TIMES,  # noqa: E402
-                          TEAM_TIME, Metric, Test, equivalent, format_p_value)
+from .comparisons import (
+    ALPHA,
+    DOOR_OPENINGS,
+    HIGHER,
+    LOWER,
+    NO_DATA,
+    NOT_SIGNIFICANT,
+    SUM_OF_TIMES,  # noqa: E402
+    TEAM_TIME,
+    Metric,
+    Test,
+    equivalent,
+    format_p_value,
+)
 from .design import format_p  # noqa: E402
 from .plots import LABELS  # noqa: E402
 from .results import Results  # noqa: E402
@@ -64,8 +76,15 @@ def plot_map(results: Results, metric: Metric, tests: list[Test], out: Path) -> 
     halfrange = max(finite) if finite and max(finite) > 0 else 1.0
     norm = CenteredNorm(vcenter=0.0, halfrange=halfrange)
     cmap = plt.get_cmap("RdBu_r").with_extremes(bad="0.85")  # grey: no data
-    fig, axes = plt.subplots(1, max(1, len(panels)), figsize=(1.2 + 2.1 * len(costs) * max(1, len(panels)), 1.6 + 0.9 * len(tasks)),
-                             dpi=120, squeeze=False, sharey=True, layout="constrained")
+    fig, axes = plt.subplots(
+        1,
+        max(1, len(panels)),
+        figsize=(1.2 + 2.1 * len(costs) * max(1, len(panels)), 1.6 + 0.9 * len(tasks)),
+        dpi=120,
+        squeeze=False,
+        sharey=True,
+        layout="constrained",
+    )
     image = None
     unit = f" ({metric.unit})" if metric.unit else ""
     d = metric.digits
@@ -88,9 +107,16 @@ def plot_map(results: Results, metric: Metric, tests: list[Test], out: Path) -> 
     if image is not None:
         fig.colorbar(image, ax=list(axes[0]), shrink=0.9, label=f"mean difference{unit}")
     fig.suptitle(f"{metric.label.capitalize()}: ARROCH − baseline, paired (blue: ARROCH lower)", fontsize=10)
-    fig.text(0.01, -0.02, f"mean [95 % CI] of the paired differences; Holm-adjusted {metric.primary_label}: * < {ALPHA:g}, "
-             f"** < 0.01, *** < 0.001; ≈ {equivalent(metric)} (Holm-adjusted TOST)",
-             ha="left", va="top", fontsize=7, color="0.3")
+    fig.text(
+        0.01,
+        -0.02,
+        f"mean [95 % CI] of the paired differences; Holm-adjusted {metric.primary_label}: * < {ALPHA:g}, "
+        f"** < 0.01, *** < 0.001; ≈ {equivalent(metric)} (Holm-adjusted TOST)",
+        ha="left",
+        va="top",
+        fontsize=7,
+        color="0.3",
+    )
     path = out / f"map_{metric.name}.png"
     fig.savefig(path, bbox_inches="tight")
     plt.close(fig)
@@ -102,6 +128,7 @@ def plot_maps(results: Results, tested: dict[str, list[Test]], out: Path) -> lis
 
 
 # ---------------------------------------------------------------------------- REPORT.md
+
 
 def _cell(t: Test) -> str:
     r, d = t.result, t.metric.digits
@@ -148,16 +175,24 @@ def reading(results: Results, tested: dict[str, list[Test]]) -> str:
         tests = tested.get(metric.name) or []
         for b in sorted({t.baseline for t in tests}, key=results.methods.index):
             mine = [t for t in tests if t.baseline == b]
-            groups = {v: [t for t in mine if t.verdict == v] for v in (LOWER, HIGHER, equivalent(metric), NOT_SIGNIFICANT, NO_DATA)}
-            by_cost = ", ".join(f"{sum(1 for t in groups[LOWER] if t.level[1] == c)}/{sum(1 for t in mine if t.level[1] == c)}"  # type: ignore[index]
-                                for c in costs)
-            parts = [f"**{metric.label.capitalize()}, ARROCH − {LABELS.get(b, b)}** (Δ in {metric.unit or 'openings'}): "
-                     f"significantly lower in {len(groups[LOWER])} of {len(mine)} cells"
-                     + (f" ({_where(groups[LOWER])})" if groups[LOWER] else "")
-                     + f" — by interruption cost {'/'.join(format_p(c) for c in costs)} s: {by_cost}",
-                     f"significantly higher in {len(groups[HIGHER])}" + (f" ({_where(groups[HIGHER])})" if groups[HIGHER] else ""),
-                     f"{equivalent(metric)} in {len(groups[equivalent(metric)])}",
-                     f"not significant in {len(groups[NOT_SIGNIFICANT])}"]
+            groups = {
+                v: [t for t in mine if t.verdict == v]
+                for v in (LOWER, HIGHER, equivalent(metric), NOT_SIGNIFICANT, NO_DATA)
+            }
+            by_cost = ", ".join(
+                f"{sum(1 for t in groups[LOWER] if t.level[1] == c)}/{sum(1 for t in mine if t.level[1] == c)}"  # type: ignore[index]
+                for c in costs
+            )
+            parts = [
+                f"**{metric.label.capitalize()}, ARROCH − {LABELS.get(b, b)}** (Δ in {metric.unit or 'openings'}): "
+                f"significantly lower in {len(groups[LOWER])} of {len(mine)} cells"
+                + (f" ({_where(groups[LOWER])})" if groups[LOWER] else "")
+                + f" — by interruption cost {'/'.join(format_p(c) for c in costs)} s: {by_cost}",
+                f"significantly higher in {len(groups[HIGHER])}"
+                + (f" ({_where(groups[HIGHER])})" if groups[HIGHER] else ""),
+                f"{equivalent(metric)} in {len(groups[equivalent(metric)])}",
+                f"not significant in {len(groups[NOT_SIGNIFICANT])}",
+            ]
             if groups[NO_DATA]:
                 parts.append(f"no data in {len(groups[NO_DATA])}")
             sentences.append("; ".join(parts) + ".")
@@ -167,13 +202,23 @@ def reading(results: Results, tested: dict[str, list[Test]]) -> str:
 def map_section(results: Results, tested: dict[str, list[Test]]) -> list[str]:
     if not any(tested.get(m.name) for m in MAP_METRICS):
         return ["## Map: where feedback pays", "", "Not available: the sweep needs ARROCH and a baseline.", ""]
-    out = ["## Map: where feedback pays", "",
-           "ARROCH − baseline per cell (task length × interruption cost), mean of the paired differences with its 95 % CI; "
-           "verdicts from the Holm-adjusted p-values over each metric's family (all cells × baselines), as in the tests "
-           "above. Negative: ARROCH lower.", "",
-           "**Reading.** " + reading(results, tested), ""]
+    out = [
+        "## Map: where feedback pays",
+        "",
+        "ARROCH − baseline per cell (task length × interruption cost), mean of the paired differences with its 95 % CI; "
+        "verdicts from the Holm-adjusted p-values over each metric's family (all cells × baselines), as in the tests "
+        "above. Negative: ARROCH lower.",
+        "",
+        "**Reading.** " + reading(results, tested),
+        "",
+    ]
     for metric in MAP_METRICS:
         tests = tested.get(metric.name)
         if tests:
-            out += [f"### {metric.label}" + (f" ({metric.unit})" if metric.unit else ""), "", *_table(results, metric, tests), ""]
+            out += [
+                f"### {metric.label}" + (f" ({metric.unit})" if metric.unit else ""),
+                "",
+                *_table(results, metric, tests),
+                "",
+            ]
     return out

@@ -10,8 +10,9 @@ incomparable) is listed under ``differs`` with the values seen, rather than hidd
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 PER_TRIAL = ("site", "method", "seed", "robots", "objects", "human_doors")  # top-level params of one trial
 VARIED_HUMAN = ("door_probability", "task_mean", "interruption_cost")  # what the sweeps vary (CSV columns)

@@ -48,8 +48,18 @@ def plot_metric(results: Results, metric: str, ylabel: str, title: str, out: Pat
             xs.append(j + (i - (len(methods) - 1) / 2) * width)
             means.append(s.mean)
             errors.append(0.0 if math.isnan(s.half_width) else s.half_width)
-        ax.bar(xs, means, width, yerr=errors, capsize=3, label=LABELS.get(method, method),
-               color=COLORS.get(method, None), edgecolor="black", linewidth=0.5, error_kw={"linewidth": 0.9})
+        ax.bar(
+            xs,
+            means,
+            width,
+            yerr=errors,
+            capsize=3,
+            label=LABELS.get(method, method),
+            color=COLORS.get(method, None),
+            edgecolor="black",
+            linewidth=0.5,
+            error_kw={"linewidth": 0.9},
+        )
     ax.set_xticks(range(len(levels)))
     ax.set_xticklabels([f"{int(v)}" if results.kind == "robots" else f"{v:g}" for v in levels])
     ax.set_xlabel("Number of robots" if results.kind == "robots" else "Door-opening probability (lower = lazier human)")
@@ -58,7 +68,15 @@ def plot_metric(results: Results, metric: str, ylabel: str, title: str, out: Pat
     ax.grid(axis="y", alpha=0.3)
     ax.set_axisbelow(True)
     ax.legend(frameon=False)
-    fig.text(0.99, 0.01, "bars: mean of completed trials; whiskers: 95 % CI", ha="right", va="bottom", fontsize=7, color="0.4")
+    fig.text(
+        0.99,
+        0.01,
+        "bars: mean of completed trials; whiskers: 95 % CI",
+        ha="right",
+        va="bottom",
+        fontsize=7,
+        color="0.4",
+    )
     fig.tight_layout()
     path = out / _name(metric, results)
     fig.savefig(path)

@@ -24,8 +24,16 @@ def clock(seconds: float) -> str:
 
 
 class Progress:
-    def __init__(self, total: int, done_before: int, *, label: str, stream: TextIO | None = None,
-                 bar: bool | None = None, interval: float = 30.0) -> None:
+    def __init__(
+        self,
+        total: int,
+        done_before: int,
+        *,
+        label: str,
+        stream: TextIO | None = None,
+        bar: bool | None = None,
+        interval: float = 30.0,
+    ) -> None:
         self.total = total
         self.done_before = done_before
         self.label = label
@@ -53,9 +61,11 @@ class Progress:
         finished = self.done_before + self.done
         filled = round(width * finished / self.total) if self.total else width
         eta = self.eta(now)
-        parts = [f"{self.label} [{'#' * filled}{'.' * (width - filled)}] {finished}/{self.total}",
-                 f"elapsed {clock(now - self.started)}",
-                 f"left {'~' + clock(eta) if eta is not None else '?'}"]
+        parts = [
+            f"{self.label} [{'#' * filled}{'.' * (width - filled)}] {finished}/{self.total}",
+            f"elapsed {clock(now - self.started)}",
+            f"left {'~' + clock(eta) if eta is not None else '?'}",
+        ]
         if self.failed:
             parts.append(f"{self.failed} failed")
         if self.last:

@@ -68,23 +68,37 @@ def _n(value: Any) -> str:
 
 
 def key_cells(key: TrialKey) -> dict[str, str]:
-    return {"method": key.method, "robots": str(key.robots), "objects": str(key.objects),
-            "door_probability": format_p(key.p), "task_mean": format_p(key.task), "interruption_cost": format_p(key.cost),
-            "trial": str(key.trial)}
+    return {
+        "method": key.method,
+        "robots": str(key.robots),
+        "objects": str(key.objects),
+        "door_probability": format_p(key.p),
+        "task_mean": format_p(key.task),
+        "interruption_cost": format_p(key.cost),
+        "trial": str(key.trial),
+    }
 
 
 def key_of(row: dict[str, str]) -> TrialKey:
     """The identity of a CSV row (raises ValueError on a malformed one)."""
-    return TrialKey(row["method"], int(row["robots"]), int(row["objects"]), float(row["door_probability"]),
-                    float(row["task_mean"]), float(row["interruption_cost"]), int(row["trial"]))
+    return TrialKey(
+        row["method"],
+        int(row["robots"]),
+        int(row["objects"]),
+        float(row["door_probability"]),
+        float(row["task_mean"]),
+        float(row["interruption_cost"]),
+        int(row["trial"]),
+    )
 
 
 def trial_row(spec: SweepSpec, outcome: TrialOutcome) -> dict[str, str]:
     key = outcome.key
     row = {name: "" for name in TRIAL_FIELDS}
     row.update(key_cells(key))
-    row.update(site_seed=str(spec.site_seed(key)), seed=str(spec.sim_seed(key)), status=outcome.status,
-               reason=outcome.reason)
+    row.update(
+        site_seed=str(spec.site_seed(key)), seed=str(spec.sim_seed(key)), status=outcome.status, reason=outcome.reason
+    )
     m = outcome.metrics
     if m is None:
         return row
@@ -99,7 +113,9 @@ def trial_row(spec: SweepSpec, outcome: TrialOutcome) -> dict[str, str]:
         sum_of_times=_t(sum(times)) if times and len(times) == len(agents) else "",
         slowest_robot_time=_t(max(robot_times)) if robot_times and len(robot_times) == len(robots) else "",
         human_completion_time=_t(agents.get("human")),
-        agent_completion_times=";".join(f"{name}={_t(t)}" for name, t in [*sorted(robots.items()), ("human", agents.get("human"))]),
+        agent_completion_times=";".join(
+            f"{name}={_t(t)}" for name, t in [*sorted(robots.items()), ("human", agents.get("human"))]
+        ),
         door_openings=_n(m.get("human_door_openings")),
         human_door_trips=_n(human.get("door_trips")),
         human_task_time=_t(human.get("task_duration")),

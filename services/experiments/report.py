@@ -25,8 +25,9 @@ import csv
 import json
 import logging
 import math
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 from .claims import Claim, check_claims
 from .comparisons import ALPHA, TESTED, Test, families, format_p_value
@@ -39,20 +40,34 @@ from .store import JsonlStore
 
 log = logging.getLogger("arroch.experiment")
 
-EFFICIENCY_COLUMNS = (("team_completion_time", "team completion (s)"), ("sum_of_times", "sum of times (s)"),
-                      ("slowest_robot_time", "slowest robot (s)"), ("human_completion_time", "human done (s)"))
-HUMAN_COLUMNS = (("door_openings", "door openings"), ("human_time_away", "time away (s)"),
-                 ("human_interruptions", "interruptions"), ("human_time_lost", "time lost (s)"),
-                 ("focus_declared", "focus declared"), ("feedback_sent", "feedback sent"),
-                 ("feedback_accepted", "feedback accepted"), ("replans", "replans"))
+EFFICIENCY_COLUMNS = (
+    ("team_completion_time", "team completion (s)"),
+    ("sum_of_times", "sum of times (s)"),
+    ("slowest_robot_time", "slowest robot (s)"),
+    ("human_completion_time", "human done (s)"),
+)
+HUMAN_COLUMNS = (
+    ("door_openings", "door openings"),
+    ("human_time_away", "time away (s)"),
+    ("human_interruptions", "interruptions"),
+    ("human_time_lost", "time lost (s)"),
+    ("focus_declared", "focus declared"),
+    ("feedback_sent", "feedback sent"),
+    ("feedback_accepted", "feedback accepted"),
+    ("replans", "replans"),
+)
 STATUSES = ("ok", "unfinished", "timeout", "error")
-TITLES = {"robots": "Different number of robots", "laziness": "Human laziness (door-opening probability)",
-          "map": "Map of where feedback pays (task length × interruption cost)"}
+TITLES = {
+    "robots": "Different number of robots",
+    "laziness": "Human laziness (door-opening probability)",
+    "map": "Map of where feedback pays (task length × interruption cost)",
+}
 
 __all__ = ["ReportError", "build_report", "claims_of", "summary_rows", "test_rows"]
 
 
 # ---------------------------------------------------------------------------- formatting
+
 
 def _num(value: float | None, digits: int = 3) -> str:
     return "" if value is None or math.isnan(value) else f"{value:.{digits}f}"
@@ -104,9 +119,20 @@ def _share(k: int, n: int) -> str:
 
 # ---------------------------------------------------------------------------- tables
 
+
 def summary_rows(results: Results) -> tuple[list[str], list[list[str]]]:
-    header = ["method", "robots", "objects", "door_probability", "task_mean", "interruption_cost", "trials", *STATUSES,
-              "human_slowest", "human_slowest_share"]
+    header = [
+        "method",
+        "robots",
+        "objects",
+        "door_probability",
+        "task_mean",
+        "interruption_cost",
+        "trials",
+        *STATUSES,
+        "human_slowest",
+        "human_slowest_share",
+    ]
     for metric in METRICS:
         header += [f"{metric}_mean", f"{metric}_ci_low", f"{metric}_ci_high", f"{metric}_n"]
     rows = []
@@ -114,8 +140,18 @@ def summary_rows(results: Results) -> tuple[list[str], list[list[str]]]:
         counts = statuses(trials)
         first = trials[0]
         slow, known = _slowest(trials)
-        row = [method, str(first.robots), str(first.objects), format_p(first.p), format_p(first.task), format_p(first.cost),
-               str(len(trials)), *(str(counts.get(s, 0)) for s in STATUSES), str(slow), _num(slow / known if known else None)]
+        row = [
+            method,
+            str(first.robots),
+            str(first.objects),
+            format_p(first.p),
+            format_p(first.task),
+            format_p(first.cost),
+            str(len(trials)),
+            *(str(counts.get(s, 0)) for s in STATUSES),
+            str(slow),
+            _num(slow / known if known else None),
+        ]
         for metric in METRICS:
             s = summarize(results.values(method, level, metric))
             row += [_num(s.mean), _num(s.ci_low), _num(s.ci_high), str(s.n)]
@@ -126,40 +162,92 @@ def summary_rows(results: Results) -> tuple[list[str], list[list[str]]]:
 def test_rows(results: Results, tested: dict[str, list[Test]] | None = None) -> tuple[list[str], list[list[str]]]:
     """``tests.csv``: one row per (metric, level, baseline) with complete pairs."""
     tested = tested if tested is not None else families(results)
-    header = ["metric", *results.level_columns, "baseline", "n_pairs", "n_nonzero", "mean_arroch", "mean_baseline", "mean_diff",
-              "ci_low", "ci_high", "sd_diff", "paired_t", "paired_t_p", "wilcoxon_w", "wilcoxon_p", "perm_p", "primary_test",
-              "primary_p", "primary_p_holm", "tost_margin", "tost_p", "tost_p_holm", "d_z", "verdict"]
+    header = [
+        "metric",
+        *results.level_columns,
+        "baseline",
+        "n_pairs",
+        "n_nonzero",
+        "mean_arroch",
+        "mean_baseline",
+        "mean_diff",
+        "ci_low",
+        "ci_high",
+        "sd_diff",
+        "paired_t",
+        "paired_t_p",
+        "wilcoxon_w",
+        "wilcoxon_p",
+        "perm_p",
+        "primary_test",
+        "primary_p",
+        "primary_p_holm",
+        "tost_margin",
+        "tost_p",
+        "tost_p_holm",
+        "d_z",
+        "verdict",
+    ]
     rows = []
     for metric in TESTED:
         for t in tested.get(metric.name, []):
             r = t.result
             if r.n < 2:
                 continue
-            rows.append([metric.name, *results.level_cells(t.level), t.baseline, str(r.n), str(r.n_nonzero), _num(r.mean_a),
-                         _num(r.mean_b), _num(r.mean_diff), _num(r.ci_low), _num(r.ci_high), _num(r.sd_diff), _g(r.t), _g(r.t_p),
-                         _g(r.wilcoxon.w), _g(r.wilcoxon.p), _g(r.perm_p), metric.primary_test, _g(t.primary_p),
-                         _g(t.primary_p_holm), f"{metric.margin:g}", _g(r.tost_p), _g(t.tost_p_holm), _g(r.d_z), t.verdict])
+            rows.append(
+                [
+                    metric.name,
+                    *results.level_cells(t.level),
+                    t.baseline,
+                    str(r.n),
+                    str(r.n_nonzero),
+                    _num(r.mean_a),
+                    _num(r.mean_b),
+                    _num(r.mean_diff),
+                    _num(r.ci_low),
+                    _num(r.ci_high),
+                    _num(r.sd_diff),
+                    _g(r.t),
+                    _g(r.t_p),
+                    _g(r.wilcoxon.w),
+                    _g(r.wilcoxon.p),
+                    _g(r.perm_p),
+                    metric.primary_test,
+                    _g(t.primary_p),
+                    _g(t.primary_p_holm),
+                    f"{metric.margin:g}",
+                    _g(r.tost_p),
+                    _g(t.tost_p_holm),
+                    _g(r.d_z),
+                    t.verdict,
+                ]
+            )
     return header, rows
 
 
 # ---------------------------------------------------------------------------- sections
 
+
 def _section_design() -> list[str]:
     margins = ", ".join(f"{m.label} ±{m.margin:g}{m.suffix}" for m in TESTED)
     resamples = f"{PERMUTATION_RESAMPLES:_}".replace("_", " ")
-    return ["## Design", "",
-            "Paired trials (common random numbers): for one trial index every method meets the same site and the same human "
-            "draws (task time, focus intervals, each decision), so methods are compared trial by trial on the differences "
-            "ARROCH − baseline; a trial that did not complete in one method drops that pair. Per level and baseline: the mean "
-            "difference with its 95 % t interval, the paired t-test, the Wilcoxon signed-rank test (zero differences dropped; "
-            "exact for small samples) — the primary test for times — and for counts a sign-flip permutation test on the "
-            f"differences (exact up to {EXACT_FLIPS_MAX} nonzero differences, otherwise {resamples} random flips "
-            f"with the fixed seed {PERMUTATION_SEED}) — the primary test for counts; d_z = mean / sd of the differences (n/a "
-            f"without spread); equivalence by two one-sided paired t-tests (TOST) against the margins {margins} (chosen before "
-            "the runs: 30 s is 5 % of the 600 s task and half the sd of her task draw; 10 s is about one door trip; half an "
-            "opening is less than one door per trial). Holm's correction over each metric's family (all levels × baselines), "
-            f"separately for the primary and the TOST p-values; every verdict uses the Holm-adjusted values at α = {ALPHA:g}. "
-            "Conventions in detail: `services/experiments/stats.py` and `comparisons.py`.", ""]
+    return [
+        "## Design",
+        "",
+        "Paired trials (common random numbers): for one trial index every method meets the same site and the same human "
+        "draws (task time, focus intervals, each decision), so methods are compared trial by trial on the differences "
+        "ARROCH − baseline; a trial that did not complete in one method drops that pair. Per level and baseline: the mean "
+        "difference with its 95 % t interval, the paired t-test, the Wilcoxon signed-rank test (zero differences dropped; "
+        "exact for small samples) — the primary test for times — and for counts a sign-flip permutation test on the "
+        f"differences (exact up to {EXACT_FLIPS_MAX} nonzero differences, otherwise {resamples} random flips "
+        f"with the fixed seed {PERMUTATION_SEED}) — the primary test for counts; d_z = mean / sd of the differences (n/a "
+        f"without spread); equivalence by two one-sided paired t-tests (TOST) against the margins {margins} (chosen before "
+        "the runs: 30 s is 5 % of the 600 s task and half the sd of her task draw; 10 s is about one door trip; half an "
+        "opening is less than one door per trial). Holm's correction over each metric's family (all levels × baselines), "
+        f"separately for the primary and the TOST p-values; every verdict uses the Holm-adjusted values at α = {ALPHA:g}. "
+        "Conventions in detail: `services/experiments/stats.py` and `comparisons.py`.",
+        "",
+    ]
 
 
 def _section_sweep(results: Results) -> list[str]:
@@ -167,12 +255,22 @@ def _section_sweep(results: Results) -> list[str]:
     lines = ["## Sweep", ""]
     if spec is None:
         return lines + ["No sweep.json in this folder: the conditions are those trials.csv shows.", ""]
-    rows = [["kind", spec.kind], ["methods", _value(spec.methods)], ["robots", _value(spec.robots)],
-            ["objects per robot", str(spec.objects)], ["door-opening probabilities", _value(spec.ps)],
-            ["mean task lengths (s)", _value(spec.tasks)], ["interruption costs (s)", _value(spec.costs)],
-            ["trials per condition", str(spec.trials)], ["base seed", str(spec.seed)],
-            ["time limit (sim s)", "the simulator's default" if spec.time_limit is None else _value(spec.time_limit)],
-            ["human model", "the simulator's defaults" if spec.human_config is None else "a custom --human-config (text in sweep.json)"]]
+    rows = [
+        ["kind", spec.kind],
+        ["methods", _value(spec.methods)],
+        ["robots", _value(spec.robots)],
+        ["objects per robot", str(spec.objects)],
+        ["door-opening probabilities", _value(spec.ps)],
+        ["mean task lengths (s)", _value(spec.tasks)],
+        ["interruption costs (s)", _value(spec.costs)],
+        ["trials per condition", str(spec.trials)],
+        ["base seed", str(spec.seed)],
+        ["time limit (sim s)", "the simulator's default" if spec.time_limit is None else _value(spec.time_limit)],
+        [
+            "human model",
+            "the simulator's defaults" if spec.human_config is None else "a custom --human-config (text in sweep.json)",
+        ],
+    ]
     rows += [[name, _value(value)] for name, value in sorted(spec.extra.items())]
     return lines + _table(["parameter", "value"], rows) + [""]
 
@@ -183,9 +281,17 @@ def _section_params(results: Results) -> list[str]:
         return ["## Human model", "", "No params.json in this folder (it is written when a sweep completes).", ""]
     human = params.get("human", {})
     varied = params.get("varied_per_trial", {})
-    lines = ["## Human model (as the simulator reported it)", "",
-             f"Source: {params.get('source', 'params.json')}."
-             + (" Varied per trial: " + "; ".join(f"{k} ∈ {{{_value(vs)}}}" for k, vs in varied.items()) + "." if varied else ""), ""]
+    lines = [
+        "## Human model (as the simulator reported it)",
+        "",
+        f"Source: {params.get('source', 'params.json')}."
+        + (
+            " Varied per trial: " + "; ".join(f"{k} ∈ {{{_value(vs)}}}" for k, vs in varied.items()) + "."
+            if varied
+            else ""
+        ),
+        "",
+    ]
     lines += _table(["option", "value"], [[k, _value(v)] for k, v in sorted(human.items())])
     for name in ("site_params", "engine"):
         if params.get(name):
@@ -193,36 +299,53 @@ def _section_params(results: Results) -> list[str]:
     if params.get("mode") is not None:
         lines += ["", f"clock mode: {params.get('mode')}"]
     if params.get("differs"):
-        lines += ["", "**Parameters that differ between trials** (the trials are not comparable on these): "
-                  + "; ".join(f"{k}: {_value(v)}" for k, v in params["differs"].items())]
+        lines += [
+            "",
+            "**Parameters that differ between trials** (the trials are not comparable on these): "
+            + "; ".join(f"{k}: {_value(v)}" for k, v in params["differs"].items()),
+        ]
     return lines + [""]
 
 
 def _section_trials(results: Results) -> list[str]:
     counts = statuses(results.trials)
-    lines = ["## Trials", "",
-             f"{len(results.trials)} trials: " + ", ".join(f"{counts.get(s, 0)} {s}" for s in STATUSES) + ". "
-             "Statistics use the completed (`ok`) trials only; the paired tests, the pairs in which both methods completed."]
+    lines = [
+        "## Trials",
+        "",
+        f"{len(results.trials)} trials: " + ", ".join(f"{counts.get(s, 0)} {s}" for s in STATUSES) + ". "
+        "Statistics use the completed (`ok`) trials only; the paired tests, the pairs in which both methods completed.",
+    ]
     codes: dict[str, int] = {}
     for r in results.timing:
         if r.get("code"):
             codes[r["code"]] = codes.get(r["code"], 0) + 1
     if len(codes) == 1:
-        lines += ["", f"Every trial ran on the same services' code (fingerprint `{next(iter(codes))}`, see timing.csv)."]
+        lines += [
+            "",
+            f"Every trial ran on the same services' code (fingerprint `{next(iter(codes))}`, see timing.csv).",
+        ]
     elif codes:
-        lines += ["", f"**The trials ran on {len(codes)} versions of the services' code** (the sources changed during the sweep; "
-                  "fingerprint: trials): " + ", ".join(f"`{c}`: {n}" for c, n in codes.items())
-                  + ". Trials of different versions are not strictly comparable."]
+        lines += [
+            "",
+            f"**The trials ran on {len(codes)} versions of the services' code** (the sources changed during the sweep; "
+            "fingerprint: trials): "
+            + ", ".join(f"`{c}`: {n}" for c, n in codes.items())
+            + ". Trials of different versions are not strictly comparable.",
+        ]
     failed = [t for t in results.trials if not t.ok]
     if failed:
         lines += ["", "Trials that did not complete (first 10):", ""]
-        lines += [f"- {t.method}, {results.level_label(results.level_of(t))}, trial {t.trial}: {t.status} — {t.reason}"
-                  for t in failed[:10]]
+        lines += [
+            f"- {t.method}, {results.level_label(results.level_of(t))}, trial {t.trial}: {t.status} — {t.reason}"
+            for t in failed[:10]
+        ]
     return lines + [""]
 
 
 def _summary_table(results: Results, columns: tuple[tuple[str, str], ...], slowest: bool) -> list[str]:
-    head = [*results.level_columns, "method", "ok / n", *(label for _, label in columns)] + (["human slowest"] if slowest else [])
+    head = [*results.level_columns, "method", "ok / n", *(label for _, label in columns)] + (
+        ["human slowest"] if slowest else []
+    )
     rows = []
     for level, method, trials in results.conditions():
         row = [*results.level_cells(level), method, f"{sum(t.ok for t in trials)} / {len(trials)}"]
@@ -235,49 +358,91 @@ def _summary_table(results: Results, columns: tuple[tuple[str, str], ...], slowe
 
 
 def _section_summary(results: Results) -> list[str]:
-    return ["## Summary (mean [95 % CI])", "", "### Team efficiency", "",
-            *_summary_table(results, EFFICIENCY_COLUMNS, slowest=True), "",
-            "*sum of times*: every agent's completion time added up (the paper's real-world measure); *human slowest*: "
-            "completed trials in which the human's own task ended last, i.e. set the team's time.", "",
-            "### The human's workload and the communication", "",
-            *_summary_table(results, HUMAN_COLUMNS, slowest=False), "",
-            "*time away*: walking to doors and opening them; *interruptions*: walks to a door begun during one of her focus "
-            "intervals; *time lost*: her task time lost to them (the interruption cost each).", ""]
+    return [
+        "## Summary (mean [95 % CI])",
+        "",
+        "### Team efficiency",
+        "",
+        *_summary_table(results, EFFICIENCY_COLUMNS, slowest=True),
+        "",
+        "*sum of times*: every agent's completion time added up (the paper's real-world measure); *human slowest*: "
+        "completed trials in which the human's own task ended last, i.e. set the team's time.",
+        "",
+        "### The human's workload and the communication",
+        "",
+        *_summary_table(results, HUMAN_COLUMNS, slowest=False),
+        "",
+        "*time away*: walking to doors and opening them; *interruptions*: walks to a door begun during one of her focus "
+        "intervals; *time lost*: her task time lost to them (the interruption cost each).",
+        "",
+    ]
 
 
 def _section_tests(results: Results, tested: dict[str, list[Test]]) -> list[str]:
     if not any(t.result.n >= 2 for tests in tested.values() for t in tests):
-        return ["## ARROCH against each baseline (paired)", "",
-                "Not available: the sweep needs ARROCH, a baseline and two complete pairs per level.", ""]
-    out = ["## ARROCH against each baseline (paired)", "",
-           "Δ = ARROCH − baseline over the pairs (negative: ARROCH lower). Holm: over all levels and baselines of one metric. "
-           "The verdict reads the Holm-adjusted p-values only (Design).", ""]
+        return [
+            "## ARROCH against each baseline (paired)",
+            "",
+            "Not available: the sweep needs ARROCH, a baseline and two complete pairs per level.",
+            "",
+        ]
+    out = [
+        "## ARROCH against each baseline (paired)",
+        "",
+        "Δ = ARROCH − baseline over the pairs (negative: ARROCH lower). Holm: over all levels and baselines of one metric. "
+        "The verdict reads the Holm-adjusted p-values only (Design).",
+        "",
+    ]
     for metric in TESTED:
         rows = []
         for t in tested.get(metric.name, []):
             r, d = t.result, metric.digits
             if r.n < 2:
                 continue
-            rows.append([*results.level_cells(t.level), t.baseline, str(r.n), f"{r.mean_a:.{d}f} vs {r.mean_b:.{d}f}",
-                         f"{r.mean_diff:+.{d}f} [{r.ci_low:+.{d}f}, {r.ci_high:+.{d}f}]",
-                         "n/a" if math.isnan(r.t) else f"{r.t:.2f} ({format_p_value(r.t_p)})",
-                         f"{r.wilcoxon.w:g} ({format_p_value(r.wilcoxon.p)})",
-                         *([format_p_value(r.perm_p)] if metric.count else []),
-                         format_p_value(t.primary_p_holm), format_p_value(t.tost_p_holm),
-                         "n/a" if math.isnan(r.d_z) else f"{r.d_z:.2f}", t.verdict])
-        head = [*results.level_columns, "baseline", "pairs", "mean ARROCH vs baseline", "Δ [95 % CI]", "paired t (p)",
-                "Wilcoxon W (p)", *(["permutation p"] if metric.count else []), f"{metric.primary_test} Holm p",
-                f"TOST ±{metric.margin:g} Holm p", "d_z", "verdict"]
+            rows.append(
+                [
+                    *results.level_cells(t.level),
+                    t.baseline,
+                    str(r.n),
+                    f"{r.mean_a:.{d}f} vs {r.mean_b:.{d}f}",
+                    f"{r.mean_diff:+.{d}f} [{r.ci_low:+.{d}f}, {r.ci_high:+.{d}f}]",
+                    "n/a" if math.isnan(r.t) else f"{r.t:.2f} ({format_p_value(r.t_p)})",
+                    f"{r.wilcoxon.w:g} ({format_p_value(r.wilcoxon.p)})",
+                    *([format_p_value(r.perm_p)] if metric.count else []),
+                    format_p_value(t.primary_p_holm),
+                    format_p_value(t.tost_p_holm),
+                    "n/a" if math.isnan(r.d_z) else f"{r.d_z:.2f}",
+                    t.verdict,
+                ]
+            )
+        head = [
+            *results.level_columns,
+            "baseline",
+            "pairs",
+            "mean ARROCH vs baseline",
+            "Δ [95 % CI]",
+            "paired t (p)",
+            "Wilcoxon W (p)",
+            *(["permutation p"] if metric.count else []),
+            f"{metric.primary_test} Holm p",
+            f"TOST ±{metric.margin:g} Holm p",
+            "d_z",
+            "verdict",
+        ]
         out += [f"### {metric.label}" + (f" ({metric.unit})" if metric.unit else ""), "", *_table(head, rows), ""]
     return out
 
 
 def _section_claims(claims: list[Claim]) -> list[str]:
-    out = ["## The paper's claims", "",
-           "Each (level, baseline) is *lower (significant)* when the primary test's Holm-adjusted p < 0.05 and ARROCH's mean "
-           "difference is negative; *higher (significant)* likewise with a positive one; *equivalent* when the Holm-adjusted "
-           "TOST p < 0.05; otherwise *not significant*. A claim is confirmed only when every (level, baseline) is lower "
-           "(significant); partly confirmed when some are.", ""]
+    out = [
+        "## The paper's claims",
+        "",
+        "Each (level, baseline) is *lower (significant)* when the primary test's Holm-adjusted p < 0.05 and ARROCH's mean "
+        "difference is negative; *higher (significant)* likewise with a positive one; *equivalent* when the Holm-adjusted "
+        "TOST p < 0.05; otherwise *not significant*. A claim is confirmed only when every (level, baseline) is lower "
+        "(significant); partly confirmed when some are.",
+        "",
+    ]
     for claim in claims:
         out += [f"### {claim.title}: **{claim.verdict}**", "", f"Claim: {claim.statement}", "", claim.detail, ""]
     return out
@@ -297,11 +462,13 @@ def _section_drivers(results: Results) -> list[str]:
         def mean(metric: str) -> str:
             return _mean_ci(summarize([t.values[metric] for t in mine if t.values.get(metric) is not None]))
 
-        lines.append(f"- {method}: the human was the slowest agent in {_share(*_slowest(mine))} of the completed trials; her "
-                     f"task ended at {mean('human_completion_time')} s on average (her task needed {mean('human_task_time')} s "
-                     f"of work), the last robot's delivery at {mean('slowest_robot_time')} s; the sum of all agents' times was "
-                     f"{mean('sum_of_times')} s; she spent {mean('human_time_away')} s away from her task on doors and lost "
-                     f"{mean('human_time_lost')} s to {mean('human_interruptions')} interruptions.")
+        lines.append(
+            f"- {method}: the human was the slowest agent in {_share(*_slowest(mine))} of the completed trials; her "
+            f"task ended at {mean('human_completion_time')} s on average (her task needed {mean('human_task_time')} s "
+            f"of work), the last robot's delivery at {mean('slowest_robot_time')} s; the sum of all agents' times was "
+            f"{mean('sum_of_times')} s; she spent {mean('human_time_away')} s away from her task on doors and lost "
+            f"{mean('human_time_lost')} s to {mean('human_interruptions')} interruptions."
+        )
     return lines + [""]
 
 
@@ -311,9 +478,16 @@ def _section_time(results: Results) -> list[str]:
     lines = ["## Wall time", ""]
     if results.runs:
         total = sum(float(r.get("wall_time", 0.0)) for r in results.runs)
-        lines.append(f"{len(results.runs)} session(s), {total / 60:.1f} min of wall time in all "
-                     + "(" + "; ".join(f"{r.get('started', '?')}: {float(r.get('wall_time', 0)) / 60:.1f} min, {r.get('trials_run')} trials, "
-                                      f"{r.get('jobs')} jobs, router per {r.get('router')}, {r.get('ended')}" for r in results.runs) + ").")
+        lines.append(
+            f"{len(results.runs)} session(s), {total / 60:.1f} min of wall time in all "
+            + "("
+            + "; ".join(
+                f"{r.get('started', '?')}: {float(r.get('wall_time', 0)) / 60:.1f} min, {r.get('trials_run')} trials, "
+                f"{r.get('jobs')} jobs, router per {r.get('router')}, {r.get('ended')}"
+                for r in results.runs
+            )
+            + ")."
+        )
         lines.append("")
     rows = [r for r in results.timing if r.get("wall_time")]
     if rows:
@@ -325,22 +499,52 @@ def _section_time(results: Results) -> list[str]:
 
         def per_version(subset: list[dict[str, str]]) -> str:
             """Mission wall time per world version: one lockstep round trip (sim → planner → sim)."""
-            pairs = [(float(r["mission_wall_time"]), versions.get(key_of(r))) for r in subset if r.get("mission_wall_time")]
+            pairs = [
+                (float(r["mission_wall_time"]), versions.get(key_of(r))) for r in subset if r.get("mission_wall_time")
+            ]
             pairs = [(w, v) for w, v in pairs if v]
             return f"{1000 * sum(w for w, _ in pairs) / sum(v for _, v in pairs):.0f}" if pairs else "–"
 
         groups: dict[Level, list[dict[str, str]]] = {}
         for r in rows:
             groups.setdefault(results.level_of(key_of(r)), []).append(r)
-        head = [*results.level_columns, "trials", "wall / trial (s)", "services up (s)", "sim start-up + end (s)",
-                "mission (s)", "planner solve (s)", "plans", "ms per world version", "shutdown (s)", "sim s per wall s"]
-        table = [[*results.level_cells(level), str(len(g)), mean("wall_time", g), mean("services_up", g), mean("sim_startup", g),
-                  mean("mission_wall_time", g), mean("planner_solve_time", g), mean("plans", g), per_version(g), mean("shutdown", g),
-                  mean("realtime_factor", g)] for level, g in groups.items()]
-        lines += ["Per trial, mean (from timing.csv; trials ran in parallel, so the sweep's wall time is about the sum / jobs). "
-                  "*ms per world version*: mission wall time over the world versions the planner had to answer, i.e. "
-                  "the cost of one lockstep round trip including the replan.", "",
-                  *_table(head, table), ""]
+        head = [
+            *results.level_columns,
+            "trials",
+            "wall / trial (s)",
+            "services up (s)",
+            "sim start-up + end (s)",
+            "mission (s)",
+            "planner solve (s)",
+            "plans",
+            "ms per world version",
+            "shutdown (s)",
+            "sim s per wall s",
+        ]
+        table = [
+            [
+                *results.level_cells(level),
+                str(len(g)),
+                mean("wall_time", g),
+                mean("services_up", g),
+                mean("sim_startup", g),
+                mean("mission_wall_time", g),
+                mean("planner_solve_time", g),
+                mean("plans", g),
+                per_version(g),
+                mean("shutdown", g),
+                mean("realtime_factor", g),
+            ]
+            for level, g in groups.items()
+        ]
+        lines += [
+            "Per trial, mean (from timing.csv; trials ran in parallel, so the sweep's wall time is about the sum / jobs). "
+            "*ms per world version*: mission wall time over the world versions the planner had to answer, i.e. "
+            "the cost of one lockstep round trip including the replan.",
+            "",
+            *_table(head, table),
+            "",
+        ]
     return lines
 
 
@@ -352,6 +556,7 @@ def _section_discussion(results: Results) -> list[str]:
 
 
 # ---------------------------------------------------------------------------- the whole report
+
 
 def build_report(folder: Path) -> list[Path]:
     """Write every report file into ``folder``; returns their paths."""
@@ -377,9 +582,13 @@ def build_report(folder: Path) -> list[Path]:
     figures = plot_maps(results, tested, folder) if results.kind == "map" else plot_all(results, folder)
     written += figures
     claims = check_claims(results, tested)
-    lines = [f"# Experiment: {TITLES.get(results.kind, results.kind)}", "",
-             "Paper §V-A. Each trial ran the real planner, restrictor and sim (with its human model) as separate processes over "
-             "Zenoh in lockstep mode on a generated site. Rebuilt from `trials.csv` by `arroch experiment report`.", ""]
+    lines = [
+        f"# Experiment: {TITLES.get(results.kind, results.kind)}",
+        "",
+        "Paper §V-A. Each trial ran the real planner, restrictor and sim (with its human model) as separate processes over "
+        "Zenoh in lockstep mode on a generated site. Rebuilt from `trials.csv` by `arroch experiment report`.",
+        "",
+    ]
     lines += _section_sweep(results)
     lines += _section_params(results)
     lines += _section_design()

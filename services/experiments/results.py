@@ -14,19 +14,45 @@ metric known; a trial that failed in one method drops that pair.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator, Protocol, Union
+from typing import Any, Protocol, Union
 
 from .design import METHODS, SweepSpec, TrialKey, format_p
 from .record import TIMING_FIELDS, TRIAL_FIELDS
 from .store import CsvStore, StoreError
 
-METRICS = ("team_completion_time", "sum_of_times", "door_openings", "slowest_robot_time", "human_completion_time",
-           "human_task_time", "human_time_away", "human_door_trips", "human_interruptions", "human_time_lost",
-           "focus_declared", "feedback_sent", "feedback_accepted", "replans", "world_versions", "robot_wait_time")
-COUNTS = frozenset({"door_openings", "human_door_trips", "human_interruptions", "focus_declared", "feedback_sent",
-                    "feedback_accepted", "replans", "world_versions"})  # the others are times (s)
+METRICS = (
+    "team_completion_time",
+    "sum_of_times",
+    "door_openings",
+    "slowest_robot_time",
+    "human_completion_time",
+    "human_task_time",
+    "human_time_away",
+    "human_door_trips",
+    "human_interruptions",
+    "human_time_lost",
+    "focus_declared",
+    "feedback_sent",
+    "feedback_accepted",
+    "replans",
+    "world_versions",
+    "robot_wait_time",
+)
+COUNTS = frozenset(
+    {
+        "door_openings",
+        "human_door_trips",
+        "human_interruptions",
+        "focus_declared",
+        "feedback_sent",
+        "feedback_accepted",
+        "replans",
+        "world_versions",
+    }
+)  # the others are times (s)
 
 Level = Union[int, float, tuple[float, float]]  # robots; door-opening probability; (task mean, interruption cost)
 
@@ -122,7 +148,9 @@ class Results:
     @property
     def level_columns(self) -> tuple[str, ...]:
         """The CSV columns that name a level."""
-        return {"robots": ("robots",), "laziness": ("door_probability",)}.get(self.kind, ("task_mean", "interruption_cost"))
+        return {"robots": ("robots",), "laziness": ("door_probability",)}.get(
+            self.kind, ("task_mean", "interruption_cost")
+        )
 
     def level_cells(self, level: Level) -> list[str]:
         """A level as the text of its :attr:`level_columns`."""
@@ -138,20 +166,29 @@ class Results:
 
     @property
     def variable(self) -> str:
-        return {"robots": "robots", "laziness": "door-opening probability"}.get(self.kind, "task length × interruption cost")
+        return {"robots": "robots", "laziness": "door-opening probability"}.get(
+            self.kind, "task length × interruption cost"
+        )
 
     # ------------------------------------------------------------------ values
 
     def values(self, method: str, level: Level, metric: str) -> list[float]:
         """``metric`` of the completed (``ok``) trials of one condition."""
-        return [t.values[metric] for t in self.trials  # type: ignore[misc]
-                if t.ok and t.method == method and self.level_of(t) == level and t.values.get(metric) is not None]
+        return [
+            t.values[metric]
+            for t in self.trials  # type: ignore[misc]
+            if t.ok and t.method == method and self.level_of(t) == level and t.values.get(metric) is not None
+        ]
 
     def pairs(self, metric: str, level: Level, a: str, b: str) -> list[Pair]:
         """``metric`` of methods ``a`` and ``b`` at the same trial index, where both completed, by trial index."""
+
         def known(method: str) -> dict[tuple, TrialResult]:
-            return {t.key.pair(): t for t in self.trials
-                    if t.ok and t.method == method and self.level_of(t) == level and t.values.get(metric) is not None}
+            return {
+                t.key.pair(): t
+                for t in self.trials
+                if t.ok and t.method == method and self.level_of(t) == level and t.values.get(metric) is not None
+            }
 
         mine, theirs = known(a), known(b)
         common = sorted(set(mine) & set(theirs), key=lambda k: (k[-1], k))
@@ -174,9 +211,19 @@ def _trial(row: dict[str, str]) -> TrialResult:
     human_slowest = None
     if row["status"] == "ok" and row["human_completion_time"] and row["slowest_robot_time"]:
         human_slowest = float(row["human_completion_time"]) >= float(row["slowest_robot_time"])
-    return TrialResult(row["method"], int(row["robots"]), int(row["objects"]), float(row["door_probability"]),
-                       float(row["task_mean"]), float(row["interruption_cost"]), int(row["trial"]), row["status"],
-                       row["reason"], values, human_slowest)
+    return TrialResult(
+        row["method"],
+        int(row["robots"]),
+        int(row["objects"]),
+        float(row["door_probability"]),
+        float(row["task_mean"]),
+        float(row["interruption_cost"]),
+        int(row["trial"]),
+        row["status"],
+        row["reason"],
+        values,
+        human_slowest,
+    )
 
 
 def _kind(spec: SweepSpec | None, trials: list[TrialResult]) -> str:

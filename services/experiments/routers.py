@@ -54,13 +54,14 @@ class Router:
         self.endpoint = ""
         self._output: collections.deque[str] = collections.deque(maxlen=50)
 
-    def start(self) -> "Router":
+    def start(self) -> Router:
         last = ""
         for _ in range(START_ATTEMPTS):
             self.endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
             argv = router_argv(Launch(namespace="-", log_level=self.log_level), self.endpoint)
-            self.child = Child("router", argv, env=child_env(), on_line=lambda _name, line: self._output.append(line),
-                               restart=False)
+            self.child = Child(
+                "router", argv, env=child_env(), on_line=lambda _name, line: self._output.append(line), restart=False
+            )
             self.child.start(ROUTER_READY)
             deadline = time.monotonic() + self.start_timeout
             while not self.child.ready.wait(0.05):
@@ -75,8 +76,11 @@ class Router:
                 log.debug("router up on %s (pid %s)", self.endpoint, self.child.pid)
                 return self
             code = self.child.returncode()
-            last = (f"the router {describe_exit(code)}" if code is not None
-                    else f"the router did not report ready within {self.start_timeout:.0f} s")
+            last = (
+                f"the router {describe_exit(code)}"
+                if code is not None
+                else f"the router did not report ready within {self.start_timeout:.0f} s"
+            )
             stop_all([self.child], 2.0)
             tail = " | ".join(list(self._output)[-3:])
             log.debug("router on %s failed: %s (%s)", self.endpoint, last, tail)

@@ -30,16 +30,16 @@ import queue
 import signal
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
 
 from protocol.signals import StopSignals, restore
 
 from .design import SweepSpec, TrialKey
 from .params import write_params
-from .provenance import code_fingerprint
 from .progress import Progress, ProgressLogHandler
+from .provenance import code_fingerprint
 from .record import DONE, TIMING_FIELDS, TRIAL_FIELDS, key_cells, key_of, timing_row, trial_row
 from .routers import ROUTER_MODES, Router, RouterError
 from .store import CsvStore, JsonlStore
@@ -108,15 +108,19 @@ class Sweep:
         spec_path = self.out / SPEC_FILE
         if spec_path.exists():
             if not self.options.resume:
-                raise SweepError(f"{self.out} already holds a sweep: add --resume to continue it, or choose another --out")
+                raise SweepError(
+                    f"{self.out} already holds a sweep: add --resume to continue it, or choose another --out"
+                )
             try:
                 old = SweepSpec.from_json(json.loads(spec_path.read_text(encoding="utf-8")))
             except (json.JSONDecodeError, ValueError) as exc:
                 raise SweepError(f"{spec_path}: {exc}") from None
             differences = self.spec.differences(old)
             if differences:
-                raise SweepError(f"--resume: {self.out} holds another sweep ({'; '.join(differences)}); "
-                                 f"run it with the same options, or choose another --out")
+                raise SweepError(
+                    f"--resume: {self.out} holds another sweep ({'; '.join(differences)}); "
+                    f"run it with the same options, or choose another --out"
+                )
         elif self.trials.exists():
             raise SweepError(f"{self.out} has a {TRIALS_FILE} but no {SPEC_FILE}: not a sweep folder this command made")
         self.out.mkdir(parents=True, exist_ok=True)
@@ -155,9 +159,13 @@ class Sweep:
             if outcome.status == "ok":
                 log_path.unlink(missing_ok=True)  # an old failure of this trial, now run again
             else:  # a failure, or a mission that did not end: worth reading
-                log_path.write_text("\n".join([f"status: {outcome.status}", f"reason: {outcome.reason}", "",
-                                               *outcome.output]) + "\n", encoding="utf-8")
-                log.warning("%s: %s: %s (services' output in %s)", outcome.key.ident(), outcome.status, outcome.reason, log_path)
+                log_path.write_text(
+                    "\n".join([f"status: {outcome.status}", f"reason: {outcome.reason}", "", *outcome.output]) + "\n",
+                    encoding="utf-8",
+                )
+                log.warning(
+                    "%s: %s: %s (services' output in %s)", outcome.key.ident(), outcome.status, outcome.reason, log_path
+                )
             self.ran += 1
         if self.progress is not None:
             wall = outcome.timing.get("wall", 0.0)
@@ -226,8 +234,15 @@ class Sweep:
             self._todo.put(key)
         started_at, started = time.time(), time.monotonic()
         jobs = min(self.options.jobs, max(1, len(todo)))
-        log.info("%s sweep: %d trials (%d to run) in %s, %d at a time, router per %s",
-                 self.spec.kind, total, len(todo), self.out, jobs, self.options.router)
+        log.info(
+            "%s sweep: %d trials (%d to run) in %s, %d at a time, router per %s",
+            self.spec.kind,
+            total,
+            len(todo),
+            self.out,
+            jobs,
+            self.options.router,
+        )
         handler: logging.Handler | None = None
         if self.options.progress != "off":
             bar = {"auto": None, "bar": True, "line": False}[self.options.progress]
@@ -239,7 +254,11 @@ class Sweep:
             root.handlers[:] = [handler]
         # The handlers only note the signal (protocol.signals): the loop below turns it into a cancel.
         signals = StopSignals()
-        previous = signals.install((signal.SIGINT, signal.SIGTERM, signal.SIGHUP)) if threading.current_thread() is threading.main_thread() else {}
+        previous = (
+            signals.install((signal.SIGINT, signal.SIGTERM, signal.SIGHUP))
+            if threading.current_thread() is threading.main_thread()
+            else {}
+        )
         shared: Router | None = None
         try:
             if self.options.cluster:
@@ -261,7 +280,9 @@ class Sweep:
 
     def _run_locally(self, jobs: int, shared: Router | None, stopping: Callable[[], bool]) -> None:
         """``jobs`` worker threads until the queue is empty or the sweep is cancelled."""
-        workers = [threading.Thread(target=self._worker, args=(shared,), name=f"worker-{i}", daemon=True) for i in range(jobs)]
+        workers = [
+            threading.Thread(target=self._worker, args=(shared,), name=f"worker-{i}", daemon=True) for i in range(jobs)
+        ]
         for worker in workers:
             worker.start()
         while any(w.is_alive() for w in workers):
@@ -298,8 +319,15 @@ class Sweep:
         self._note_session(started_at, wall, jobs, ending)
         if complete:
             self._finish()
-        log.info("%s: %d trial(s) run in %.1f s (%s), %d failed; results in %s",
-                 self.spec.kind, self.ran, wall, ending, self.failed, self.out)
+        log.info(
+            "%s: %d trial(s) run in %.1f s (%s), %d failed; results in %s",
+            self.spec.kind,
+            self.ran,
+            wall,
+            ending,
+            self.failed,
+            self.out,
+        )
         if self.cancel.is_set():
             log.info("stopped: run the same command with --resume to finish the sweep")
             return 130
@@ -311,13 +339,21 @@ class Sweep:
             sessions = json.loads(path.read_text(encoding="utf-8")) if path.exists() else []
         except json.JSONDecodeError:
             sessions = []
-        sessions.append({
-            "started": time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(started_at)),
-            "wall_time": round(wall, 3), "jobs": jobs, "router": self.options.router,
-            "cluster": self.options.cluster,
-            "trial_timeout": self.options.trial.timeout, "trials_run": self.ran, "failed": self.failed,
-            "ended": ending, "cpu_count": os.cpu_count(), "code_at_end": code_fingerprint(),
-        })
+        sessions.append(
+            {
+                "started": time.strftime("%Y-%m-%dT%H:%M:%S%z", time.localtime(started_at)),
+                "wall_time": round(wall, 3),
+                "jobs": jobs,
+                "router": self.options.router,
+                "cluster": self.options.cluster,
+                "trial_timeout": self.options.trial.timeout,
+                "trials_run": self.ran,
+                "failed": self.failed,
+                "ended": ending,
+                "cpu_count": os.cpu_count(),
+                "code_at_end": code_fingerprint(),
+            }
+        )
         path.write_text(json.dumps(sessions, indent=2) + "\n", encoding="utf-8")
 
     def _finish(self) -> None:
@@ -334,6 +370,10 @@ class Sweep:
             try:
                 build_report(self.out)
             except Exception as exc:  # the results are safe; the report can be rebuilt from them
-                log.error("the report was not built (%s: %s); once fixed: arroch experiment report %s",
-                          type(exc).__name__, exc, self.out)
+                log.error(
+                    "the report was not built (%s: %s); once fixed: arroch experiment report %s",
+                    type(exc).__name__,
+                    exc,
+                    self.out,
+                )
                 self._worker_errors.append(f"report: {exc}")

@@ -49,8 +49,8 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -69,6 +69,7 @@ def _scipy_stats():  # noqa: ANN202 - the module
 
 
 # ---------------------------------------------------------------------------- one sample
+
 
 @dataclass(frozen=True)
 class Summary:
@@ -98,6 +99,7 @@ def summarize(values: Sequence[float]) -> Summary:
 
 
 # ---------------------------------------------------------------------------- paired tests
+
 
 def differences(a: Sequence[float], b: Sequence[float]) -> np.ndarray:
     """``a_i - b_i``, rounded so that equal differences in the CSV are equal here."""
@@ -160,8 +162,14 @@ def sign_flip_test(d: np.ndarray) -> float:
         return 1.0  # no difference, or one: its two sign arrangements have the same |sum|
     exact = k <= EXACT_FLIPS_MAX
     res = _scipy_stats().permutation_test(
-        (nonzero,), _sum, permutation_type="samples", vectorized=True, alternative="two-sided",
-        n_resamples=2**k if exact else PERMUTATION_RESAMPLES, rng=np.random.default_rng(PERMUTATION_SEED))
+        (nonzero,),
+        _sum,
+        permutation_type="samples",
+        vectorized=True,
+        alternative="two-sided",
+        n_resamples=2**k if exact else PERMUTATION_RESAMPLES,
+        rng=np.random.default_rng(PERMUTATION_SEED),
+    )
     return min(1.0, float(res.pvalue))
 
 
@@ -218,11 +226,27 @@ def paired(a: Sequence[float], b: Sequence[float], *, margin: float, permutation
     if n >= 2 and s.sd == 0.0:
         ci_low = ci_high = s.mean
     d_z = s.mean / s.sd if n >= 2 and s.sd > 0 else NAN
-    return Paired(n, int(np.count_nonzero(d)), mean_a, mean_b, s.mean, s.sd, ci_low, ci_high, t, t_p, rank,
-                  perm_p, d_z, margin, tost(d, margin))
+    return Paired(
+        n,
+        int(np.count_nonzero(d)),
+        mean_a,
+        mean_b,
+        s.mean,
+        s.sd,
+        ci_low,
+        ci_high,
+        t,
+        t_p,
+        rank,
+        perm_p,
+        d_z,
+        margin,
+        tost(d, margin),
+    )
 
 
 # ---------------------------------------------------------------------------- families
+
 
 def holm(pvalues: Sequence[float]) -> list[float]:
     """Holm–Bonferroni adjusted p-values (NaN stays NaN and does not count as a test)."""

@@ -15,8 +15,8 @@ import io
 import json
 import logging
 import os
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Callable, Iterable
 
 log = logging.getLogger("arroch.experiment")
 
@@ -54,15 +54,20 @@ class CsvStore:
         text = self.path.read_text(encoding="utf-8")
         if text and not text.endswith("\n"):
             cut = text.rfind("\n") + 1
-            log.warning("%s: dropping an incomplete last line (%d characters) left by an interrupted write", self.path, len(text) - cut)
+            log.warning(
+                "%s: dropping an incomplete last line (%d characters) left by an interrupted write",
+                self.path,
+                len(text) - cut,
+            )
             text = text[:cut]
         reader = csv.reader(io.StringIO(text))
         header = next(reader, None)
         if header is None:
             return []
         if tuple(header) != self.fields:
-            raise StoreError(f"{self.path}: its columns are not this version's ({', '.join(header)}); "
-                             f"use another --out folder")
+            raise StoreError(
+                f"{self.path}: its columns are not this version's ({', '.join(header)}); use another --out folder"
+            )
         rows = []
         for number, cells in enumerate(reader, start=2):
             if len(cells) != len(self.fields):

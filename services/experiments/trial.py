@@ -96,7 +96,7 @@ class _Output:
 
     def last_from(self, name: str) -> str:
         """``name``'s most telling last line (an ERROR if it logged one), without its time stamp."""
-        mine = [line[len(name) + 3:] for line in self.lines() if line.startswith(f"[{name}] ")]
+        mine = [line[len(name) + 3 :] for line in self.lines() if line.startswith(f"[{name}] ")]
         errors = [line for line in mine if " ERROR " in line or "Error" in line]
         text = (errors or mine or ["(no output)"])[-1]
         return _LOG_PREFIX.sub("", text).strip()[:300]
@@ -108,20 +108,43 @@ def _spec_for(name: str, drop: tuple[str, ...] = ()) -> ServiceSpec:
     return dataclasses.replace(spec, takes=tuple(t for t in spec.takes if t not in drop))
 
 
-def service_commands(spec: SweepSpec, key: TrialKey, *, namespace: str, site: Path, folder: Path,
-                     connect: str, log_level: str, human_config: Path | None,
-                     events: Path | None = None, record: bool = False) -> dict[str, list[str]]:
+def service_commands(
+    spec: SweepSpec,
+    key: TrialKey,
+    *,
+    namespace: str,
+    site: Path,
+    folder: Path,
+    connect: str,
+    log_level: str,
+    human_config: Path | None,
+    events: Path | None = None,
+    record: bool = False,
+) -> dict[str, list[str]]:
     """The three command lines of a trial (four with ``record``), built by the supervisor's catalog.
 
     The catalog's ``method`` is the baseline the *sim* runs (the human model); the planner is the
     same ARROCH planner for every method (its own ``--method`` is iidp/joint), so it does not get it.
     """
-    launch = Launch(namespace=namespace, connect=[connect], site=str(site), log_level=log_level,
-                    mission=MissionOptions(method=key.method, mode="lockstep", seed=spec.sim_seed(key)),
-                    run_dir=folder)
+    launch = Launch(
+        namespace=namespace,
+        connect=[connect],
+        site=str(site),
+        log_level=log_level,
+        mission=MissionOptions(method=key.method, mode="lockstep", seed=spec.sim_seed(key)),
+        run_dir=folder,
+    )
     sim = service_argv(SERVICES["sim"], launch) + [
-        "--until-done", "--metrics-out", str(folder / "metrics.json"), "--door-probability", format_p(key.p),
-        "--task-mean", format_p(key.task), "--interruption-cost", format_p(key.cost)]
+        "--until-done",
+        "--metrics-out",
+        str(folder / "metrics.json"),
+        "--door-probability",
+        format_p(key.p),
+        "--task-mean",
+        format_p(key.task),
+        "--interruption-cost",
+        format_p(key.cost),
+    ]
     if spec.focus_reading is not None:
         sim += ["--focus-reading", spec.focus_reading]
     if human_config is not None:
@@ -152,8 +175,15 @@ def _read_metrics(path: Path) -> dict[str, Any] | None:
 class Trial:
     """Runs one trial on ``router``. ``cancel`` (set by the sweep) ends it early, unrecorded."""
 
-    def __init__(self, spec: SweepSpec, key: TrialKey, router: Router, config: TrialConfig,
-                 cancel: threading.Event, namespace: str) -> None:
+    def __init__(
+        self,
+        spec: SweepSpec,
+        key: TrialKey,
+        router: Router,
+        config: TrialConfig,
+        cancel: threading.Event,
+        namespace: str,
+    ) -> None:
         self.spec = spec
         self.key = key
         self.router = router
@@ -215,7 +245,9 @@ class Trial:
             child = self.children[name]
             if not child.running():
                 child.flush_output()
-                return f"{name} {describe_exit(child.returncode() or 0)} during the mission: {self.output.last_from(name)}"
+                return (
+                    f"{name} {describe_exit(child.returncode() or 0)} during the mission: {self.output.last_from(name)}"
+                )
         return ""
 
     def _check(self, started: float, what: str) -> None:
@@ -239,15 +271,25 @@ class Trial:
 
     def _run_mission(self, folder: Path, watch: Any, started: float) -> tuple[str, str, dict[str, Any] | None]:
         site = folder / "site.toml"
-        site.write_text(generate_site(self.key.robots, self.key.objects, self.spec.site_seed(self.key)), encoding="utf-8")
+        site.write_text(
+            generate_site(self.key.robots, self.key.objects, self.spec.site_seed(self.key)), encoding="utf-8"
+        )
         human = None
         if self.spec.human_config is not None:
             human = folder / "human.toml"
             human.write_text(self.spec.human_config, encoding="utf-8")
-        commands = service_commands(self.spec, self.key, namespace=self.namespace, site=site, folder=folder,
-                                    connect=self.router.endpoint, log_level=self.config.log_level, human_config=human,
-                                    events=self.config.events_dir / f"{self.key.ident()}.jsonl" if self.config.events_dir else None,
-                                    record=self.config.record != "none")
+        commands = service_commands(
+            self.spec,
+            self.key,
+            namespace=self.namespace,
+            site=site,
+            folder=folder,
+            connect=self.router.endpoint,
+            log_level=self.config.log_level,
+            human_config=human,
+            events=self.config.events_dir / f"{self.key.ident()}.jsonl" if self.config.events_dir else None,
+            record=self.config.record != "none",
+        )
         first = tuple(name for name in (*FIRST, RECORDER.name) if name in commands)
         for name in first:  # together: their start-ups overlap
             self._start(name, commands[name])
@@ -275,7 +317,10 @@ class Trial:
                 if metrics is not None:
                     break
                 sim.flush_output()
-                raise _Failed("error", f"sim {describe_exit(sim.returncode() or 0)} without metrics: {self.output.last_from('sim')}")
+                raise _Failed(
+                    "error",
+                    f"sim {describe_exit(sim.returncode() or 0)} without metrics: {self.output.last_from('sim')}",
+                )
             dead = self._dead(FIRST)
             if dead:
                 raise _Failed("error", dead)
@@ -285,7 +330,11 @@ class Trial:
         self.timing["sim_startup"] = max(0.0, time.monotonic() - sim_started - mission)
         if metrics.get("completed"):
             return "ok", "", metrics
-        return "unfinished", f"mission ended unfinished at t={float(metrics.get('time') or 0.0):.1f} s (the sim's time limit)", metrics
+        return (
+            "unfinished",
+            f"mission ended unfinished at t={float(metrics.get('time') or 0.0):.1f} s (the sim's time limit)",
+            metrics,
+        )
 
 
 class _Failed(Exception):

@@ -26,7 +26,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     add_common_arguments(svc)
     _planning_arguments(svc, default_limit=5.0)
-    svc.add_argument("--off-track", type=float, default=1.0, metavar="M", help="distance from the trajectory that triggers a replan (default 1.0 m)")
+    svc.add_argument(
+        "--off-track",
+        type=float,
+        default=1.0,
+        metavar="M",
+        help="distance from the trajectory that triggers a replan (default 1.0 m)",
+    )
     svc.set_defaults(func=_run_service)
 
     one = subparsers.add_parser(
@@ -34,23 +40,57 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="compute one plan for a site's start and print it",
         description="Plan once for the site's initial state (every robot at its start, nothing delivered) and print the plan.",
     )
-    one.add_argument("--site", "--config", dest="site", metavar="FILE", help="site file (TOML); default: the packaged 'office' site")
+    one.add_argument(
+        "--site", "--config", dest="site", metavar="FILE", help="site file (TOML); default: the packaged 'office' site"
+    )
     add_common_arguments(one, site=False, zenoh=False)
     _planning_arguments(one, default_limit=30.0)
-    one.add_argument("--unavailable", action="append", default=[], metavar="DOOR:T0:T1",
-                     help="the human will not open DOOR in [T0, T1) (integer seconds); repeatable")
-    one.add_argument("--constraints", action="append", default=[], metavar="FILE.lp",
-                     help="extra constraints in the shared ASP vocabulary (docs/architecture.md); repeatable")
-    one.add_argument("--start-time", type=int, default=0, metavar="T", help="site-clock second the plan starts at (default 0)")
+    one.add_argument(
+        "--unavailable",
+        action="append",
+        default=[],
+        metavar="DOOR:T0:T1",
+        help="the human will not open DOOR in [T0, T1) (integer seconds); repeatable",
+    )
+    one.add_argument(
+        "--constraints",
+        action="append",
+        default=[],
+        metavar="FILE.lp",
+        help="extra constraints in the shared ASP vocabulary (docs/architecture.md); repeatable",
+    )
+    one.add_argument(
+        "--start-time", type=int, default=0, metavar="T", help="site-clock second the plan starts at (default 0)"
+    )
     one.add_argument("--json", action="store_true", help="print the plan as JSON")
     one.set_defaults(func=_run_plan)
 
 
 def _planning_arguments(parser: argparse.ArgumentParser, *, default_limit: float) -> None:
-    parser.add_argument("--method", choices=("iidp", "joint"), default="iidp", help="IIDP (default) or the joint program (small teams)")
-    parser.add_argument("--time-limit", type=float, default=default_limit, metavar="S", help=f"solver time for one plan (default {default_limit:g} s); past it the best plan so far is used")
-    parser.add_argument("--solve-limit", type=float, default=2.0, metavar="S", help="solver time for one robot's program inside IIDP (default 2 s; 5x that for the rare larger programs)")
-    parser.add_argument("--routes", type=int, default=1, metavar="K", help="candidate routes per leg (default 1; 2 when constraints mention rooms)")
+    parser.add_argument(
+        "--method", choices=("iidp", "joint"), default="iidp", help="IIDP (default) or the joint program (small teams)"
+    )
+    parser.add_argument(
+        "--time-limit",
+        type=float,
+        default=default_limit,
+        metavar="S",
+        help=f"solver time for one plan (default {default_limit:g} s); past it the best plan so far is used",
+    )
+    parser.add_argument(
+        "--solve-limit",
+        type=float,
+        default=2.0,
+        metavar="S",
+        help="solver time for one robot's program inside IIDP (default 2 s; 5x that for the rare larger programs)",
+    )
+    parser.add_argument(
+        "--routes",
+        type=int,
+        default=1,
+        metavar="K",
+        help="candidate routes per leg (default 1; 2 when constraints mention rooms)",
+    )
 
 
 def _settings(args: argparse.Namespace):
@@ -62,7 +102,12 @@ def _settings(args: argparse.Namespace):
         raise ValueError("--solve-limit must be positive")
     if args.routes < 1:
         raise ValueError("--routes must be at least 1")
-    return PlannerSettings(time_limit=args.time_limit, solve_limit=args.solve_limit, joint_time_limit=args.time_limit, routes_per_leg=args.routes)
+    return PlannerSettings(
+        time_limit=args.time_limit,
+        solve_limit=args.solve_limit,
+        joint_time_limit=args.time_limit,
+        routes_per_leg=args.routes,
+    )
 
 
 def _run_service(args: argparse.Namespace) -> int:
@@ -76,7 +121,9 @@ def _run_service(args: argparse.Namespace) -> int:
         if args.off_track <= 0:
             raise ValueError("--off-track must be positive")
         settings = ServiceSettings(method=args.method, planner=_settings(args), off_track=args.off_track)
-        return PlannerService(site, args.namespace or site.name, options_from(args), clock=make_clock(args.clock), settings=settings)
+        return PlannerService(
+            site, args.namespace or site.name, options_from(args), clock=make_clock(args.clock), settings=settings
+        )
 
     return run_service(build)
 
@@ -110,8 +157,10 @@ def _run_plan(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result.as_json(), indent=2))
         return 0
-    print(f"{result.method}: makespan {result.makespan} s, {result.door_openings} door openings, "
-          f"{result.iterations} rounds, {result.solve_time:.2f} s{' (time limit hit)' if result.status == 'timeout' else ''}")
+    print(
+        f"{result.method}: makespan {result.makespan} s, {result.door_openings} door openings, "
+        f"{result.iterations} rounds, {result.solve_time:.2f} s{' (time limit hit)' if result.status == 'timeout' else ''}"
+    )
     for o in result.openings:
         print(f"  human opens {o.door} at {result.absolute(o.start)} for {', '.join(o.robots)}")
     for rid, plan in sorted(result.plans.items()):

@@ -47,7 +47,7 @@ class ConstraintProgram:
     _admits: dict[tuple[str, int], bool] = field(default_factory=dict, repr=False)
 
     @classmethod
-    def build(cls, items: list[ConstraintText]) -> "ConstraintProgram":
+    def build(cls, items: list[ConstraintText]) -> ConstraintProgram:
         prog = cls(items=list(items))
         for index, item in enumerate(prog.items):
             try:
@@ -150,7 +150,9 @@ def from_constraint_set(cs: ConstraintSet) -> list[ConstraintText]:
 
 def unavailable(door: str, t0: int, t1: int, cid: str) -> ConstraintText:
     """The restrictor's ``door_unavailable`` form (docs/architecture.md) for the one-shot CLI."""
-    return ConstraintText(cid, f"human_unavailable({door}, {t0}, {t1}).\n:- human_opens({door}, T), T >= {t0}, T < {t1}.\n")
+    return ConstraintText(
+        cid, f"human_unavailable({door}, {t0}, {t1}).\n:- human_opens({door}, T), T >= {t0}, T < {t1}.\n"
+    )
 
 
 def parse_unavailable(spec: str, index: int) -> ConstraintText:

@@ -9,13 +9,12 @@ action and its times. Openings (``opens/3``) are matched to the passes they cove
 from __future__ import annotations
 
 import re
-from typing import Iterable
+from collections.abc import Iterable
 
 import clingo
 
 from .plan import Pass, RobotPlan, Step
 from .problem import RobotProblem
-
 
 # a comma between the arguments of an atom, not inside a term such as l(r0,2) or ld(o3)
 _TOP_COMMA = re.compile(r",(?![^(]*\))")
@@ -96,12 +95,16 @@ def decode(
             visits=tuple(visits(prob, passes, finish)),
             order=tuple(at[(rid, pos)] for pos in range(1, len(prob.stops) + 1)),
             legs=tuple(use[(rid, pos)] for pos in range(1, len(prob.stops) + 1)),
-            routes=tuple(tuple(c.opening for c in legs[use[(rid, pos)]].crossings) for pos in range(1, len(prob.stops) + 1)),
+            routes=tuple(
+                tuple(c.opening for c in legs[use[(rid, pos)]].crossings) for pos in range(1, len(prob.stops) + 1)
+            ),
         )
     return plans
 
 
-def _cover(windows: set[tuple[str, int]], opens: set[tuple[str, int]], door: str, start: int, end: int, hold: int) -> tuple[str, int] | None:
+def _cover(
+    windows: set[tuple[str, int]], opens: set[tuple[str, int]], door: str, start: int, end: int, hold: int
+) -> tuple[str, int] | None:
     """The opening window of ``door`` that a pass [start, end) lies in (own openings first)."""
     covering = sorted((d, t) for d, t in windows if d == door and t <= start and end <= t + hold)
     own = [w for w in covering if w in opens]

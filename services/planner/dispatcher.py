@@ -87,7 +87,15 @@ class Dispatcher:
                 continue
             trajectory, duration = self.trajectory(rid, plan, step, world)
             action_id = self._new_id(rid)
-            cmd = RobotCommand(robot=rid, plan_id=plan_id, action_id=action_id, action=step.action, args=list(step.args), trajectory=trajectory, duration=duration)
+            cmd = RobotCommand(
+                robot=rid,
+                plan_id=plan_id,
+                action_id=action_id,
+                action=step.action,
+                args=list(step.args),
+                trajectory=trajectory,
+                duration=duration,
+            )
             self.current[rid] = Dispatched(step.action, step.args, action_id, plan_id, trajectory, duration, cmd)
             front_ids[rid] = action_id
             commands.append(cmd)
@@ -124,7 +132,14 @@ class Dispatcher:
     def intents(self, plan_id: int) -> list[Intent]:
         """What every robot with a command is about to follow (for the AR client)."""
         return [
-            Intent(robot=rid, plan_id=plan_id, action_id=d.action_id, action=d.action, args=list(d.args), trajectory=d.trajectory)
+            Intent(
+                robot=rid,
+                plan_id=plan_id,
+                action_id=d.action_id,
+                action=d.action,
+                args=list(d.args),
+                trajectory=d.trajectory,
+            )
             for rid, d in sorted(self.current.items())
         ]
 

@@ -9,8 +9,8 @@ top of ``domain.lp``.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Iterable
 
 from protocol.site import Site
 
@@ -77,16 +77,25 @@ def time_point_facts(site: Site, base: int, numbers: set[int]) -> str:
 
 def robot_facts(p: RobotProblem) -> str:
     r = p.robot
-    lines = [f"robot({r}).", f"capacity({r},{p.capacity}).", f"start({r},{p.room},{p.ready}).", f"nstops({r},{len(p.stops)})."]
+    lines = [
+        f"robot({r}).",
+        f"capacity({r},{p.capacity}).",
+        f"start({r},{p.room},{p.ready}).",
+        f"nstops({r},{len(p.stops)}).",
+    ]
     lines += [f"carrying0({r},{o})." for o in p.carrying]
     lines += [f"stop({r},{key})." for key in p.stops]
     for leg in p.legs:
-        lines.append(f"leg({r},{leg.origin},{leg.stop},{leg.id}). ncross({leg.id},{len(leg.crossings)}). tail({leg.id},{leg.room},{leg.tail}).")
+        lines.append(
+            f"leg({r},{leg.origin},{leg.stop},{leg.id}). ncross({leg.id},{len(leg.crossings)}). tail({leg.id},{leg.room},{leg.tail})."
+        )
         rest = leg.tail
         for k in range(len(leg.crossings), 0, -1):
             c = leg.crossings[k - 1]
             rest += c.through
-            lines.append(f"cross({leg.id},{k},{c.opening},{c.src},{c.dst},{c.approach},{c.through}). rest({leg.id},{k},{rest}).")
+            lines.append(
+                f"cross({leg.id},{k},{c.opening},{c.src},{c.dst},{c.approach},{c.through}). rest({leg.id},{k},{rest})."
+            )
             rest += c.approach
     lines += after_facts(p)
     return "\n".join(lines) + "\n"
@@ -125,10 +134,15 @@ def context_facts(ctx: Context, group: str) -> str:
     """The context of ``group`` (a robot planned against fixed others, or ``team`` in the joint
     program); ``grp(R,Q)`` facts put robots in it."""
     q = group
-    lines = [f"horizon({q},{ctx.horizon if ctx.horizon is not None else NO_HORIZON}). syncwait({q},{ctx.syncwait}). clearwait({q},{ctx.clearwait})."]
+    lines = [
+        f"horizon({q},{ctx.horizon if ctx.horizon is not None else NO_HORIZON}). syncwait({q},{ctx.syncwait}). clearwait({q},{ctx.clearwait})."
+    ]
     lines += [f"given_open({q},{d},{t})." for d, t in sorted(set(ctx.given_open))]
     lines += [f"blocked_open({q},{d},{t})." for d, t in sorted(set(ctx.blocked_open))]
-    lines += [f"busy({q},{b.opening},{b.start},{b.end},{b.owner})." for b in sorted(set(ctx.busy), key=lambda b: (b.opening, b.start, b.end, b.owner))]
+    lines += [
+        f"busy({q},{b.opening},{b.start},{b.end},{b.owner})."
+        for b in sorted(set(ctx.busy), key=lambda b: (b.opening, b.start, b.end, b.owner))
+    ]
     if ctx.others_end is not None:
         lines.append(f"others_end({q},{ctx.others_end}).")
     return "\n".join(lines) + "\n"

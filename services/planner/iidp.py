@@ -117,7 +117,9 @@ def min_openings(plans, hold: int, existing: frozenset) -> int:
     return n
 
 
-def lower_bound(rid: str, plans: dict[str, RobotPlan], alone: int, hold: int, existing: frozenset) -> tuple[int, int, int, int, int]:
+def lower_bound(
+    rid: str, plans: dict[str, RobotPlan], alone: int, hold: int, existing: frozenset
+) -> tuple[int, int, int, int, int]:
     """A cost no plan of ``rid`` can beat, with the others' plans fixed (component by component)."""
     others = [p for o, p in plans.items() if o != rid]
     overlaps = count_conflicts([replace(p, uses=frozenset()) for p in others], hold)  # doorway overlaps only
@@ -144,7 +146,9 @@ def iidp(
         return max(deadline - time.perf_counter(), single.solve_limit)
 
     # Robots with nothing left to do only finish what they are in the middle of.
-    fixed = {rid: single.solve(problems[rid], single.context(problems[rid], {}))[0] for rid in robots if problems[rid].done}
+    fixed = {
+        rid: single.solve(problems[rid], single.context(problems[rid], {}))[0] for rid in robots if problems[rid].done
+    }
 
     def alone_context(rid: str):
         return single.context(problems[rid], {o: p for o, p in fixed.items() if o != rid and p is not None})
@@ -232,9 +236,9 @@ def iidp(
     return plans, stats
 
 
-
-
-def _respond(single: SingleRobotSolver, prob: RobotProblem, others: dict[str, RobotPlan], horizon: int | None, relax: bool) -> RobotPlan | None:
+def _respond(
+    single: SingleRobotSolver, prob: RobotProblem, others: dict[str, RobotPlan], horizon: int | None, relax: bool
+) -> RobotPlan | None:
     """The robot's best plan against ``others``; with ``relax`` (the robot must get a plan), when the
     bounded waits leave it none, try again with looser bounds and no horizon, and more solver time
     (larger programs, rarely needed)."""
@@ -251,7 +255,9 @@ def _respond(single: SingleRobotSolver, prob: RobotProblem, others: dict[str, Ro
     return None
 
 
-def _response_request(single: SingleRobotSolver, prob: RobotProblem, plans: dict[str, RobotPlan], current: tuple, hold: int):
+def _response_request(
+    single: SingleRobotSolver, prob: RobotProblem, plans: dict[str, RobotPlan], current: tuple, hold: int
+):
     """The program of the robot's best response (its problem and context), the others' plans and
     whether it is in a conflict."""
     others = {o: p for o, p in plans.items() if o != prob.robot}
@@ -260,7 +266,9 @@ def _response_request(single: SingleRobotSolver, prob: RobotProblem, plans: dict
     return prob, single.context(prob, others, None if involved else current[1]), others, involved
 
 
-def _response(single: SingleRobotSolver, prob: RobotProblem, plans: dict[str, RobotPlan], current: tuple, hold: int) -> RobotPlan | None:
+def _response(
+    single: SingleRobotSolver, prob: RobotProblem, plans: dict[str, RobotPlan], current: tuple, hold: int
+) -> RobotPlan | None:
     """The robot's best response to the others' current plans, over every order of its stops."""
     _, ctx, others, involved = _response_request(single, prob, plans, current, hold)
     return _respond(single, prob, others, ctx.horizon, relax=involved)
@@ -314,7 +322,14 @@ def _in_turn(
     return placed
 
 
-def _warm_start(single: SingleRobotSolver, problems: dict[str, RobotProblem], warm: dict[str, RobotPlan], plan_alone, hold: int, existing: frozenset) -> dict[str, RobotPlan]:
+def _warm_start(
+    single: SingleRobotSolver,
+    problems: dict[str, RobotProblem],
+    warm: dict[str, RobotPlan],
+    plan_alone,
+    hold: int,
+    existing: frozenset,
+) -> dict[str, RobotPlan]:
     """A replan's starting team: every robot's current plan retimed to the world as it is now, each in
     its current order of stops against the others' current plans (an unchanged world gives the plan
     back); the robots this leaves without a plan or in a conflict are then placed in turn, the one

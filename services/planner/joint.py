@@ -46,7 +46,9 @@ def joint(
     hints: dict[str, RobotPlan] | None = None,
     time_limit: float = 60.0,
 ) -> tuple[dict[str, RobotPlan] | None, Outcome]:
-    busy = tuple(Busy(p.opening, p.start, p.end, rid) for rid, prob in sorted(problems.items()) for p in prob.prefix if p.opening)
+    busy = tuple(
+        Busy(p.opening, p.start, p.end, rid) for rid, prob in sorted(problems.items()) for p in prob.prefix if p.opening
+    )
     ctx = Context(given_open=tuple(sorted(existing)), busy=busy, horizon=horizon)
     team = "".join(robot_facts(problems[r]) + f"grp({r},{TEAM}).\n" for r in sorted(problems))
     text = site_facts + team + context_facts(ctx, TEAM) + door_facts(ctx, TEAM, throughs(problems.values()), hold)

@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import heapq
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Iterable, Sequence
 
 import numpy as np
 
@@ -47,7 +47,9 @@ class MotionPlanner:
     def __init__(self, site: Site, *, resolution: float = GRID_RESOLUTION, clearance: float = CLEARANCE) -> None:
         self.site = site
         self.speed = site.params.robot_speed
-        self.grid = site.occupancy_grid(resolution=resolution, open_doors=tuple(site.door_leaves), inflate=site.params.robot_radius + clearance)
+        self.grid = site.occupancy_grid(
+            resolution=resolution, open_doors=tuple(site.door_leaves), inflate=site.params.robot_radius + clearance
+        )
         self._occ = self.grid.occupied
         self._res = self.grid.resolution
         self._paths: dict[tuple[Point, Point], Path] = {}
@@ -172,7 +174,9 @@ class MotionPlanner:
         pts = self._shorten(pts)
         return Path(tuple(pts), sum(math.dist(p, q) for p, q in zip(pts, pts[1:])))
 
-    def _search(self, start: tuple[int, int], goal: tuple[int, int], window: tuple[int, int, int, int]) -> list[tuple[int, int]] | None:
+    def _search(
+        self, start: tuple[int, int], goal: tuple[int, int], window: tuple[int, int, int, int]
+    ) -> list[tuple[int, int]] | None:
         r0, r1, c0, c1 = window
         occ = self._occ[r0:r1, c0:c1].tolist()  # plain lists index much faster than numpy per cell
         h, w = r1 - r0, c1 - c0
@@ -181,7 +185,16 @@ class MotionPlanner:
         occ[sr][sc] = False
         occ[gr][gc] = False
         diag = math.sqrt(2.0)
-        steps = ((1, 0, 1.0), (-1, 0, 1.0), (0, 1, 1.0), (0, -1, 1.0), (1, 1, diag), (1, -1, diag), (-1, 1, diag), (-1, -1, diag))
+        steps = (
+            (1, 0, 1.0),
+            (-1, 0, 1.0),
+            (0, 1, 1.0),
+            (0, -1, 1.0),
+            (1, 1, diag),
+            (1, -1, diag),
+            (-1, 1, diag),
+            (-1, -1, diag),
+        )
 
         def heuristic(r: int, c: int) -> float:
             dr, dc = abs(r - gr), abs(c - gc)

@@ -58,7 +58,7 @@ class RobotPlan:
     def empty(self) -> bool:
         return not self.steps
 
-    def shifted(self, delta: int) -> "RobotPlan":
+    def shifted(self, delta: int) -> RobotPlan:
         """The same plan with times moved by ``delta`` (to re-express it against a new base);
         windows and passes that then lie in the past are dropped (they happened or they won't), and
         a finish in the past is now (the robot is done: nothing finishes before the base)."""
@@ -66,7 +66,9 @@ class RobotPlan:
             self,
             steps=tuple(Step(s.action, s.args, s.start + delta, s.end + delta) for s in self.steps),
             finish=max(self.finish + delta, 0),
-            passes=tuple(replace(p, start=p.start + delta, end=p.end + delta) for p in self.passes if p.end + delta > 0),
+            passes=tuple(
+                replace(p, start=p.start + delta, end=p.end + delta) for p in self.passes if p.end + delta > 0
+            ),
             uses=frozenset((d, t + delta) for d, t in self.uses if t + delta >= 0),
             unoffered=frozenset((d, t + delta) for d, t in self.unoffered if t + delta >= 0),
             visits=tuple((r, a + delta, b + delta) for r, a, b in self.visits),
@@ -113,10 +115,13 @@ class TeamResult:
             for p in plan.passes:
                 if not p.human:
                     continue
-                for (door, t) in plan.uses:
+                for door, t in plan.uses:
                     if door == p.opening and t <= p.start and p.end <= t + self.hold:
                         by_window[(door, t)].add(plan.robot)
-        return [Opening(d, t, t + self.hold, tuple(sorted(rs))) for (d, t), rs in sorted(by_window.items(), key=lambda kv: (kv[0][1], kv[0][0]))]
+        return [
+            Opening(d, t, t + self.hold, tuple(sorted(rs)))
+            for (d, t), rs in sorted(by_window.items(), key=lambda kv: (kv[0][1], kv[0][0]))
+        ]
 
     @property
     def door_openings(self) -> int:
@@ -159,7 +164,10 @@ class TeamResult:
             "solve_time": round(self.solve_time, 4),
             "iterations": self.iterations,
             "robots": {
-                rid: [{"action": s.action, "args": list(s.args), "start": self.base + s.start, "end": self.base + s.end} for s in plan.steps]
+                rid: [
+                    {"action": s.action, "args": list(s.args), "start": self.base + s.start, "end": self.base + s.end}
+                    for s in plan.steps
+                ]
                 for rid, plan in sorted(self.plans.items())
             },
         }

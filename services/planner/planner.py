@@ -48,13 +48,23 @@ class TaskPlanner:
         self.builder = ProblemBuilder(site, self.motion, routes_per_leg=self.settings.routes_per_leg)
         self.hold = hold_seconds(site)
 
-    def problems(self, world: World, base: int, constraints: ConstraintProgram | None = None) -> dict[str, RobotProblem]:
-        routes = max(self.settings.routes_per_leg, 2) if constraints is not None and constraints.mentions_rooms else None
-        return {rid: self.builder.problem(world, rid, base, routes) for rid in sorted(world.robots) if rid in self.site.robots}
+    def problems(
+        self, world: World, base: int, constraints: ConstraintProgram | None = None
+    ) -> dict[str, RobotProblem]:
+        routes = (
+            max(self.settings.routes_per_leg, 2) if constraints is not None and constraints.mentions_rooms else None
+        )
+        return {
+            rid: self.builder.problem(world, rid, base, routes)
+            for rid in sorted(world.robots)
+            if rid in self.site.robots
+        }
 
     def existing_windows(self, world: World, base: int) -> tuple[tuple[str, int], ...]:
         """Doors the human opened that are still open: windows every robot may use, not counted."""
-        return tuple(sorted((d, int(math.floor(t)) - base) for d, t in world.open_doors.items() if d in self.builder.human_doors))
+        return tuple(
+            sorted((d, int(math.floor(t)) - base) for d, t in world.open_doors.items() if d in self.builder.human_doors)
+        )
 
     def plan(
         self,
@@ -86,7 +96,9 @@ class TaskPlanner:
         limit = self.settings.time_limit if time_limit is None else time_limit
         warm_plans = self._warm(warm, base)
         try:
-            plans, stats = iidp(single, problems, time_limit=limit, max_rounds=self.settings.max_rounds, warm=warm_plans)
+            plans, stats = iidp(
+                single, problems, time_limit=limit, max_rounds=self.settings.max_rounds, warm=warm_plans
+            )
         except NoPlan as exc:
             return self._no_plan(result, single, problems, exc, t0)
         solves = single.calls
@@ -100,8 +112,14 @@ class TaskPlanner:
             result.diagnostic = f"{result.conflicts} conflicts left after the time limit"
         if method == "joint":
             jplans, out = joint(
-                single.site_facts, problems, self.hold, constraints, existing=existing,
-                horizon=result.makespan, hints=plans, time_limit=self.settings.joint_time_limit,
+                single.site_facts,
+                problems,
+                self.hold,
+                constraints,
+                existing=existing,
+                horizon=result.makespan,
+                hints=plans,
+                time_limit=self.settings.joint_time_limit,
             )
             if jplans is not None:
                 result.plans = jplans
@@ -110,8 +128,16 @@ class TaskPlanner:
             else:
                 result.diagnostic = f"joint program gave no plan ({out.status}); IIDP's plan kept"
         result.solve_time = time.perf_counter() - t0
-        log.debug("%s plan: makespan %d, openings %d, %d rounds, %d solves (%d cached), %.3f s",
-                  method, result.makespan, result.door_openings, result.iterations, single.calls, single.cache_hits, result.solve_time)
+        log.debug(
+            "%s plan: makespan %d, openings %d, %d rounds, %d solves (%d cached), %.3f s",
+            method,
+            result.makespan,
+            result.door_openings,
+            result.iterations,
+            single.calls,
+            single.cache_hits,
+            result.solve_time,
+        )
         result.solves = solves
         return result
 
@@ -123,7 +149,15 @@ class TaskPlanner:
         cheap next to a mission's replans. Returns plans, IIDP figures and the programs solved."""
         if remaining <= 0:
             return plans, stats, single.calls
-        other = replace(single, site_facts=single.site_facts + "early.\n", _cache={}, _facts={}, calls=0, cache_hits=0, solve_seconds=0.0)
+        other = replace(
+            single,
+            site_facts=single.site_facts + "early.\n",
+            _cache={},
+            _facts={},
+            calls=0,
+            cache_hits=0,
+            solve_seconds=0.0,
+        )
         try:
             plans2, stats2 = iidp(other, problems, time_limit=remaining, max_rounds=self.settings.max_rounds)
         except NoPlan:
@@ -142,7 +176,9 @@ class TaskPlanner:
         delta = previous.base - base
         return {rid: plan.shifted(delta) for rid, plan in previous.plans.items()}
 
-    def _no_plan(self, result: TeamResult, single: SingleRobotSolver, problems: dict[str, RobotProblem], exc: NoPlan, t0: float) -> TeamResult:
+    def _no_plan(
+        self, result: TeamResult, single: SingleRobotSolver, problems: dict[str, RobotProblem], exc: NoPlan, t0: float
+    ) -> TeamResult:
         prob = problems[exc.robot]
         out = exc.outcome
         if out.status == "unsat":

@@ -108,7 +108,7 @@ class RobotProblem:
             into[leg.stop] = min(d, into.get(leg.stop, d))
         return self.ready + sum(into.values())
 
-    def following(self, order: tuple[str, ...], routes: tuple[tuple[str, ...], ...] = ()) -> "RobotProblem | None":
+    def following(self, order: tuple[str, ...], routes: tuple[tuple[str, ...], ...] = ()) -> RobotProblem | None:
         """This problem with only the legs of one plan skeleton: ``order`` of the remaining stops (stops
         no longer to do are skipped) and, where still on offer, the same routes. None when ``order``
         does not cover this problem's stops."""
@@ -244,7 +244,18 @@ class ProblemBuilder:
                 far = self.beside(opening, other)
                 step = self.motion.distance(point, near, (room,)) + self.motion.distance(near, far, (room, other))
                 g2 = g + step
-                heapq.heappush(heap, (g2 + math.dist(far, b), g2, next(counter), other, far, visited + (other,), path + ((opening, room, other),)))
+                heapq.heappush(
+                    heap,
+                    (
+                        g2 + math.dist(far, b),
+                        g2,
+                        next(counter),
+                        other,
+                        far,
+                        visited + (other,),
+                        path + ((opening, room, other),),
+                    ),
+                )
         self._routes[key] = found
         return found
 
@@ -255,6 +266,7 @@ class ProblemBuilder:
         room = self.site.room_at(x, y)
         if room is not None:
             return room.id
+
         # Outside every rectangle (in a wall's thickness, or in a doorway): the nearest room.
         def gap(r) -> float:
             x0, y0, x1, y1 = r.rect
@@ -302,18 +314,43 @@ class ProblemBuilder:
             if spec.robot != robot or obj in delivered:
                 continue
             if obj not in carrying:
-                stops[f"ld({obj})"] = Stop(f"ld({obj})", "ld", obj, spec.room, self.object_point(obj), self.params.load_time)
-            stops[f"ul({obj})"] = Stop(f"ul({obj})", "ul", obj, spec.deliver_to, self.drop_point(obj), self.params.load_time)
+                stops[f"ld({obj})"] = Stop(
+                    f"ld({obj})", "ld", obj, spec.room, self.object_point(obj), self.params.load_time
+                )
+            stops[f"ul({obj})"] = Stop(
+                f"ul({obj})", "ul", obj, spec.deliver_to, self.drop_point(obj), self.params.load_time
+            )
         capacity = self.params.robot_capacity
         legs = self._legs(robot, point, room, beside, stops, carrying, capacity, routes)
-        return RobotProblem(robot=robot, room=room, ready=ready, point=point, beside=beside, carrying=tuple(sorted(carrying & {s.obj for s in stops.values()})),
-                            stops=stops, legs=tuple(legs), capacity=capacity, prefix=tuple(prefix), rooms_at_start=tuple(rooms_at_start))
+        return RobotProblem(
+            robot=robot,
+            room=room,
+            ready=ready,
+            point=point,
+            beside=beside,
+            carrying=tuple(sorted(carrying & {s.obj for s in stops.values()})),
+            stops=stops,
+            legs=tuple(legs),
+            capacity=capacity,
+            prefix=tuple(prefix),
+            rooms_at_start=tuple(rooms_at_start),
+        )
 
     @staticmethod
     def _rel(t: float, base: int) -> int:
         return int(math.ceil(t - base - 1e-9))
 
-    def _legs(self, robot: str, start: Point, start_room: str, beside: str, stops: dict[str, Stop], carrying: set[str], capacity: int, k: int | None) -> list[Leg]:
+    def _legs(
+        self,
+        robot: str,
+        start: Point,
+        start_room: str,
+        beside: str,
+        stops: dict[str, Stop],
+        carrying: set[str],
+        capacity: int,
+        k: int | None,
+    ) -> list[Leg]:
         """Candidate legs between every pair of stops that may follow one another."""
         origins: list[tuple[str, Point, str]] = [("start", start, start_room)]
         origins += [(s.key, s.point, s.room) for s in stops.values()]
@@ -325,9 +362,13 @@ class ProblemBuilder:
                     continue
                 routes = self.routes(p, room_p, stop.point, stop.room, k)
                 if not routes:
-                    raise PlanningError(f"robot {robot} cannot get from room {room_p} to {stop.room} for {stop.action}({stop.obj})")
+                    raise PlanningError(
+                        f"robot {robot} cannot get from room {room_p} to {stop.room} for {stop.action}({stop.obj})"
+                    )
                 for route in routes:
-                    legs.append(self._leg(f"l({robot},{n})", origin, p, stop, route, beside if origin == "start" else ""))
+                    legs.append(
+                        self._leg(f"l({robot},{n})", origin, p, stop, route, beside if origin == "start" else "")
+                    )
                     n += 1
         return legs
 

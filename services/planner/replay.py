@@ -38,8 +38,15 @@ def world_at(builder: ProblemBuilder, world: World, result: TeamResult, t: float
             if step.action == "gothrough":
                 opening = site.opening(arg)
                 ip = state.in_progress
-                dst = ip.target if ip is not None and ip.action == "gothrough" and ip.args[:1] == (arg,) and step is plan.steps[0] else ""
-                dst = dst or next((p.dst for p in plan.passes if p.opening == arg and result.absolute(p.start) == start and p.dst), opening.other(room) if room in opening.rooms else opening.rooms[1])
+                dst = (
+                    ip.target
+                    if ip is not None and ip.action == "gothrough" and ip.args[:1] == (arg,) and step is plan.steps[0]
+                    else ""
+                )
+                dst = dst or next(
+                    (p.dst for p in plan.passes if p.opening == arg and result.absolute(p.start) == start and p.dst),
+                    opening.other(room) if room in opening.rooms else opening.rooms[1],
+                )
                 if end > t:
                     (x, y), beside = opening.center, ""
                     in_progress = InProgress("gothrough", (arg,), float(end), dst)
@@ -66,5 +73,9 @@ def world_at(builder: ProblemBuilder, world: World, result: TeamResult, t: float
                     carrying.discard(arg)
                     delivered.add(arg)
         robots[rid] = RobotState(rid, (x, y, theta), frozenset(carrying), frozenset(delivered), beside, in_progress)
-    open_doors = {o.door: float(result.absolute(o.start)) for o in result.openings if result.absolute(o.start) <= t < result.absolute(o.end)}
+    open_doors = {
+        o.door: float(result.absolute(o.start))
+        for o in result.openings
+        if result.absolute(o.start) <= t < result.absolute(o.end)
+    }
     return replace(world, now=float(t), robots=robots, open_doors=open_doors)

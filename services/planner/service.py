@@ -57,7 +57,17 @@ import time
 from dataclasses import dataclass, field, replace
 
 from protocol.clock import SimClock, WallClock
-from protocol.messages import Clock, ConstraintSet, DoorState, Event, PlannedOpening, PlanStep, RobotPose, RobotStatus, TeamPlan
+from protocol.messages import (
+    Clock,
+    ConstraintSet,
+    DoorState,
+    Event,
+    PlannedOpening,
+    PlanStep,
+    RobotPose,
+    RobotStatus,
+    TeamPlan,
+)
 from protocol.service import Service
 from protocol.site import Site
 from protocol.transport import ZenohOptions
@@ -77,7 +87,9 @@ CONTINUE_TOLERANCE = 2.0  # s: an action that ends at most this late keeps the p
 ROUTINE_STATES = ("moving", "done", "loading", "unloading")  # states a plan being followed goes through
 LOCKSTEP_TRIGGERS = ("world_version", "constraints", "start")  # news a lockstep simulator waits for a plan about
 RESEND_INTERVAL = 1.0  # wall s after sending a command before it is sent again (robot reports no such id)
-START_GRACE = 1.5  # wall s to hear a mission under way (statuses come once a second) before planning from the site's start
+START_GRACE = (
+    1.5  # wall s to hear a mission under way (statuses come once a second) before planning from the site's start
+)
 STATE_WAIT = 5.0  # wall s to wait for the last robots' poses and statuses before planning without them
 REPEAT_AFTER = 2.0  # wall s the simulator may stay paused at a version the plan answers before the plan is sent again
 
@@ -214,8 +226,14 @@ class PlannerService(Service):
         sent = self.dispatcher.current.get(robot)
         status = self.statuses.get(robot)
         pose = self.poses.get(robot)
-        if pose is None or sent is None or len(sent.trajectory) < 2 or status is None or status.state != "moving" \
-                or status.action_id != sent.action_id:
+        if (
+            pose is None
+            or sent is None
+            or len(sent.trajectory) < 2
+            or status is None
+            or status.state != "moving"
+            or status.action_id != sent.action_id
+        ):
             return False
         return polyline_distance(pose[:2], sent.trajectory) > self.settings.off_track
 
@@ -237,8 +255,12 @@ class PlannerService(Service):
         self._adopt(msg)
         self._note_version(msg.world_version)
         sent = self.dispatcher.current.get(msg.robot)
-        changed = before is None or (before.state, before.action_id, tuple(before.carrying), tuple(before.delivered)) != (
-            msg.state, msg.action_id, tuple(msg.carrying), tuple(msg.delivered))
+        changed = before is None or (
+            before.state,
+            before.action_id,
+            tuple(before.carrying),
+            tuple(before.delivered),
+        ) != (msg.state, msg.action_id, tuple(msg.carrying), tuple(msg.delivered))
         if sent is not None and msg.action_id == sent.action_id and msg.state in FINISHED_STATES:
             self._finished.add(msg.robot)
         if sent is not None and msg.action_id < sent.action_id:
@@ -256,7 +278,13 @@ class PlannerService(Service):
             return
         self.dispatcher.current[msg.robot] = Dispatched(msg.action, tuple(msg.args), msg.action_id, msg.plan_id, [])
         self.counters["actions_adopted"] += 1
-        self.log.info("%s is executing action %d (%s %s) of an earlier plan: taken over", msg.robot, msg.action_id, msg.action, " ".join(msg.args))
+        self.log.info(
+            "%s is executing action %d (%s %s) of an earlier plan: taken over",
+            msg.robot,
+            msg.action_id,
+            msg.action,
+            " ".join(msg.args),
+        )
 
     def _resend(self, robot: str) -> None:
         """Send the robot's current command again (same id) when its status shows an older action.
@@ -274,7 +302,13 @@ class PlannerService(Service):
             return
         self._sent_at[robot] = now
         self.counters["commands_resent"] += 1
-        self.log.debug("sending %s's command %d (%s) again: its status shows action %d", robot, cmd.action_id, cmd.action, self.statuses[robot].action_id)
+        self.log.debug(
+            "sending %s's command %d (%s) again: its status shows action %d",
+            robot,
+            cmd.action_id,
+            cmd.action,
+            self.statuses[robot].action_id,
+        )
         self.publish(self.keys.robot_command(robot), cmd)
 
     def on_door(self, msg: DoorState, _key: str) -> None:
@@ -296,7 +330,10 @@ class PlannerService(Service):
         for cid, why in sorted(program.invalid.items()):
             self.log.warning("constraint %s is left out: %s", cid, why)
         if program.invalid:
-            self.publish_conflict(sorted(program.invalid), "invalid: " + "; ".join(f"{c}: {w}" for c, w in sorted(program.invalid.items())))
+            self.publish_conflict(
+                sorted(program.invalid),
+                "invalid: " + "; ".join(f"{c}: {w}" for c, w in sorted(program.invalid.items())),
+            )
         self.constraints = program if program.active else None
         self.trigger(f"constraints:v{msg.version}")
         self._plan_if_awaited()
@@ -307,7 +344,11 @@ class PlannerService(Service):
             # The pose that goes with the event travels in it: poses come on another key, which may
             # be delivered later than the event.
             pose = data.get("pose")
-            if isinstance(pose, list) and len(pose) == 3 and all(isinstance(v, (int, float)) and math.isfinite(v) for v in pose):
+            if (
+                isinstance(pose, list)
+                and len(pose) == 3
+                and all(isinstance(v, (int, float)) and math.isfinite(v) for v in pose)
+            ):
                 self.poses[msg.robot] = (float(pose[0]), float(pose[1]), float(pose[2]))
             sent = self.dispatcher.current.get(msg.robot)
             if sent is not None and data.get("action_id") == sent.action_id:
@@ -364,7 +405,11 @@ class PlannerService(Service):
         if have < clock.constraints_version:
             return  # on_constraints calls again
         sent = self.message
-        if sent is not None and sent.world_version >= clock.world_version and sent.constraints_version >= clock.constraints_version:
+        if (
+            sent is not None
+            and sent.world_version >= clock.world_version
+            and sent.constraints_version >= clock.constraints_version
+        ):
             return  # answered already: what is pending now waits for the next version
         if self._plan_now(time.monotonic()):
             self.counters["plans_on_pause"] += 1
@@ -411,8 +456,13 @@ class PlannerService(Service):
         first = self._repeated_at < since  # the first repeat in this pause is worth a line; later ones are not
         self._repeated_at = now
         self.counters["plans_repeated"] += 1
-        self.log.log(logging.INFO if first else logging.DEBUG, "the simulator has been paused at world v%d for %.0f s: "
-                     "publishing plan %d again (in case it was lost)", version, now - since, message.plan_id)
+        self.log.log(
+            logging.INFO if first else logging.DEBUG,
+            "the simulator has been paused at world v%d for %.0f s: publishing plan %d again (in case it was lost)",
+            version,
+            now - since,
+            message.plan_id,
+        )
         self.publish(self.keys.plan(), message)
 
     def _world_heard(self, now: float) -> bool:
@@ -433,13 +483,20 @@ class PlannerService(Service):
         if self._state_wait_since is None:
             self._state_wait_since = now
             self._state_wait_reported = False
-            self.log.info("a mission is under way (world v%d): waiting for the pose and status of %s before planning",
-                          max(self.world_version, clock_version), ", ".join(missing))
+            self.log.info(
+                "a mission is under way (world v%d): waiting for the pose and status of %s before planning",
+                max(self.world_version, clock_version),
+                ", ".join(missing),
+            )
         if now - self._state_wait_since < STATE_WAIT:
             return False
         if not self._state_wait_reported:
             self._state_wait_reported = True
-            self.log.warning("planning without the pose or status of %s (nothing from them in %.0f s)", ", ".join(missing), STATE_WAIT)
+            self.log.warning(
+                "planning without the pose or status of %s (nothing from them in %.0f s)",
+                ", ".join(missing),
+                STATE_WAIT,
+            )
         return True
 
     def world(self) -> World:
@@ -472,11 +529,18 @@ class PlannerService(Service):
         (approach or opendoor, now over) brought it to."""
         if status.state == "waiting_at_door" and status.waiting_door in self.site.openings:
             return status.waiting_door
-        if status.state in ("done", "idle") and status.action in ("approach", "opendoor") and status.args and status.args[0] in self.site.openings:
+        if (
+            status.state in ("done", "idle")
+            and status.action in ("approach", "opendoor")
+            and status.args
+            and status.args[0] in self.site.openings
+        ):
             return status.args[0]
         return ""
 
-    def _in_progress(self, rid: str, status: RobotStatus, pose: tuple[float, float, float], now: float) -> InProgress | None:
+    def _in_progress(
+        self, rid: str, status: RobotStatus, pose: tuple[float, float, float], now: float
+    ) -> InProgress | None:
         """Actions that must be finished first: a gothrough while in the doorway, a load/unload in place."""
         sent = self.dispatcher.current.get(rid)
         if sent is None or status.action_id != sent.action_id or not status.args:
@@ -565,7 +629,7 @@ class PlannerService(Service):
                 return None
             if world.now - kept.absolute(step.end) > CONTINUE_TOLERANCE:
                 return None  # late: the others' plans may count on it
-            plans[rid] = replace(plan, steps=plan.steps[index + 1:])
+            plans[rid] = replace(plan, steps=plan.steps[index + 1 :])
         base = int(math.floor(world.now))
         delta = kept.base - base
         return replace(
@@ -585,13 +649,23 @@ class PlannerService(Service):
         cs_version = self.constraint_set.version if self.constraint_set is not None else 0
         kept = self.result
         if kept is None:
-            self.message = TeamPlan(plan_id=self.plan_id, world_version=self.world_version, constraints_version=cs_version, method=self.settings.method, diagnostic=diagnostic[:4096])
+            self.message = TeamPlan(
+                plan_id=self.plan_id,
+                world_version=self.world_version,
+                constraints_version=cs_version,
+                method=self.settings.method,
+                diagnostic=diagnostic[:4096],
+            )
             self.publish(self.keys.plan(), self.message)
             return
         finished, force = set(self._finished), set(self._force)
         self._finished.clear()
         self._force.clear()
-        commands, front = self.dispatcher.dispatch(kept, world, self.plan_id, finished=finished, force=force) if result is not None else ([], {})
+        commands, front = (
+            self.dispatcher.dispatch(kept, world, self.plan_id, finished=finished, force=force)
+            if result is not None
+            else ([], {})
+        )
         if result is None:
             front = {rid: d.action_id for rid, d in self.dispatcher.current.items()}
         # Commands first: a simulator in lockstep waits for the commands a plan names before it runs on.
@@ -602,11 +676,19 @@ class PlannerService(Service):
             # (an action taken over from before a restart has no trajectory to show)
             if intent.robot in kept.plans and not kept.plans[intent.robot].empty and intent.trajectory:
                 self.publish(self.keys.intent(intent.robot), intent)
-        self.message = to_message(kept, self.plan_id, self.world_version, cs_version, front, diagnostic, self.dispatcher.front_index)
+        self.message = to_message(
+            kept, self.plan_id, self.world_version, cs_version, front, diagnostic, self.dispatcher.front_index
+        )
         self.publish(self.keys.plan(), self.message)
         self.log.info(
             "plan %d for world v%d, constraints v%d: makespan %d s, %d door openings, %d rounds, %.2f s%s",
-            self.plan_id, self.world_version, cs_version, kept.makespan, kept.door_openings, kept.iterations, kept.solve_time,
+            self.plan_id,
+            self.world_version,
+            cs_version,
+            kept.makespan,
+            kept.door_openings,
+            kept.iterations,
+            kept.solve_time,
             f" ({diagnostic})" if diagnostic else "",
         )
 
@@ -618,19 +700,46 @@ class PlannerService(Service):
         self.reported_conflicts.add(key)
         self.counters["plan_conflicts"] += 1
         self.log.warning("constraints %s: %s", ", ".join(ids) or "(none)", reason)
-        self.publish(self.keys.event(), Event(kind="plan_conflict", data={"constraints": list(ids), "constraints_version": version, "reason": reason[:1000]}))
+        self.publish(
+            self.keys.event(),
+            Event(
+                kind="plan_conflict",
+                data={"constraints": list(ids), "constraints_version": version, "reason": reason[:1000]},
+            ),
+        )
 
 
-def to_message(result: TeamResult, plan_id: int, world_version: int, constraints_version: int, front: dict[str, int], diagnostic: str, skip: dict[str, int] | None = None) -> TeamPlan:
+def to_message(
+    result: TeamResult,
+    plan_id: int,
+    world_version: int,
+    constraints_version: int,
+    front: dict[str, int],
+    diagnostic: str,
+    skip: dict[str, int] | None = None,
+) -> TeamPlan:
     """``skip``: leading steps of a robot's plan that need not be executed (an opendoor of a door
     open now, see :meth:`Dispatcher.front`); the message starts at the step dispatched."""
     robots = {}
     for rid, plan in sorted(result.plans.items()):
         steps = []
-        for i, s in enumerate(plan.steps[(skip or {}).get(rid, 0):]):
-            steps.append(PlanStep(action=s.action, args=list(s.args), start=float(result.absolute(s.start)), end=float(result.absolute(s.end)), action_id=front.get(rid, 0) if i == 0 else 0))
+        for i, s in enumerate(plan.steps[(skip or {}).get(rid, 0) :]):
+            steps.append(
+                PlanStep(
+                    action=s.action,
+                    args=list(s.args),
+                    start=float(result.absolute(s.start)),
+                    end=float(result.absolute(s.end)),
+                    action_id=front.get(rid, 0) if i == 0 else 0,
+                )
+            )
         robots[rid] = steps
-    openings = [PlannedOpening(door=o.door, start=float(result.absolute(o.start)), end=float(result.absolute(o.end)), robots=list(o.robots)) for o in result.openings]
+    openings = [
+        PlannedOpening(
+            door=o.door, start=float(result.absolute(o.start)), end=float(result.absolute(o.end)), robots=list(o.robots)
+        )
+        for o in result.openings
+    ]
     return TeamPlan(
         plan_id=plan_id,
         world_version=world_version,

@@ -20,7 +20,6 @@ from .plan import RobotPlan, contested
 from .problem import RobotProblem
 from .solver import Outcome, parts_for, solve, solve_each
 
-
 RELAXED_WAIT = 100_000  # s: waits bounded only by the plan's own times
 
 
@@ -45,7 +44,9 @@ class SingleRobotSolver:
     def __post_init__(self) -> None:
         self.parts = parts_for(self.constraints)
 
-    def context(self, prob: RobotProblem, others: dict[str, RobotPlan], horizon: int | None = None, *, relaxed: bool = False) -> Context:
+    def context(
+        self, prob: RobotProblem, others: dict[str, RobotPlan], horizon: int | None = None, *, relaxed: bool = False
+    ) -> Context:
         """What ``prob``'s robot must live with, keeping only openings it may cross (better cache hits)."""
         mine = {c.opening for leg in prob.legs for c in leg.crossings}
         given = set(w for w in self.existing if w[0] in mine)
@@ -59,8 +60,19 @@ class SingleRobotSolver:
         # Windows that overlap an earlier one (left by independent first plans) may not be shared,
         # only avoided, so that their users move off them one by one.
         blocked = contested(given, self.hold) - set(self.existing)
-        waits = {"syncwait": RELAXED_WAIT, "clearwait": RELAXED_WAIT} if relaxed else {"syncwait": self.syncwait, "clearwait": self.clearwait}
-        return Context(given_open=tuple(sorted(given - blocked)), blocked_open=tuple(sorted(blocked)), busy=busy_sorted, others_end=end, horizon=horizon, **waits)
+        waits = (
+            {"syncwait": RELAXED_WAIT, "clearwait": RELAXED_WAIT}
+            if relaxed
+            else {"syncwait": self.syncwait, "clearwait": self.clearwait}
+        )
+        return Context(
+            given_open=tuple(sorted(given - blocked)),
+            blocked_open=tuple(sorted(blocked)),
+            busy=busy_sorted,
+            others_end=end,
+            horizon=horizon,
+            **waits,
+        )
 
     def _admitted(self, window: tuple[str, int]) -> bool:
         """An opening from another plan that the constraints allow (plans made before a constraint may not)."""
@@ -70,7 +82,9 @@ class SingleRobotSolver:
     def _key(prob: RobotProblem, ctx: Context) -> tuple:
         return (prob.robot, tuple(leg.id for leg in prob.legs), ctx)
 
-    def solve(self, prob: RobotProblem, ctx: Context, *, time_limit: float | None = None) -> tuple[RobotPlan | None, Outcome]:
+    def solve(
+        self, prob: RobotProblem, ctx: Context, *, time_limit: float | None = None
+    ) -> tuple[RobotPlan | None, Outcome]:
         key = self._key(prob, ctx)
         hit = self._cache.get(key)
         if hit is not None:
@@ -115,8 +129,13 @@ class SingleRobotSolver:
     def _member(self, prob: RobotProblem, ctx: Context) -> str:
         """The robot's problem and its context; the robot is its own group."""
         r = prob.robot
-        return (self.robot_facts(prob) + f"grp({r},{r}).\n" + context_facts(ctx, r)
-                + door_facts(ctx, r, throughs([prob]), self.hold) + closed_facts(prob, ctx, self.hold))
+        return (
+            self.robot_facts(prob)
+            + f"grp({r},{r}).\n"
+            + context_facts(ctx, r)
+            + door_facts(ctx, r, throughs([prob]), self.hold)
+            + closed_facts(prob, ctx, self.hold)
+        )
 
     def robot_facts(self, prob: RobotProblem) -> str:
         """The problem's facts, written once per problem (a robot is solved many times in one plan)."""

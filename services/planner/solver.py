@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import functools
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
 
 import clingo
 import clingo.ast as ast
@@ -75,7 +75,9 @@ def parts_for(constraints: ConstraintProgram | None, *, joint: bool = False) -> 
     return parts
 
 
-def _grounded(facts: str, parts: Sequence[str], constraints: ConstraintProgram | None, args: list[str], extra: str = "") -> clingo.Control:
+def _grounded(
+    facts: str, parts: Sequence[str], constraints: ConstraintProgram | None, args: list[str], extra: str = ""
+) -> clingo.Control:
     ctl = clingo.Control(args)
     with ast.ProgramBuilder(ctl) as builder:
         for part in parts:
@@ -97,7 +99,9 @@ def _guards(constraints: ConstraintProgram | None) -> list[tuple[clingo.Symbol, 
     return [(ConstraintProgram.guard_symbol(i), True) for i in (constraints.active if constraints else [])]
 
 
-def _optimise(ctl: clingo.Control, assumptions: list, limit: float, t0: float, ground: float, core: list[int] | None = None) -> Outcome:
+def _optimise(
+    ctl: clingo.Control, assumptions: list, limit: float, t0: float, ground: float, core: list[int] | None = None
+) -> Outcome:
     """Branch-and-bound under ``assumptions`` for at most ``limit`` s; the best model found."""
     best: list = []
 

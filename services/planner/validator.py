@@ -22,8 +22,8 @@ Returns the violations as readable strings; an empty list means the plan is vali
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Iterable, Sequence
 
 import clingo
 
@@ -52,7 +52,7 @@ class Windows:
     forbidden: list[tuple[str, int, int]] = field(default_factory=list)  # (room, t0, t1)
 
     @classmethod
-    def from_asp(cls, texts: Iterable[str]) -> "Windows":
+    def from_asp(cls, texts: Iterable[str]) -> Windows:
         """The ``human_unavailable/3`` and ``room_forbidden/3`` facts stated in constraint texts."""
         out = cls()
         for text in texts:
@@ -72,7 +72,10 @@ class Windows:
 
 
 def validate_result(site: Site, world: World, result: TeamResult, windows: Windows | None = None) -> list[str]:
-    robots = {rid: [StepView(s.action, s.args, result.absolute(s.start), result.absolute(s.end)) for s in plan.steps] for rid, plan in result.plans.items()}
+    robots = {
+        rid: [StepView(s.action, s.args, result.absolute(s.start), result.absolute(s.end)) for s in plan.steps]
+        for rid, plan in result.plans.items()
+    }
     openings = [(o.door, result.absolute(o.start), result.absolute(o.end)) for o in result.openings]
     existing = {(d, result.absolute(t)) for d, t in result.existing}
     return validate(site, world, robots, openings, windows or Windows(), existing=existing)
@@ -135,7 +138,12 @@ def validate(
                     errors.append(f"{where}: the robot is not beside {arg} (beside {beside or 'nothing'})")
             elif step.action == "gothrough":
                 opening = _opening(site, arg)
-                continuing = i == 0 and in_progress is not None and in_progress.action == "gothrough" and in_progress.args[:1] == (arg,)
+                continuing = (
+                    i == 0
+                    and in_progress is not None
+                    and in_progress.action == "gothrough"
+                    and in_progress.args[:1] == (arg,)
+                )
                 if opening is None:
                     errors.append(f"{where}: unknown opening {arg}")
                     continue
@@ -184,7 +192,9 @@ def validate(
                     carrying.discard(arg)
                     delivered.add(arg)
                     pos = None  # the drop point is the planner's choice
-                if step.end - step.start < site.params.load_time - TIME_TOLERANCE and not (i == 0 and in_progress is not None):
+                if step.end - step.start < site.params.load_time - TIME_TOLERANCE and not (
+                    i == 0 and in_progress is not None
+                ):
                     errors.append(f"{where}: shorter than load_time")
                 beside = ""
             else:
@@ -207,7 +217,14 @@ def validate(
     return errors
 
 
-def _check_openings(errors: list[str], site: Site, openings: Sequence[tuple[str, float, float]], windows: Windows, existing: set, hold: float) -> None:
+def _check_openings(
+    errors: list[str],
+    site: Site,
+    openings: Sequence[tuple[str, float, float]],
+    windows: Windows,
+    existing: set,
+    hold: float,
+) -> None:
     by_door: dict[str, list[float]] = {}
     for door, start, end in openings:
         opening = site.openings.get(door)
@@ -226,7 +243,9 @@ def _check_openings(errors: list[str], site: Site, openings: Sequence[tuple[str,
                 errors.append(f"openings of {door} at {a:g} and {b:g} overlap (hold {hold:g} s)")
 
 
-def _check_duration(errors: list[str], where: str, a: tuple[float, float], b: tuple[float, float], speed: float, step: StepView) -> None:
+def _check_duration(
+    errors: list[str], where: str, a: tuple[float, float], b: tuple[float, float], speed: float, step: StepView
+) -> None:
     need = math.dist(a, b) / speed
     if step.end - step.start < need - TIME_TOLERANCE - 1e-6:
         errors.append(f"{where}: {step.end - step.start:g} s is less than the {need:.1f} s the straight line takes")
@@ -246,4 +265,7 @@ def _room_of(site: Site, state, builder: ProblemBuilder | None) -> str:
     if room is not None:
         return room.id
     x, y = state.pose[0], state.pose[1]
-    return min(site.rooms.values(), key=lambda r: math.hypot(max(r.rect[0] - x, 0, x - r.rect[2]), max(r.rect[1] - y, 0, y - r.rect[3]))).id
+    return min(
+        site.rooms.values(),
+        key=lambda r: math.hypot(max(r.rect[0] - x, 0, x - r.rect[2]), max(r.rect[1] - y, 0, y - r.rect[3])),
+    ).id

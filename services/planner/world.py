@@ -50,7 +50,7 @@ class World:
             out |= robot.delivered
         return frozenset(out)
 
-    def with_now(self, now: float) -> "World":
+    def with_now(self, now: float) -> World:
         return replace(self, now=now)
 
 

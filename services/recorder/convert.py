@@ -9,12 +9,42 @@ from __future__ import annotations
 from typing import Any
 
 from foxglove.messages import (
-    CameraCalibration, CircleAnnotation, Color, CompressedImage, FrameTransform, FrameTransforms, ImageAnnotations,
-    LinePrimitive, LinePrimitiveLineType, Log, LogLevel, Point2, Point3, PointsAnnotation, PointsAnnotationType, Pose,
-    Quaternion, SceneEntity, SceneEntityDeletion, SceneEntityDeletionType, SceneUpdate, TextAnnotation, Vector3,
+    CameraCalibration,
+    CircleAnnotation,
+    Color,
+    CompressedImage,
+    FrameTransform,
+    FrameTransforms,
+    ImageAnnotations,
+    LinePrimitive,
+    LinePrimitiveLineType,
+    Log,
+    LogLevel,
+    Point2,
+    Point3,
+    PointsAnnotation,
+    PointsAnnotationType,
+    Pose,
+    Quaternion,
+    SceneEntity,
+    SceneEntityDeletion,
+    SceneEntityDeletionType,
+    SceneUpdate,
+    TextAnnotation,
+    Vector3,
 )
 
-from protocol.messages import CameraFrame, CameraTruth, Event, Feedback, FeedbackAck, Intent, Overlay, Primitive, RobotPose
+from protocol.messages import (
+    CameraFrame,
+    CameraTruth,
+    Event,
+    Feedback,
+    FeedbackAck,
+    Intent,
+    Overlay,
+    Primitive,
+    RobotPose,
+)
 
 from .scene import rgba, stamp_of, yaw_quaternion
 from .topics import WORLD_FRAME, camera_frame, robot_frame
@@ -25,18 +55,34 @@ XRAY_ALPHA = 0.5  # as the AR client's rasteriser draws x-ray primitives (servic
 
 
 def robot_transform(pose: RobotPose) -> FrameTransforms:
-    return FrameTransforms(transforms=[FrameTransform(
-        timestamp=stamp_of(pose.stamp), parent_frame_id=WORLD_FRAME, child_frame_id=robot_frame(pose.robot),
-        translation=Vector3(x=pose.x, y=pose.y, z=0.0), rotation=yaw_quaternion(pose.theta))])
+    return FrameTransforms(
+        transforms=[
+            FrameTransform(
+                timestamp=stamp_of(pose.stamp),
+                parent_frame_id=WORLD_FRAME,
+                child_frame_id=robot_frame(pose.robot),
+                translation=Vector3(x=pose.x, y=pose.y, z=0.0),
+                rotation=yaw_quaternion(pose.theta),
+            )
+        ]
+    )
 
 
 def camera_transform(truth: CameraTruth) -> FrameTransforms:
     """World → camera, the camera in OpenCV axes (x right, y down, z forward), as Foxglove expects."""
     qx, qy, qz, qw = truth.quaternion
     px, py, pz = truth.position
-    return FrameTransforms(transforms=[FrameTransform(
-        timestamp=stamp_of(truth.stamp), parent_frame_id=WORLD_FRAME, child_frame_id=camera_frame(truth.camera),
-        translation=Vector3(x=px, y=py, z=pz), rotation=Quaternion(x=qx, y=qy, z=qz, w=qw))])
+    return FrameTransforms(
+        transforms=[
+            FrameTransform(
+                timestamp=stamp_of(truth.stamp),
+                parent_frame_id=WORLD_FRAME,
+                child_frame_id=camera_frame(truth.camera),
+                translation=Vector3(x=px, y=py, z=pz),
+                rotation=Quaternion(x=qx, y=qy, z=qz, w=qw),
+            )
+        ]
+    )
 
 
 def intent_path(intent: Intent, color: tuple[int, int, int]) -> SceneUpdate:
@@ -44,23 +90,39 @@ def intent_path(intent: Intent, color: tuple[int, int, int]) -> SceneUpdate:
     entity_id = f"intent/{intent.robot}"
     ts = stamp_of(intent.stamp)
     if len(intent.trajectory) < 2:
-        return SceneUpdate(deletions=[SceneEntityDeletion(timestamp=ts, type=SceneEntityDeletionType.MatchingId, id=entity_id)])
+        return SceneUpdate(
+            deletions=[SceneEntityDeletion(timestamp=ts, type=SceneEntityDeletionType.MatchingId, id=entity_id)]
+        )
     points = [Point3(x=row[1], y=row[2], z=PATH_Z) for row in intent.trajectory]
-    line = LinePrimitive(type=LinePrimitiveLineType.LineStrip, pose=Pose(position=Vector3(x=0.0, y=0.0, z=0.0),
-                         orientation=yaw_quaternion(0.0)), thickness=PATH_THICKNESS, points=points, color=rgba(color, 0.9))
+    line = LinePrimitive(
+        type=LinePrimitiveLineType.LineStrip,
+        pose=Pose(position=Vector3(x=0.0, y=0.0, z=0.0), orientation=yaw_quaternion(0.0)),
+        thickness=PATH_THICKNESS,
+        points=points,
+        color=rgba(color, 0.9),
+    )
     return SceneUpdate(entities=[SceneEntity(timestamp=ts, frame_id=WORLD_FRAME, id=entity_id, lines=[line])])
 
 
 def camera_image(frame: CameraFrame) -> CompressedImage:
-    return CompressedImage(timestamp=stamp_of(frame.stamp), frame_id=camera_frame(frame.camera), data=frame.jpeg, format="jpeg")
+    return CompressedImage(
+        timestamp=stamp_of(frame.stamp), frame_id=camera_frame(frame.camera), data=frame.jpeg, format="jpeg"
+    )
 
 
 def camera_calibration(frame: CameraFrame) -> CameraCalibration:
     fx, fy, cx, cy = frame.intrinsics
     return CameraCalibration(
-        timestamp=stamp_of(frame.stamp), frame_id=camera_frame(frame.camera), width=frame.width, height=frame.height,
-        distortion_model="plumb_bob", D=list(frame.distortion), K=[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
-        R=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0], P=[fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0])
+        timestamp=stamp_of(frame.stamp),
+        frame_id=camera_frame(frame.camera),
+        width=frame.width,
+        height=frame.height,
+        distortion_model="plumb_bob",
+        D=list(frame.distortion),
+        K=[fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0],
+        R=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        P=[fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0],
+    )
 
 
 def _color(p: Primitive) -> Color:
@@ -80,16 +142,35 @@ def overlay_annotations(overlay: Overlay, frame_stamp: float) -> ImageAnnotation
         pts = [Point2(x=u, y=v) for u, v in p.points]
         if p.kind == "circle" and pts:
             fill = color if p.width == 0 else Color(r=0.0, g=0.0, b=0.0, a=0.0)
-            circles.append(CircleAnnotation(timestamp=ts, position=pts[0], diameter=2 * p.radius, thickness=p.width,
-                                            fill_color=fill, outline_color=color))
+            circles.append(
+                CircleAnnotation(
+                    timestamp=ts,
+                    position=pts[0],
+                    diameter=2 * p.radius,
+                    thickness=p.width,
+                    fill_color=fill,
+                    outline_color=color,
+                )
+            )
         elif p.kind == "text" and pts:
-            texts.append(TextAnnotation(timestamp=ts, position=pts[0], text=p.text, font_size=p.radius or 12.0,
-                                        text_color=color, background_color=Color(r=0.0, g=0.0, b=0.0, a=0.0)))
+            texts.append(
+                TextAnnotation(
+                    timestamp=ts,
+                    position=pts[0],
+                    text=p.text,
+                    font_size=p.radius or 12.0,
+                    text_color=color,
+                    background_color=Color(r=0.0, g=0.0, b=0.0, a=0.0),
+                )
+            )
         elif len(pts) >= 2:
             kind = PointsAnnotationType.LineLoop if p.kind == "polygon" else PointsAnnotationType.LineStrip
             fill = color if p.kind == "polygon" else Color(r=0.0, g=0.0, b=0.0, a=0.0)
-            points.append(PointsAnnotation(timestamp=ts, type=kind, points=pts, outline_color=color, fill_color=fill,
-                                           thickness=p.width))
+            points.append(
+                PointsAnnotation(
+                    timestamp=ts, type=kind, points=pts, outline_color=color, fill_color=fill, thickness=p.width
+                )
+            )
     return ImageAnnotations(circles=circles, points=points, texts=texts)
 
 
@@ -108,14 +189,21 @@ def describe(msg: Feedback | FeedbackAck | Event) -> tuple[str, str]:
         return "INFO", f"feedback {msg.kind}({params})"
     if isinstance(msg, FeedbackAck):
         what = f"accepted as {msg.constraint_id}" if msg.accepted else f"refused: {msg.reason}"
-        return ("INFO" if msg.accepted else "WARNING"), f"feedback {msg.feedback_seq} of {msg.to} {what} (constraints v{msg.constraints_version})"
+        return (
+            "INFO" if msg.accepted else "WARNING"
+        ), f"feedback {msg.feedback_seq} of {msg.to} {what} (constraints v{msg.constraints_version})"
     who = " ".join(f"{k}={v}" for k, v in (("robot", msg.robot), ("door", msg.door), ("object", msg.object)) if v)
     data = "" if msg.kind == "mission_done" or not msg.data else f" {_short(msg.data)}"
     return ("WARNING" if msg.kind in WARNING_EVENTS else "INFO"), f"{msg.kind} {who}{data}".strip()
 
 
-LEVELS = {"DEBUG": LogLevel.Debug, "INFO": LogLevel.Info, "WARNING": LogLevel.Warning, "ERROR": LogLevel.Error,
-          "CRITICAL": LogLevel.Fatal}
+LEVELS = {
+    "DEBUG": LogLevel.Debug,
+    "INFO": LogLevel.Info,
+    "WARNING": LogLevel.Warning,
+    "ERROR": LogLevel.Error,
+    "CRITICAL": LogLevel.Fatal,
+}
 
 
 def text_log(t: float, level: str, name: str, message: str) -> Log:

@@ -32,13 +32,26 @@ def scale_frame(frame: CameraFrame, scale: float) -> CameraFrame:
     if not ok:
         return frame
     fx, fy, cx, cy = frame.intrinsics
-    return dataclasses.replace(frame, jpeg=jpeg.tobytes(), width=width, height=height,
-                               intrinsics=[fx * sx, fy * sy, _pixel(cx, sx), _pixel(cy, sy)])
+    return dataclasses.replace(
+        frame,
+        jpeg=jpeg.tobytes(),
+        width=width,
+        height=height,
+        intrinsics=[fx * sx, fy * sy, _pixel(cx, sx), _pixel(cy, sy)],
+    )
 
 
 def scale_overlay(overlay: Overlay, scale: float) -> Overlay:
     """The overlay's primitives in the pixels of the frame scaled by ``scale``."""
-    prims = [dataclasses.replace(p, points=[[_pixel(u, scale), _pixel(v, scale)] for u, v in p.points],
-                                 width=p.width * scale, radius=p.radius * scale) for p in overlay.primitives]
-    return dataclasses.replace(overlay, primitives=prims, width=round(overlay.width * scale), height=round(overlay.height * scale))
-
+    prims = [
+        dataclasses.replace(
+            p,
+            points=[[_pixel(u, scale), _pixel(v, scale)] for u, v in p.points],
+            width=p.width * scale,
+            radius=p.radius * scale,
+        )
+        for p in overlay.primitives
+    ]
+    return dataclasses.replace(
+        overlay, primitives=prims, width=round(overlay.width * scale), height=round(overlay.height * scale)
+    )

@@ -5,7 +5,7 @@ from __future__ import annotations
 import dataclasses
 import types
 import typing
-from functools import lru_cache
+from functools import cache
 from typing import Any
 
 from protocol.messages import Message
@@ -34,7 +34,7 @@ def _schema_of(hint: Any) -> dict[str, Any]:
     return {}
 
 
-@lru_cache(maxsize=None)
+@cache
 def record_schema(cls: type) -> dict[str, Any]:
     """``{"type": "object", "title": ..., "properties": {...}}`` for a message or nested record."""
     hints = typing.get_type_hints(cls, include_extras=False)

@@ -10,7 +10,9 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-_LINE = re.compile(r"^\[(?P<name>[^\]]{1,64})\] (?:\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d+ (?P<level>[A-Z]+)\s+)?(?P<text>.*)$")
+_LINE = re.compile(
+    r"^\[(?P<name>[^\]]{1,64})\] (?:\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d+ (?P<level>[A-Z]+)\s+)?(?P<text>.*)$"
+)
 MAX_READ = 1 << 20  # bytes taken per poll, so a huge backlog never stalls the recorder
 
 

@@ -15,8 +15,19 @@ from foxglove.messages import FrameTransforms, Log, SceneUpdate
 from protocol.codec import encode
 from protocol.keys import Keys
 from protocol.messages import (
-    CameraFrame, CameraTruth, ConstraintSet, DoorState, Event, Feedback, FeedbackAck, Intent, Message, Overlay,
-    RobotPose, RobotStatus, TeamPlan,
+    CameraFrame,
+    CameraTruth,
+    ConstraintSet,
+    DoorState,
+    Event,
+    Feedback,
+    FeedbackAck,
+    Intent,
+    Message,
+    Overlay,
+    RobotPose,
+    RobotStatus,
+    TeamPlan,
 )
 from protocol.palette import unlisted_robot_color
 from protocol.schema import record_to_wire
@@ -29,7 +40,8 @@ from .scene import SiteScene, to_foxglove
 from .sink import FoxgloveSink
 
 PROGRESS_SCHEMA: dict[str, Any] = {
-    "type": "object", "title": "Progress",
+    "type": "object",
+    "title": "Progress",
     "properties": {
         "delivered": {"type": "integer", "description": "objects delivered so far, all robots"},
         "delivered_by": {"type": "object", "additionalProperties": {"type": "integer"}},
@@ -56,18 +68,31 @@ class FoxgloveProfile:
         self.human_door_openings = 0
         self.frame_stamps: dict[tuple[str, int], float] = {}
         self._handlers = {
-            RobotPose: self._pose, RobotStatus: self._status, DoorState: self._door, TeamPlan: self._json(topics.PLAN),
-            Intent: self._intent, Feedback: self._described, FeedbackAck: self._described,
-            ConstraintSet: self._json(topics.CONSTRAINTS), CameraFrame: self._frame, CameraTruth: self._truth,
-            Overlay: self._overlay, Event: self._event,
+            RobotPose: self._pose,
+            RobotStatus: self._status,
+            DoorState: self._door,
+            TeamPlan: self._json(topics.PLAN),
+            Intent: self._intent,
+            Feedback: self._described,
+            FeedbackAck: self._described,
+            ConstraintSet: self._json(topics.CONSTRAINTS),
+            CameraFrame: self._frame,
+            CameraTruth: self._truth,
+            Overlay: self._overlay,
+            Event: self._event,
         }
 
     def start(self, t: float) -> None:
         # The fixed channels exist from the start, so a viewer can subscribe before the mission's burst.
         for topic, message_type in ((topics.TF, FrameTransforms), (topics.PATHS, SceneUpdate), (topics.LOG, Log)):
             self.sink.declare(topic, message_type)
-        for topic, schema in ((topics.PLAN, record_schema(TeamPlan)), (topics.CONSTRAINTS, record_schema(ConstraintSet)),
-                              (topics.EVENTS, record_schema(Event)), (topics.PROGRESS, PROGRESS_SCHEMA), (topics.METRICS, METRICS_SCHEMA)):
+        for topic, schema in (
+            (topics.PLAN, record_schema(TeamPlan)),
+            (topics.CONSTRAINTS, record_schema(ConstraintSet)),
+            (topics.EVENTS, record_schema(Event)),
+            (topics.PROGRESS, PROGRESS_SCHEMA),
+            (topics.METRICS, METRICS_SCHEMA),
+        ):
             self.sink.declare_json(topic, schema)
         self._scene(t)
 
@@ -126,11 +151,18 @@ class FoxgloveProfile:
         self._progress(msg.stamp)
 
     def _progress(self, t: float) -> None:
-        self.sink.json(topics.PROGRESS, PROGRESS_SCHEMA, {
-            "delivered": sum(self.delivered.values()), "delivered_by": dict(sorted(self.delivered.items())),
-            "door_openings": self.door_openings, "human_door_openings": self.human_door_openings,
-            "open_doors": sum(1 for state in self.scene.doors.values() if state),
-        }, t)
+        self.sink.json(
+            topics.PROGRESS,
+            PROGRESS_SCHEMA,
+            {
+                "delivered": sum(self.delivered.values()),
+                "delivered_by": dict(sorted(self.delivered.items())),
+                "door_openings": self.door_openings,
+                "human_door_openings": self.human_door_openings,
+                "open_doors": sum(1 for state in self.scene.doors.values() if state),
+            },
+            t,
+        )
 
     def _intent(self, msg: Intent) -> None:
         color = self.scene.colors.get(msg.robot) or unlisted_robot_color(msg.robot)

@@ -4,9 +4,10 @@ put back from the image channel), its metadata, and its channels' counts and tim
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, BinaryIO, Callable, Iterator
+from typing import Any, BinaryIO
 
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
@@ -81,8 +82,16 @@ def channel_stats(path: Path) -> list[ChannelStats]:
     for cid, channel in channels.items():
         schema = schemas.get(channel.schema_id)
         first, last = spans.get(cid, [0, 0])
-        out.append(ChannelStats(channel.topic, schema.name if schema else "", channel.message_encoding, counts.get(cid, 0),
-                                first / 1e9, last / 1e9))
+        out.append(
+            ChannelStats(
+                channel.topic,
+                schema.name if schema else "",
+                channel.message_encoding,
+                counts.get(cid, 0),
+                first / 1e9,
+                last / 1e9,
+            )
+        )
     return sorted(out, key=lambda c: c.topic)
 
 
@@ -98,7 +107,10 @@ def messages(path: Path, *, start: float | None = None, end: float | None = None
         decoders: dict[int, Callable[[bytes], Any]] = {}  # schema id -> protobuf decoder
         images: dict[tuple[str, int], bytes] = {}  # (camera, log time) -> JPEG waiting for its frame
         frames: dict[tuple[str, int], tuple[str, CameraFrame]] = {}  # frames waiting for their JPEG
-        kwargs = {"start_time": None if start is None else int(start * 1e9), "end_time": None if end is None else int(end * 1e9)}
+        kwargs = {
+            "start_time": None if start is None else int(start * 1e9),
+            "end_time": None if end is None else int(end * 1e9),
+        }
         try:
             for schema, channel, message in reader.iter_messages(log_time_order=True, **kwargs):
                 topic = channel.topic

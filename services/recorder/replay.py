@@ -21,8 +21,9 @@ import logging
 import sys
 import threading
 import time
+from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Callable, Iterable, TextIO
+from typing import TextIO
 
 from protocol.messages import CameraFrame, Overlay
 from protocol.runner import add_common_arguments, zenoh_options
@@ -67,7 +68,7 @@ class Pacer:
 
 def selected(topic: str, only: list[str], skip: list[str]) -> bool:
     """Patterns match the key below the namespace (``robot/*/pose``, ``camera/tablet/frame``, ``clock``)."""
-    rest = topic[len(RAW_PREFIX):]
+    rest = topic[len(RAW_PREFIX) :]
     if only and not any(fnmatch.fnmatchcase(rest, p) for p in only):
         return False
     return not any(fnmatch.fnmatchcase(rest, p) for p in skip)
@@ -76,7 +77,9 @@ def selected(topic: str, only: list[str], skip: list[str]) -> bool:
 class Replayer(Service):
     """Publishes recorded payloads; with ``hold_camera``, waits for each frame's overlay."""
 
-    def __init__(self, namespace: str, options: ZenohOptions, *, hold_camera: float | None = None, settle: float = 0.05) -> None:
+    def __init__(
+        self, namespace: str, options: ZenohOptions, *, hold_camera: float | None = None, settle: float = 0.05
+    ) -> None:
         super().__init__("replay", namespace, options)
         self.hold_camera = hold_camera
         self.settle = settle
@@ -143,8 +146,9 @@ def replay_main(args: argparse.Namespace) -> int:
         return 2
     rate = None if args.fast else (args.rate or 1.0)
     pacer = Pacer(rate, args.step_size if args.step else None)
-    replayer = Replayer(namespace, zenoh_options(args), hold_camera=args.hold_timeout if args.hold_camera else None,
-                        settle=args.settle)
+    replayer = Replayer(
+        namespace, zenoh_options(args), hold_camera=args.hold_timeout if args.hold_camera else None, settle=args.settle
+    )
     replayer.install_signal_handlers()
     try:
         replayer.open()
@@ -153,7 +157,11 @@ def replay_main(args: argparse.Namespace) -> int:
         return 1
     try:
         time.sleep(args.delay)  # subscribers discover the new publisher first
-        records = (r for r in messages(path, start=args.start, end=args.end) if selected(r.topic, args.only or [], args.skip or []))
+        records = (
+            r
+            for r in messages(path, start=args.start, end=args.end)
+            if selected(r.topic, args.only or [], args.skip or [])
+        )
         code = replayer.replay(records, pacer)
         time.sleep(LINGER)  # the last messages leave before the session closes
     except RecordingError as exc:
@@ -164,7 +172,9 @@ def replay_main(args: argparse.Namespace) -> int:
     finally:
         replayer.close()
     held = f", {replayer.holds_timed_out} camera hold(s) timed out" if args.hold_camera else ""
-    print(f"replay: {replayer.published} messages published on namespace {namespace}{held}", file=sys.stderr, flush=True)
+    print(
+        f"replay: {replayer.published} messages published on namespace {namespace}{held}", file=sys.stderr, flush=True
+    )
     return code
 
 
@@ -175,12 +185,32 @@ def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
     pace.add_argument("--rate", type=float, metavar="K", help="K times the recorded pace (default 1)")
     pace.add_argument("--fast", action="store_true", help="publish without waiting")
     pace.add_argument("--step", action="store_true", help="wait for Enter before each --step-size site seconds")
-    parser.add_argument("--step-size", type=float, default=1.0, metavar="S", help="with --step: site seconds per Enter (default 1)")
-    parser.add_argument("--only", action="append", metavar="PATTERN", help="replay only keys matching (e.g. 'robot/*/pose'; repeatable)")
+    parser.add_argument(
+        "--step-size", type=float, default=1.0, metavar="S", help="with --step: site seconds per Enter (default 1)"
+    )
+    parser.add_argument(
+        "--only", action="append", metavar="PATTERN", help="replay only keys matching (e.g. 'robot/*/pose'; repeatable)"
+    )
     parser.add_argument("--skip", action="append", metavar="PATTERN", help="do not replay keys matching (repeatable)")
     parser.add_argument("--start", type=float, metavar="T", help="from site time T")
     parser.add_argument("--end", type=float, metavar="T", help="up to site time T")
-    parser.add_argument("--hold-camera", action="store_true", help="after each camera frame, wait for its overlay (ar/<cid>/overlay)")
-    parser.add_argument("--hold-timeout", type=float, default=3.0, metavar="S", help="longest wait for an overlay (default 3 s)")
-    parser.add_argument("--settle", type=float, default=0.05, metavar="S", help="with --hold-camera: wall seconds before each frame (default 0.05)")
-    parser.add_argument("--delay", type=float, default=0.5, metavar="S", help="wall seconds between joining Zenoh and the first message (default 0.5)")
+    parser.add_argument(
+        "--hold-camera", action="store_true", help="after each camera frame, wait for its overlay (ar/<cid>/overlay)"
+    )
+    parser.add_argument(
+        "--hold-timeout", type=float, default=3.0, metavar="S", help="longest wait for an overlay (default 3 s)"
+    )
+    parser.add_argument(
+        "--settle",
+        type=float,
+        default=0.05,
+        metavar="S",
+        help="with --hold-camera: wall seconds before each frame (default 0.05)",
+    )
+    parser.add_argument(
+        "--delay",
+        type=float,
+        default=0.5,
+        metavar="S",
+        help="wall seconds between joining Zenoh and the first message (default 0.5)",
+    )

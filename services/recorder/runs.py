@@ -31,23 +31,48 @@ def _table(rows: list[tuple[str, str, str]], out: TextIO) -> None:
 
 
 def metrics_rows(m: dict[str, Any]) -> list[tuple[str, str, str]]:
-    rows = [("completed", "yes" if m.get("completed") else "no", "every object delivered and the human's own task done"),
-            ("team completion time", _seconds(m.get("team_completion_time")), "the slowest agent's, the human included")]
+    rows = [
+        ("completed", "yes" if m.get("completed") else "no", "every object delivered and the human's own task done"),
+        ("team completion time", _seconds(m.get("team_completion_time")), "the slowest agent's, the human included"),
+    ]
     for agent, t in (m.get("agent_completion_times") or {}).items():
         rows.append((f"  {agent}", _seconds(t), "last delivery" if agent != "human" else "her own task done"))
-    rows.append(("human door openings", str(m.get("human_door_openings", 0)),
-                 "times the human walked to a door and opened it for the robots (her a1 actions; the paper's figure)"))
+    rows.append(
+        (
+            "human door openings",
+            str(m.get("human_door_openings", 0)),
+            "times the human walked to a door and opened it for the robots (her a1 actions; the paper's figure)",
+        )
+    )
     note = "openings per door: by the human, or for a robot (doors that open as a robot approaches)"
     for door, by in sorted((m.get("door_openings") or {}).items()):
         parts = [f"{n} by {who}" for who, n in sorted(by.items())]
         rows.append((f"  {door}", ", ".join(parts), note))
         note = ""
     fb = m.get("feedback") or {}
-    rows.append(("feedback", f"{fb.get('sent', 0)} sent", f"{fb.get('accepted', 0)} accepted, {fb.get('refused', 0)} refused, "
-                                                             f"{fb.get('unanswered', 0)} unanswered (the human's declarations)"))
+    rows.append(
+        (
+            "feedback",
+            f"{fb.get('sent', 0)} sent",
+            f"{fb.get('accepted', 0)} accepted, {fb.get('refused', 0)} refused, "
+            f"{fb.get('unanswered', 0)} unanswered (the human's declarations)",
+        )
+    )
     for rid, r in sorted((m.get("robots") or {}).items()):
-        rows.append((f"robot {rid}", f"{len(r.get('delivered', []))} delivered", f"waited {float(r.get('wait_time', 0)):.1f} s at closed doors"))
-    rows.append(("closed-door crossings", str(m.get("closed_door_crossings", 0)), "robots that entered a closed door's doorway (0 in a correct run)"))
+        rows.append(
+            (
+                f"robot {rid}",
+                f"{len(r.get('delivered', []))} delivered",
+                f"waited {float(r.get('wait_time', 0)):.1f} s at closed doors",
+            )
+        )
+    rows.append(
+        (
+            "closed-door crossings",
+            str(m.get("closed_door_crossings", 0)),
+            "robots that entered a closed door's doorway (0 in a correct run)",
+        )
+    )
     rows.append(("world versions", str(m.get("world_versions", 0)), "changes the planner had to answer (replans)"))
     return rows
 
@@ -60,8 +85,11 @@ def show(run: Path, out: TextIO | None = None, png: Path | None = None) -> int:
     info_file = folder / "run.json"
     if info_file.is_file():
         info = json.loads(info_file.read_text())
-        print(f"  services {', '.join(info.get('services', []))}; stopped: {info.get('stop_reason')}; "
-              f"exit {info.get('exit_code')}; {float(info.get('wall_seconds', 0)):.1f} wall s", file=out)
+        print(
+            f"  services {', '.join(info.get('services', []))}; stopped: {info.get('stop_reason')}; "
+            f"exit {info.get('exit_code')}; {float(info.get('wall_seconds', 0)):.1f} wall s",
+            file=out,
+        )
     metrics_file = folder / "metrics.json"
     metrics = json.loads(metrics_file.read_text()) if metrics_file.is_file() else None
     if not recording.is_file():
@@ -85,7 +113,10 @@ def show(run: Path, out: TextIO | None = None, png: Path | None = None) -> int:
     rows += [(c.topic, c.schema, str(c.messages), f"{c.first:.1f}", f"{c.last:.1f}") for c in stats]
     widths = [max(len(r[i]) for r in rows) for i in range(5)]
     for r in rows:
-        print(f"  {r[0]:<{widths[0]}}  {r[1]:<{widths[1]}}  {r[2]:>{widths[2]}}  {r[3]:>{widths[3]}}  {r[4]:>{widths[4]}}", file=out)
+        print(
+            f"  {r[0]:<{widths[0]}}  {r[1]:<{widths[1]}}  {r[2]:>{widths[2]}}  {r[3]:>{widths[3]}}  {r[4]:>{widths[4]}}",
+            file=out,
+        )
     picture = draw_timeline(timeline, png or folder / "timeline.png", title=f"timeline of {folder.name}")
     print(f"\ntimeline {picture}", file=out)
     return 0

@@ -12,7 +12,16 @@ import math
 from dataclasses import dataclass, field
 
 from foxglove.messages import (
-    Color, CubePrimitive, CylinderPrimitive, Pose, Quaternion, SceneEntity, SceneUpdate, TextPrimitive, Timestamp, Vector3,
+    Color,
+    CubePrimitive,
+    CylinderPrimitive,
+    Pose,
+    Quaternion,
+    SceneEntity,
+    SceneUpdate,
+    TextPrimitive,
+    Timestamp,
+    Vector3,
 )
 
 from protocol.palette import robot_colors
@@ -90,24 +99,62 @@ class SiteScene:
     def entities(self) -> list[Entity]:
         """The whole scene as it is now."""
         site = self.site
-        walls = tuple(_box((w.box[0] + w.box[2]) / 2, (w.box[1] + w.box[3]) / 2, w.height / 2, w.box[2] - w.box[0],
-                           w.box[3] - w.box[1], w.height, WALL) for w in site.walls)
+        walls = tuple(
+            _box(
+                (w.box[0] + w.box[2]) / 2,
+                (w.box[1] + w.box[3]) / 2,
+                w.height / 2,
+                w.box[2] - w.box[0],
+                w.box[3] - w.box[1],
+                w.height,
+                WALL,
+            )
+            for w in site.walls
+        )
         out = [Entity("walls", WORLD_FRAME, walls)]
         for room in site.rooms.values():
             x0, y0, x1, y1 = room.rect
-            out.append(Entity(f"room/{room.id}", WORLD_FRAME, (_box((x0 + x1) / 2, (y0 + y1) / 2, 0.005, x1 - x0, y1 - y0, 0.01, FLOOR),
-                                                                _label((x0 + x1) / 2, (y0 + y1) / 2, 0.05, room.id, 0.4))))
+            out.append(
+                Entity(
+                    f"room/{room.id}",
+                    WORLD_FRAME,
+                    (
+                        _box((x0 + x1) / 2, (y0 + y1) / 2, 0.005, x1 - x0, y1 - y0, 0.01, FLOOR),
+                        _label((x0 + x1) / 2, (y0 + y1) / 2, 0.05, room.id, 0.4),
+                    ),
+                )
+            )
         for tag in site.landmarks:
             x, y, z = tag.position
             nx, ny = tag.normal[0], tag.normal[1]
-            out.append(Entity(f"tag/{tag.tag}", WORLD_FRAME, (_box(x + 0.01 * nx, y + 0.01 * ny, z, 0.02, tag.size, tag.size, TAG, tag.yaw),
-                                                              _label(x + 0.15 * nx, y + 0.15 * ny, z + tag.size, f"tag {tag.tag}", 0.15))))
+            out.append(
+                Entity(
+                    f"tag/{tag.tag}",
+                    WORLD_FRAME,
+                    (
+                        _box(x + 0.01 * nx, y + 0.01 * ny, z, 0.02, tag.size, tag.size, TAG, tag.yaw),
+                        _label(x + 0.15 * nx, y + 0.15 * ny, z + tag.size, f"tag {tag.tag}", 0.15),
+                    ),
+                )
+            )
         radius = site.params.robot_radius
         for rid in site.robots:
             r, g, b = self.colors[rid]
-            body = Shape("cylinder", (0.0, 0.0, ROBOT_HEIGHT / 2), (2 * radius, 2 * radius, ROBOT_HEIGHT), (r / 255, g / 255, b / 255, 1.0))
+            body = Shape(
+                "cylinder",
+                (0.0, 0.0, ROBOT_HEIGHT / 2),
+                (2 * radius, 2 * radius, ROBOT_HEIGHT),
+                (r / 255, g / 255, b / 255, 1.0),
+            )
             nose = _box(radius * 0.7, 0.0, ROBOT_HEIGHT + 0.02, 0.15, 0.06, 0.04, LABEL)
-            out.append(Entity(f"robot/{rid}", robot_frame(rid), (body, nose, _label(0.0, 0.0, ROBOT_HEIGHT + 0.3, rid)), locked=True))
+            out.append(
+                Entity(
+                    f"robot/{rid}",
+                    robot_frame(rid),
+                    (body, nose, _label(0.0, 0.0, ROBOT_HEIGHT + 0.3, rid)),
+                    locked=True,
+                )
+            )
         return out + [self.door(did) for did in site.door_leaves] + [self.object(oid) for oid in site.objects]
 
     def door(self, did: str) -> Entity:
@@ -119,8 +166,14 @@ class SiteScene:
         cy = leaf.hinge[1] + leaf.length / 2 * math.sin(yaw)
         color = DOOR_UNKNOWN if state is None else DOOR_OPEN if state else DOOR_CLOSED
         text = f"{did}: {'?' if state is None else 'open' if state else 'closed'}"
-        return Entity(f"door/{did}", WORLD_FRAME, (_box(cx, cy, height / 2 + 0.01, leaf.length, leaf.thickness, height, color, yaw),
-                                                   _label(leaf.hinge[0], leaf.hinge[1], height + 0.2, text, 0.2)))
+        return Entity(
+            f"door/{did}",
+            WORLD_FRAME,
+            (
+                _box(cx, cy, height / 2 + 0.01, leaf.length, leaf.thickness, height, color, yaw),
+                _label(leaf.hinge[0], leaf.hinge[1], height + 0.2, text, 0.2),
+            ),
+        )
 
     def object(self, oid: str) -> Entity:
         obj = self.site.objects[oid]
@@ -130,8 +183,15 @@ class SiteScene:
             frame = WORLD_FRAME
             x, y = self.dropped.get(oid, obj.position)
             z = OBJECT_SIZE / 2
-        return Entity(f"object/{oid}", frame, (_box(x, y, z, OBJECT_SIZE, OBJECT_SIZE, OBJECT_SIZE, OBJECT),
-                                               _label(x, y, z + 0.3, f"{oid} → {obj.deliver_to}", 0.15)), locked=frame != WORLD_FRAME)
+        return Entity(
+            f"object/{oid}",
+            frame,
+            (
+                _box(x, y, z, OBJECT_SIZE, OBJECT_SIZE, OBJECT_SIZE, OBJECT),
+                _label(x, y, z + 0.3, f"{oid} → {obj.deliver_to}", 0.15),
+            ),
+            locked=frame != WORLD_FRAME,
+        )
 
     # ------------------------------------------------------------------ changes (None: nothing changed)
 
@@ -169,11 +229,31 @@ def to_foxglove(entities: list[Entity], t: float) -> SceneUpdate:
     out = []
     for e in entities:
         size = lambda s: Vector3(x=s.size[0], y=s.size[1], z=s.size[2])  # noqa: E731
-        out.append(SceneEntity(
-            timestamp=ts, frame_id=e.frame, id=e.id, frame_locked=e.locked,
-            cubes=[CubePrimitive(pose=_pose(s), size=size(s), color=_color(s.color)) for s in e.shapes if s.kind == "cube"],
-            cylinders=[CylinderPrimitive(pose=_pose(s), size=size(s), bottom_scale=1.0, top_scale=1.0, color=_color(s.color))
-                       for s in e.shapes if s.kind == "cylinder"],
-            texts=[TextPrimitive(pose=_pose(s), billboard=True, font_size=s.size[2], color=_color(s.color), text=s.text)
-                   for s in e.shapes if s.kind == "text"]))
+        out.append(
+            SceneEntity(
+                timestamp=ts,
+                frame_id=e.frame,
+                id=e.id,
+                frame_locked=e.locked,
+                cubes=[
+                    CubePrimitive(pose=_pose(s), size=size(s), color=_color(s.color))
+                    for s in e.shapes
+                    if s.kind == "cube"
+                ],
+                cylinders=[
+                    CylinderPrimitive(
+                        pose=_pose(s), size=size(s), bottom_scale=1.0, top_scale=1.0, color=_color(s.color)
+                    )
+                    for s in e.shapes
+                    if s.kind == "cylinder"
+                ],
+                texts=[
+                    TextPrimitive(
+                        pose=_pose(s), billboard=True, font_size=s.size[2], color=_color(s.color), text=s.text
+                    )
+                    for s in e.shapes
+                    if s.kind == "text"
+                ],
+            )
+        )
     return SceneUpdate(entities=out)

@@ -30,8 +30,16 @@ class RecordingProfile(Protocol):
 
 
 class Recorder(Service):
-    def __init__(self, namespace: str, zenoh_options: ZenohOptions, profiles: list[RecordingProfile], *,
-                 log_file: Path | None = None, clock: WallClock | SimClock | None = None, name: str = "recorder") -> None:
+    def __init__(
+        self,
+        namespace: str,
+        zenoh_options: ZenohOptions,
+        profiles: list[RecordingProfile],
+        *,
+        log_file: Path | None = None,
+        clock: WallClock | SimClock | None = None,
+        name: str = "recorder",
+    ) -> None:
         super().__init__(name, namespace, zenoh_options, clock=clock)
         self.profiles = profiles
         self.follower = LogFollower(log_file) if log_file is not None else None

@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import json
 import logging
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import foxglove
 import foxglove.channels
@@ -33,8 +34,13 @@ def ns(t: float) -> int:
 class FoxgloveSink:
     """One SDK context with its sinks; ``close()`` finishes the MCAP file (summary and index)."""
 
-    def __init__(self, mcap_path: Path | None = None, *, serve: tuple[str, int] | None = None,
-                 metadata: dict[str, str] | None = None) -> None:
+    def __init__(
+        self,
+        mcap_path: Path | None = None,
+        *,
+        serve: tuple[str, int] | None = None,
+        metadata: dict[str, str] | None = None,
+    ) -> None:
         self.context = Context()
         self._channels: dict[str, Any] = {}
         self._writer = None
@@ -46,11 +52,19 @@ class FoxgloveSink:
         if serve is not None:  # first: a port that cannot be had must not leave a file behind
             host, port = serve
             try:
-                self.server = foxglove.start_server(name="arroch", host=host, port=port, context=self.context,
-                                                    server_listener=_Listener(self), message_backlog_size=VIEWER_BACKLOG)
+                self.server = foxglove.start_server(
+                    name="arroch",
+                    host=host,
+                    port=port,
+                    context=self.context,
+                    server_listener=_Listener(self),
+                    message_backlog_size=VIEWER_BACKLOG,
+                )
             except Exception as exc:
                 raise ValueError(f"cannot serve the live view on {host}:{port}: {exc}") from None
-            log.info("Foxglove WebSocket server on ws://%s:%d (open it in Foxglove: Open connection)", host, self.server.port)
+            log.info(
+                "Foxglove WebSocket server on ws://%s:%d (open it in Foxglove: Open connection)", host, self.server.port
+            )
         if mcap_path is not None:
             mcap_path.parent.mkdir(parents=True, exist_ok=True)
             self._writer = foxglove.open_mcap(mcap_path, allow_overwrite=False, context=self.context)
@@ -72,7 +86,9 @@ class FoxgloveSink:
         self.declare(topic, type(msg)).log(msg, log_time=ns(t))
 
     def json(self, topic: str, schema: dict[str, Any], data: Any, t: float) -> None:
-        self.declare_json(topic, schema).log(json.dumps(data, separators=(",", ":"), default=_jsonable).encode(), log_time=ns(t))
+        self.declare_json(topic, schema).log(
+            json.dumps(data, separators=(",", ":"), default=_jsonable).encode(), log_time=ns(t)
+        )
 
     def declare(self, topic: str, message_type: type) -> Any:
         """The typed channel of ``topic`` (made now if new: a viewer sees it advertised from then on)."""
@@ -82,15 +98,25 @@ class FoxgloveSink:
     def declare_json(self, topic: str, schema: dict[str, Any]) -> Channel:
         def make() -> Channel:
             name = schema.get("title") or topic.strip("/")
-            return Channel(topic, message_encoding="json", context=self.context,
-                           schema=Schema(name=f"arroch.{name}", encoding="jsonschema", data=json.dumps(schema).encode()))
+            return Channel(
+                topic,
+                message_encoding="json",
+                context=self.context,
+                schema=Schema(name=f"arroch.{name}", encoding="jsonschema", data=json.dumps(schema).encode()),
+            )
 
         return self._channel(topic, make)
 
     def raw(self, topic: str, type_name: str, schema: dict[str, Any], payload: bytes, t: float) -> None:
         def make() -> Channel:
-            return Channel(topic, message_encoding=RAW_ENCODING, context=self.context,
-                           schema=Schema(name=RAW_SCHEMA_PREFIX + type_name, encoding="jsonschema", data=json.dumps(schema).encode()))
+            return Channel(
+                topic,
+                message_encoding=RAW_ENCODING,
+                context=self.context,
+                schema=Schema(
+                    name=RAW_SCHEMA_PREFIX + type_name, encoding="jsonschema", data=json.dumps(schema).encode()
+                ),
+            )
 
         self._channel(topic, make).log(payload, log_time=ns(t))
 

@@ -17,8 +17,14 @@ from protocol.palette import robot_colors
 
 from .reading import messages
 
-STATE_COLOURS = {"waiting_at_door": "#d62728", "loading": "#444444", "unloading": "#7f7f7f", "idle": "#e8e8e8",
-                 "done": "#c8e6c9", "failed": "#000000"}
+STATE_COLOURS = {
+    "waiting_at_door": "#d62728",
+    "loading": "#444444",
+    "unloading": "#7f7f7f",
+    "idle": "#e8e8e8",
+    "done": "#c8e6c9",
+    "failed": "#000000",
+}
 
 
 @dataclass
@@ -95,8 +101,11 @@ def draw_timeline(tl: Timeline, out: Path, title: str = "") -> Path:
         ax.text(t + 0.005 * max(tl.end, 1.0), y["human"] - 0.12, text, fontsize=7, ha="left", va="top")
     for did in doors:
         for start, end, by in tl.doors[did]:
-            ax.broken_barh([(start, max(end - start, 0.01))], (y[did] - 0.3, 0.6),
-                           facecolors="#2ca02c" if by == "human" else "#98df8a")
+            ax.broken_barh(
+                [(start, max(end - start, 0.01))],
+                (y[did] - 0.3, 0.6),
+                facecolors="#2ca02c" if by == "human" else "#98df8a",
+            )
             if by == "human":
                 ax.plot([start], [y["human"]], marker="|", color="#2ca02c", markersize=14)
     ax.set_yticks([y[name] for name in rows], [f"door {n}" if n in tl.doors else n for n in rows])
@@ -106,11 +115,24 @@ def draw_timeline(tl: Timeline, out: Path, title: str = "") -> Path:
     params = (tl.metrics or {}).get("params") or {}
     what = ", ".join(f"{k} {params[k]}" for k in ("site", "method", "seed") if k in params)
     ax.set_title(f"{title or 'timeline'}{f' ({what})' if what else ''}")
-    legend = [Patch(facecolor="#888888", label="moving (robot's colour)"), Patch(facecolor=STATE_COLOURS["waiting_at_door"], label="waiting at door"),
-              Patch(facecolor=STATE_COLOURS["loading"], label="loading"), Patch(facecolor=STATE_COLOURS["unloading"], label="unloading"),
-              Patch(facecolor=STATE_COLOURS["done"], label="done"), Patch(facecolor="#9467bd", alpha=0.6, label="human: focus interval"),
-              Patch(facecolor="#2ca02c", label="door open (by the human)"), Patch(facecolor="#98df8a", label="door open (robot/sensor)")]
-    ax.legend(handles=legend, loc="upper center", bbox_to_anchor=(0.5, -0.06 - 0.5 / len(rows)), ncol=4, fontsize=8, frameon=False)
+    legend = [
+        Patch(facecolor="#888888", label="moving (robot's colour)"),
+        Patch(facecolor=STATE_COLOURS["waiting_at_door"], label="waiting at door"),
+        Patch(facecolor=STATE_COLOURS["loading"], label="loading"),
+        Patch(facecolor=STATE_COLOURS["unloading"], label="unloading"),
+        Patch(facecolor=STATE_COLOURS["done"], label="done"),
+        Patch(facecolor="#9467bd", alpha=0.6, label="human: focus interval"),
+        Patch(facecolor="#2ca02c", label="door open (by the human)"),
+        Patch(facecolor="#98df8a", label="door open (robot/sensor)"),
+    ]
+    ax.legend(
+        handles=legend,
+        loc="upper center",
+        bbox_to_anchor=(0.5, -0.06 - 0.5 / len(rows)),
+        ncol=4,
+        fontsize=8,
+        frameon=False,
+    )
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)

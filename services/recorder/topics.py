@@ -9,8 +9,21 @@ from __future__ import annotations
 
 from protocol.keys import Keys
 from protocol.messages import (
-    CameraFrame, CameraTruth, Clock, ConstraintSet, DoorState, Event, Feedback, FeedbackAck, Intent, Message,
-    Overlay, RobotCommand, RobotPose, RobotStatus, TeamPlan,
+    CameraFrame,
+    CameraTruth,
+    Clock,
+    ConstraintSet,
+    DoorState,
+    Event,
+    Feedback,
+    FeedbackAck,
+    Intent,
+    Message,
+    Overlay,
+    RobotCommand,
+    RobotPose,
+    RobotStatus,
+    TeamPlan,
 )
 
 RAW_PREFIX = "/arroch/"
@@ -75,11 +88,11 @@ def raw_topic(keys: Keys, key: str) -> str:
     prefix = keys.prefix + "/"
     if not key.startswith(prefix):
         raise ValueError(f"key {key!r} is not under {prefix!r}")
-    return RAW_PREFIX + key[len(prefix):]
+    return RAW_PREFIX + key[len(prefix) :]
 
 
 def key_of(keys: Keys, topic: str) -> str:
     """The inverse of :func:`raw_topic` for a namespace (possibly another than the recorded one)."""
     if not topic.startswith(RAW_PREFIX):
         raise ValueError(f"topic {topic!r} is not a recorded ARROCH message")
-    return f"{keys.prefix}/{topic[len(RAW_PREFIX):]}"
+    return f"{keys.prefix}/{topic[len(RAW_PREFIX) :]}"

@@ -50,7 +50,9 @@ def fingerprint(kind: str, params: dict[str, object]) -> str:
 
 
 class ActiveSet:
-    def __init__(self, library: Library, site: SiteLike, store: StateStore, *, max_active: int = DEFAULT_MAX_ACTIVE) -> None:
+    def __init__(
+        self, library: Library, site: SiteLike, store: StateStore, *, max_active: int = DEFAULT_MAX_ACTIVE
+    ) -> None:
         self.library = library
         self.site = site
         self.store = store
@@ -60,7 +62,7 @@ class ActiveSet:
         self._next_number = stored.next_number
         self._constraints: dict[str, Constraint] = {c.id: c for c in stored.constraints}
         self._acks: collections.OrderedDict[tuple[str, int], AckRecord] = collections.OrderedDict(
-            ((a.src, a.seq), a) for a in stored.acks[-store.max_acks:]
+            ((a.src, a.seq), a) for a in stored.acks[-store.max_acks :]
         )
 
     @property
@@ -82,7 +84,9 @@ class ActiveSet:
         if previous is not None:
             if previous.fingerprint == digest:
                 return Outcome(ack=self._ack_message(previous), duplicate=True)
-            log.warning("sender %s reused seq %d for different feedback: handling it as new", quote(feedback.src), feedback.seq)
+            log.warning(
+                "sender %s reused seq %d for different feedback: handling it as new", quote(feedback.src), feedback.seq
+            )
         if now is None:
             # Not remembered: the same feedback sent again once the clock is known must be applied,
             # not answered with this refusal as a duplicate.
@@ -103,7 +107,9 @@ class ActiveSet:
         return Outcome(ack=self._ack_message(record), changed=changed or bool(expired), expired=expired)
 
     def _apply(self, feedback: Feedback, digest: str, now: float) -> AckRecord:
-        validated = validate(feedback.kind, feedback.params, self.library, self.site, active_ids=self._constraints.keys())
+        validated = validate(
+            feedback.kind, feedback.params, self.library, self.site, active_ids=self._constraints.keys()
+        )
         entry = validated.entry
         added: list[Constraint] = []
         if entry.effect == CANCEL:
@@ -114,12 +120,23 @@ class ActiveSet:
             reason = f"withdrew {target}: {describe(old.kind, old.params)}"
         else:
             compiled = render(validated, now)
-            removed = [c.id for c in self._constraints.values() if self._replaced_by(entry.cancels, validated.values, c)]
+            removed = [
+                c.id for c in self._constraints.values() if self._replaced_by(entry.cancels, validated.values, c)
+            ]
             if len(self._constraints) - len(removed) >= self.max_active:
                 raise Refusal(f"too many active constraints ({len(self._constraints)}); withdraw some first")
             constraint_id = f"c{self._next_number}"
-            added.append(Constraint(id=constraint_id, kind=entry.id, params=dict(validated.values),
-                                    start=float(compiled.start), end=float(compiled.end), asp=compiled.asp, origin=feedback.src))
+            added.append(
+                Constraint(
+                    id=constraint_id,
+                    kind=entry.id,
+                    params=dict(validated.values),
+                    start=float(compiled.start),
+                    end=float(compiled.end),
+                    asp=compiled.asp,
+                    origin=feedback.src,
+                )
+            )
             reason = f"added {constraint_id}: {describe(entry.id, validated.values)} during [{compiled.start}, {compiled.end})"
             if removed:
                 reason += f"; withdrew {', '.join(removed)}"
@@ -141,8 +158,10 @@ class ActiveSet:
     @staticmethod
     def _replaced_by(cancels: tuple[Cancels, ...], values: dict[str, int | str], constraint: Constraint) -> bool:
         """True when an entry's ``cancels`` rules cover this active constraint (same kind, same values)."""
-        return any(c.kind == constraint.kind and all(constraint.params.get(name) == values.get(name) for name in c.same)
-                   for c in cancels)
+        return any(
+            c.kind == constraint.kind and all(constraint.params.get(name) == values.get(name) for name in c.same)
+            for c in cancels
+        )
 
     # ------------------------------------------------------------------ expiry
 
@@ -163,11 +182,25 @@ class ActiveSet:
 
     # ------------------------------------------------------------------ answers
 
-    def _record(self, feedback: Feedback, digest: str, accepted: bool, reason: str, *,
-                constraint_id: str = "", version: int | None = None) -> AckRecord:
-        return AckRecord(src=feedback.src, seq=feedback.seq, fingerprint=digest, accepted=accepted,
-                         reason=reason[:_MAX_REASON], constraint_id=constraint_id,
-                         constraints_version=self.version if version is None else version)
+    def _record(
+        self,
+        feedback: Feedback,
+        digest: str,
+        accepted: bool,
+        reason: str,
+        *,
+        constraint_id: str = "",
+        version: int | None = None,
+    ) -> AckRecord:
+        return AckRecord(
+            src=feedback.src,
+            seq=feedback.seq,
+            fingerprint=digest,
+            accepted=accepted,
+            reason=reason[:_MAX_REASON],
+            constraint_id=constraint_id,
+            constraints_version=self.version if version is None else version,
+        )
 
     def _remember(self, key: tuple[str, int], record: AckRecord) -> None:
         self._acks.pop(key, None)
@@ -177,5 +210,11 @@ class ActiveSet:
 
     @staticmethod
     def _ack_message(record: AckRecord) -> FeedbackAck:
-        return FeedbackAck(to=record.src, feedback_seq=record.seq, accepted=record.accepted, reason=record.reason,
-                           constraint_id=record.constraint_id, constraints_version=record.constraints_version)
+        return FeedbackAck(
+            to=record.src,
+            feedback_seq=record.seq,
+            accepted=record.accepted,
+            reason=record.reason,
+            constraint_id=record.constraint_id,
+            constraints_version=record.constraints_version,
+        )

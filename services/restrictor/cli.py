@@ -34,8 +34,11 @@ def _load_site(path: str | None) -> Any:
 
 
 def _add_library_argument(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--library", metavar="FILE",
-                        help="constraint library (TOML) to use instead of the packaged one, e.g. a site-specific library")
+    parser.add_argument(
+        "--library",
+        metavar="FILE",
+        help="constraint library (TOML) to use instead of the packaged one, e.g. a site-specific library",
+    )
 
 
 def _config_error(exc: Exception) -> int:
@@ -142,13 +145,17 @@ def _feedback_send(args: argparse.Namespace) -> int:
         return _config_error(exc)
     entry = library.get(kind)
     if entry is None:
-        return _config_error(ValueError(f"unknown constraint kind {kind!r}; the library has: {', '.join(library.entries)}"))
+        return _config_error(
+            ValueError(f"unknown constraint kind {kind!r}; the library has: {', '.join(library.entries)}")
+        )
     params: dict[str, Any] = {}
     for name, value in pairs:
         param = entry.param(name.replace("-", "_"))
         if param is None:
-            parser.error(f"--{name} is neither an option of this command nor a parameter of {kind} "
-                         f"(it takes: {', '.join('--' + n for n in entry.param_names) or 'nothing'})")
+            parser.error(
+                f"--{name} is neither an option of this command nor a parameter of {kind} "
+                f"(it takes: {', '.join('--' + n for n in entry.param_names) or 'nothing'})"
+            )
         if value is None:
             parser.error(f"--{name} needs a value")
         params[param.name] = _typed(param.type, value)
@@ -244,8 +251,18 @@ def _constraints_compile(args: argparse.Namespace) -> int:
         return EXIT_REFUSED
     if isinstance(result, Compiled):
         if args.json:
-            print(json.dumps({"accepted": True, "kind": result.kind, "params": result.values,
-                              "start": result.start, "end": result.end, "asp": result.asp}))
+            print(
+                json.dumps(
+                    {
+                        "accepted": True,
+                        "kind": result.kind,
+                        "params": result.values,
+                        "start": result.start,
+                        "end": result.end,
+                        "asp": result.asp,
+                    }
+                )
+            )
         else:
             sys.stdout.write(result.asp)
         return 0
@@ -280,7 +297,9 @@ def _constraints_library(args: argparse.Namespace) -> int:
             print(f"  --{param['name']} ({param['type']}): {values}  {param['label']}")
         window = entry["window"]
         if window:
-            print(f"  window: {'--' + window['param'] + ' minutes' if 'param' in window else str(window['minutes']) + ' minutes'} from now")
+            print(
+                f"  window: {'--' + window['param'] + ' minutes' if 'param' in window else str(window['minutes']) + ' minutes'} from now"
+            )
     return 0
 
 
@@ -289,40 +308,57 @@ def _constraints_library(args: argparse.Namespace) -> int:
 
 def register(sub: argparse._SubParsersAction) -> None:
     run = sub.add_parser(
-        "restrictor", help="run the restrictor: feedback -> validated ASP constraints, the active set",
+        "restrictor",
+        help="run the restrictor: feedback -> validated ASP constraints, the active set",
         description="Turns feedback chosen from the constraint library into ASP constraints, keeps the active "
-                    "ConstraintSet (versioned, expiring on the site clock, persisted in --state-dir) and serves it.",
+        "ConstraintSet (versioned, expiring on the site clock, persisted in --state-dir) and serves it.",
     )
     add_common_arguments(run)
     _add_library_argument(run)
-    run.add_argument("--state-dir", metavar="DIR",
-                     help="where the active set is persisted (default $XDG_STATE_HOME/arroch/<namespace>, "
-                          "i.e. ~/.local/state/arroch/<namespace>)")
-    run.add_argument("--max-active", type=int, default=200, metavar="N", help="most active constraints at once (default 200)")
-    run.add_argument("--fresh", action="store_true",
-                     help="start with an empty set, forgetting the persisted one (e.g. a new sim mission, whose clock "
-                          "starts again at 0); the version goes on")
+    run.add_argument(
+        "--state-dir",
+        metavar="DIR",
+        help="where the active set is persisted (default $XDG_STATE_HOME/arroch/<namespace>, "
+        "i.e. ~/.local/state/arroch/<namespace>)",
+    )
+    run.add_argument(
+        "--max-active", type=int, default=200, metavar="N", help="most active constraints at once (default 200)"
+    )
+    run.add_argument(
+        "--fresh",
+        action="store_true",
+        help="start with an empty set, forgetting the persisted one (e.g. a new sim mission, whose clock "
+        "starts again at 0); the version goes on",
+    )
     run.set_defaults(func=_run_restrictor)
 
     feedback = sub.add_parser("feedback", help="give feedback from the command line (as the tablet does)")
     fsub = feedback.add_subparsers(dest="feedback_command", metavar="ACTION")
     send = fsub.add_parser(
-        "send", help="send one feedback and wait for its ack", allow_abbrev=False,  # --time must not mean --timeout
+        "send",
+        help="send one feedback and wait for its ack",
+        allow_abbrev=False,  # --time must not mean --timeout
         description="Send feedback and print the restrictor's answer; retries until acknowledged or --timeout. "
-                    "Example: arroch feedback send --site FILE --kind door_unavailable --door d_storage --minutes 4. "
-                    "The parameters after --kind are typed by the library; this command's own options may come "
-                    "before or after them (an option wins over a parameter of the same name). "
-                    "Exit 1 if refused, 3 without an answer.",
+        "Example: arroch feedback send --site FILE --kind door_unavailable --door d_storage --minutes 4. "
+        "The parameters after --kind are typed by the library; this command's own options may come "
+        "before or after them (an option wins over a parameter of the same name). "
+        "Exit 1 if refused, 3 without an answer.",
     )
     add_common_arguments(send)
     _add_library_argument(send)
     send.add_argument("--timeout", type=float, default=10.0, metavar="S", help="give up after S seconds (default 10)")
-    send.add_argument("--retry", type=float, default=1.0, metavar="S", help="resend every S seconds until acknowledged (default 1)")
+    send.add_argument(
+        "--retry", type=float, default=1.0, metavar="S", help="resend every S seconds until acknowledged (default 1)"
+    )
     send.add_argument("--src", metavar="ID", help="sender id (default feedback-cli-<pid>)")
     send.add_argument("--json", action="store_true", help="print the ack as JSON")
     # Not required=True: the options found after --kind are parsed again, without it (see _feedback_send).
-    send.add_argument("--kind", nargs=argparse.REMAINDER, metavar="KIND [--PARAM VALUE ...]",
-                      help="library entry id, then its parameters (see `arroch constraints library`)")
+    send.add_argument(
+        "--kind",
+        nargs=argparse.REMAINDER,
+        metavar="KIND [--PARAM VALUE ...]",
+        help="library entry id, then its parameters (see `arroch constraints library`)",
+    )
     send.set_defaults(func=_feedback_send, parser=send)
     feedback.set_defaults(func=lambda _args: feedback.print_help() or EXIT_CONFIG)
 
@@ -330,20 +366,29 @@ def register(sub: argparse._SubParsersAction) -> None:
     csub = constraints.add_subparsers(dest="constraints_command", metavar="ACTION")
     show = csub.add_parser("show", help="query the live ConstraintSet and print it")
     add_common_arguments(show)
-    show.add_argument("--timeout", type=float, default=3.0, metavar="S", help="wait S seconds for the restrictor (default 3)")
+    show.add_argument(
+        "--timeout", type=float, default=3.0, metavar="S", help="wait S seconds for the restrictor (default 3)"
+    )
     show.add_argument("--json", action="store_true", help="print the set as JSON")
     show.set_defaults(func=_constraints_show)
 
     comp = csub.add_parser(
-        "compile", help="offline: validate feedback and print its ASP (exit 1 if refused)",
+        "compile",
+        help="offline: validate feedback and print its ASP (exit 1 if refused)",
         description="Validate feedback as the restrictor would and print the ASP it compiles to, or the refusal "
-                    "(exit 1). A cancel is only checked for shape (there is no live set offline).",
+        "(exit 1). A cancel is only checked for shape (there is no live set offline).",
     )
     add_common_arguments(comp, zenoh=False)
     _add_library_argument(comp)
-    comp.add_argument("--feedback", required=True, metavar="JSON",
-                      help='feedback as the tablet sends it, e.g. {"kind": "door_unavailable", "door": "d_storage", "minutes": 4}')
-    comp.add_argument("--now", type=float, default=0.0, metavar="T", help="site-clock time the window starts at (default 0)")
+    comp.add_argument(
+        "--feedback",
+        required=True,
+        metavar="JSON",
+        help='feedback as the tablet sends it, e.g. {"kind": "door_unavailable", "door": "d_storage", "minutes": 4}',
+    )
+    comp.add_argument(
+        "--now", type=float, default=0.0, metavar="T", help="site-clock time the window starts at (default 0)"
+    )
     comp.add_argument("--json", action="store_true", help="print the result as JSON")
     comp.set_defaults(func=_constraints_compile)
 

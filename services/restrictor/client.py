@@ -26,8 +26,9 @@ from protocol.service import Service
 log = logging.getLogger("arroch.feedback")
 
 
-def send_feedback(client: Service, kind: str, params: dict[str, Any], *, timeout: float = 10.0,
-                  retry: float = 1.0) -> FeedbackAck | None:
+def send_feedback(
+    client: Service, kind: str, params: dict[str, Any], *, timeout: float = 10.0, retry: float = 1.0
+) -> FeedbackAck | None:
     """Send one Feedback through ``client`` (an open Service); the ack, or None after ``timeout`` s."""
     feedback = client.stamp(Feedback(kind=kind, params=params))
     payload = encode(feedback)

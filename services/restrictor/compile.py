@@ -16,8 +16,9 @@ from __future__ import annotations
 import logging
 import math
 import string
+from collections.abc import Collection
 from dataclasses import dataclass
-from typing import Any, Collection
+from typing import Any
 
 from .library import ADD, INT, Library, SiteLike
 from .validate import Refusal, Validated, validate
@@ -77,8 +78,9 @@ def render(validated: Validated, now: float) -> Compiled:
     return Compiled(validated=validated, start=start, end=end, asp=asp)
 
 
-def compile_feedback(kind: Any, params: Any, library: Library, site: SiteLike, now: float,
-                     active_ids: Collection[str] | None = None) -> Validated | Compiled:
+def compile_feedback(
+    kind: Any, params: Any, library: Library, site: SiteLike, now: float, active_ids: Collection[str] | None = None
+) -> Validated | Compiled:
     """Validate then render: a :class:`Compiled` for add entries, the :class:`Validated` cancel otherwise."""
     validated = validate(kind, params, library, site, active_ids)
     if validated.entry.effect != ADD:

@@ -178,12 +178,12 @@ class _Where:
     def __init__(self, prefix: str) -> None:
         self.prefix = prefix
 
-    def entry(self, index: int, raw: Any) -> "_Where":
+    def entry(self, index: int, raw: Any) -> _Where:
         ident = raw.get("id") if isinstance(raw, dict) else None
         label = f" (id {ident!r})" if isinstance(ident, str) else ""
         return _Where(f"{self.prefix}: entry[{index}]{label}")
 
-    def sub(self, field: str) -> "_Where":
+    def sub(self, field: str) -> _Where:
         return _Where(f"{self.prefix}: {field}")
 
     def fail(self, problem: str) -> Any:
@@ -305,8 +305,15 @@ def _parse_cancels(raw: Any, where: _Where) -> tuple[Cancels, ...]:
     return tuple(out)
 
 
-def _cancel_entry(raw: dict[str, Any], where: _Where, ident: str, label: str, help_text: str,
-                  params: tuple[Param, ...], cancels: tuple[Cancels, ...]) -> Entry:
+def _cancel_entry(
+    raw: dict[str, Any],
+    where: _Where,
+    ident: str,
+    label: str,
+    help_text: str,
+    params: tuple[Param, ...],
+    cancels: tuple[Cancels, ...],
+) -> Entry:
     for key in ("asp", "window_param", "window_minutes", "cancels"):
         if key in raw:
             where.fail(f"{key}: a cancel entry has no {key}")
@@ -315,8 +322,15 @@ def _cancel_entry(raw: dict[str, Any], where: _Where, ident: str, label: str, he
     return Entry(id=ident, label=label, help=help_text, effect=CANCEL, params=params, cancels=cancels)
 
 
-def _add_entry(raw: dict[str, Any], where: _Where, ident: str, label: str, help_text: str,
-               params: tuple[Param, ...], cancels: tuple[Cancels, ...]) -> Entry:
+def _add_entry(
+    raw: dict[str, Any],
+    where: _Where,
+    ident: str,
+    label: str,
+    help_text: str,
+    params: tuple[Param, ...],
+    cancels: tuple[Cancels, ...],
+) -> Entry:
     for param in params:
         if param.type == CONSTRAINT:
             where.fail(f"params: {param.name} is of type constraint, which only a cancel entry takes")
@@ -329,13 +343,24 @@ def _add_entry(raw: dict[str, Any], where: _Where, ident: str, label: str, help_
         if param is None or param.type != INT:
             where.fail(f"window_param: {window_param!r} is not an int parameter of this entry")
         if param.min < 1 or param.max > MAX_WINDOW_MINUTES:
-            where.fail(f"window_param: {window_param} must range within [1, {MAX_WINDOW_MINUTES}] minutes, not [{param.min}, {param.max}]")
+            where.fail(
+                f"window_param: {window_param} must range within [1, {MAX_WINDOW_MINUTES}] minutes, not [{param.min}, {param.max}]"
+            )
     elif not 1 <= window_minutes <= MAX_WINDOW_MINUTES:
         where.fail(f"window_minutes: {window_minutes} is outside [1, {MAX_WINDOW_MINUTES}]")
     asp = _text(raw, "asp", where, limit=_MAX_TEMPLATE)
     _check_template(asp, params, window_param, where.sub("asp"))
-    return Entry(id=ident, label=label, help=help_text, effect=ADD, params=params, asp=asp,
-                 window_param=window_param, window_minutes=window_minutes, cancels=cancels)
+    return Entry(
+        id=ident,
+        label=label,
+        help=help_text,
+        effect=ADD,
+        params=params,
+        asp=asp,
+        window_param=window_param,
+        window_minutes=window_minutes,
+        cancels=cancels,
+    )
 
 
 def _check_template(asp: str, params: tuple[Param, ...], window_param: str | None, where: _Where) -> None:
@@ -428,6 +453,15 @@ def library_for_site(site: SiteLike, library: Library | None = None) -> list[dic
             window = {"minutes": entry.window_minutes}
         else:
             window = None
-        out.append({"id": entry.id, "label": entry.label, "help": entry.help, "effect": entry.effect,
-                    "window": window, "usable": usable, "params": params})
+        out.append(
+            {
+                "id": entry.id,
+                "label": entry.label,
+                "help": entry.help,
+                "effect": entry.effect,
+                "window": window,
+                "usable": usable,
+                "params": params,
+            }
+        )
     return out

@@ -83,8 +83,12 @@ class RestrictorService(Service):
         self._queries: queue.Queue[zenoh.Query] = queue.Queue(maxsize=MAX_PENDING_QUERIES)
         # Feedback waiting for the site clock, in arrival order: (arrival, feedback, its query if any)
         self._held: collections.deque[tuple[float, Feedback, zenoh.Query | None]] = collections.deque()
-        self.log.info("state %s: %d active constraint(s), version %d", self.store.where,
-                      len(self.active.constraints), self.active.version)
+        self.log.info(
+            "state %s: %d active constraint(s), version %d",
+            self.store.where,
+            len(self.active.constraints),
+            self.active.version,
+        )
 
     def setup(self) -> None:
         self.subscribe(self.keys.feedback(), Feedback, self._on_feedback)
@@ -218,7 +222,9 @@ class RestrictorService(Service):
             self.log.info("duplicate feedback %s: answered again", sender)
         elif outcome.ack.accepted:
             self.count("feedback_accepted")
-            self.log.info("feedback %s accepted: %s (version %d)", sender, outcome.ack.reason, outcome.ack.constraints_version)
+            self.log.info(
+                "feedback %s accepted: %s (version %d)", sender, outcome.ack.reason, outcome.ack.constraints_version
+            )
         else:
             self.count("feedback_refused")
             self.log.info("feedback %s refused: %s", sender, outcome.ack.reason)

@@ -121,14 +121,20 @@ class StateStore:
         meta = dict(self._db.execute("SELECT key, value FROM meta").fetchall())
         if not meta:
             with self._transaction():
-                self._db.executemany("INSERT INTO meta (key, value) VALUES (?, ?)",
-                                     [("schema", str(SCHEMA)), ("site", site_name), ("version", "0"), ("next_number", "1")])
+                self._db.executemany(
+                    "INSERT INTO meta (key, value) VALUES (?, ?)",
+                    [("schema", str(SCHEMA)), ("site", site_name), ("version", "0"), ("next_number", "1")],
+                )
             return
         if meta.get("schema") != str(SCHEMA):
-            raise StoreError(f"state database {self.where} has schema {meta.get('schema')!r}, this restrictor reads {SCHEMA}")
+            raise StoreError(
+                f"state database {self.where} has schema {meta.get('schema')!r}, this restrictor reads {SCHEMA}"
+            )
         if meta.get("site") != site_name:
-            raise StoreError(f"state database {self.where} belongs to site {meta.get('site')!r}, not {site_name!r}; "
-                             "use another --state-dir")
+            raise StoreError(
+                f"state database {self.where} belongs to site {meta.get('site')!r}, not {site_name!r}; "
+                "use another --state-dir"
+            )
 
     def _transaction(self) -> Any:
         return _Transaction(self._db)
@@ -149,7 +155,9 @@ class StateStore:
                 constraint = record_from_wire(Constraint, json.loads(body))
                 check_program(constraint.asp)
             except (ValueError, ProtocolError, UnsafeProgram) as exc:
-                raise StoreError(f"state database {self.where}: constraints row {ord_} is not a valid constraint: {exc}") from None
+                raise StoreError(
+                    f"state database {self.where}: constraints row {ord_} is not a valid constraint: {exc}"
+                ) from None
             state.constraints.append(constraint)
         for (body,) in ack_rows:
             try:
@@ -160,17 +168,28 @@ class StateStore:
 
     # ------------------------------------------------------------------ writing
 
-    def commit(self, *, version: int, next_number: int, add: list[Constraint] = (), remove: list[str] = (),
-               ack: AckRecord | None = None) -> None:
+    def commit(
+        self,
+        *,
+        version: int,
+        next_number: int,
+        add: list[Constraint] = (),
+        remove: list[str] = (),
+        ack: AckRecord | None = None,
+    ) -> None:
         """Apply one change atomically. Raises ``sqlite3.Error`` (nothing written) on failure."""
         with self._transaction():
-            self._db.executemany("UPDATE meta SET value = ? WHERE key = ?",
-                                 [(str(version), "version"), (str(next_number), "next_number")])
+            self._db.executemany(
+                "UPDATE meta SET value = ? WHERE key = ?",
+                [(str(version), "version"), (str(next_number), "next_number")],
+            )
             if remove:
                 self._db.executemany("DELETE FROM constraints WHERE id = ?", [(cid,) for cid in remove])
             for constraint in add:
-                self._db.execute("INSERT INTO constraints (id, body) VALUES (?, ?)",
-                                 (constraint.id, json.dumps(record_to_wire(constraint))))
+                self._db.execute(
+                    "INSERT INTO constraints (id, body) VALUES (?, ?)",
+                    (constraint.id, json.dumps(record_to_wire(constraint))),
+                )
             if ack is not None:
                 self._insert_ack(ack)
 
@@ -190,8 +209,9 @@ class StateStore:
             self._insert_ack(ack)
 
     def _insert_ack(self, ack: AckRecord) -> None:
-        self._db.execute("INSERT OR REPLACE INTO acks (src, seq, body) VALUES (?, ?, ?)",
-                         (ack.src, ack.seq, json.dumps(asdict(ack))))
+        self._db.execute(
+            "INSERT OR REPLACE INTO acks (src, seq, body) VALUES (?, ?, ?)", (ack.src, ack.seq, json.dumps(asdict(ack)))
+        )
         self._db.execute("DELETE FROM acks WHERE ord <= (SELECT MAX(ord) FROM acks) - ?", (self.max_acks,))
 
     def close(self) -> None:

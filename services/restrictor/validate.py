@@ -10,9 +10,9 @@ and show.
 from __future__ import annotations
 
 import re
-from collections.abc import Collection
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any
 
 from .library import CONSTRAINT, DOOR, INT, OPENING, ROOM, Entry, Library, Param, SiteLike, site_choices
 from .vocabulary import is_asp_constant
@@ -50,8 +50,9 @@ def _listing(names: Collection[str]) -> str:
     return shown + (f", ... ({len(names)} in all)" if len(names) > _MAX_LISTED else "") if names else "none"
 
 
-def validate(kind: Any, params: Any, library: Library, site: SiteLike,
-             active_ids: Collection[str] | None = None) -> Validated:
+def validate(
+    kind: Any, params: Any, library: Library, site: SiteLike, active_ids: Collection[str] | None = None
+) -> Validated:
     """Check a choice; ``active_ids`` None means "no live set" (offline), so a cancel is only shape-checked."""
     if not isinstance(kind, str):
         raise Refusal(f"kind must name a library entry, got {type(kind).__name__}")
@@ -72,7 +73,9 @@ def validate(kind: Any, params: Any, library: Library, site: SiteLike,
     return Validated(entry=entry, values=values)
 
 
-def _check_value(entry: Entry, param: Param, value: Any, site: SiteLike, active_ids: Collection[str] | None) -> int | str:
+def _check_value(
+    entry: Entry, param: Param, value: Any, site: SiteLike, active_ids: Collection[str] | None
+) -> int | str:
     where = f"{entry.id}: {param.name}"  # e.g. "door_unavailable: minutes 0 is below the minimum 1"
     if param.type == INT:
         # bool is an int subclass in Python, and 4.0 is not an integer choice: both are refused.
@@ -102,10 +105,14 @@ def _check_site_symbol(entry_id: str, param: Param, value: str, site: SiteLike) 
         return value
     # Not a valid choice: say why as precisely as the site allows.
     if param.type == DOOR and value in site.doors and not site.doors[value].human_operated and param.human_operated:
-        raise Refusal(f"{entry_id}: door {value} is not human-operated (robots open it themselves); choices: {_listing(choices)}")
+        raise Refusal(
+            f"{entry_id}: door {value} is not human-operated (robots open it themselves); choices: {_listing(choices)}"
+        )
     known = {DOOR: site.doors, ROOM: site.rooms, OPENING: site.openings}[param.type]
     if value in known and not is_asp_constant(value):
-        raise Refusal(f"{entry_id}: {param.type} {quote(value)} is not an ASP constant, so it cannot be used in a constraint")
+        raise Refusal(
+            f"{entry_id}: {param.type} {quote(value)} is not an ASP constant, so it cannot be used in a constraint"
+        )
     raise Refusal(f"{entry_id}: site {site.name} has no {param.type} {quote(value)}; choices: {_listing(choices)}")
 
 

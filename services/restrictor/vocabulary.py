@@ -81,7 +81,9 @@ def check_program(text: str) -> set[tuple[str, int]]:
                 raise UnsafeProgram("#program sections are not allowed")
             continue
         if kind not in _STATEMENTS:
-            raise UnsafeProgram(f"only rules and weak constraints are allowed, found {kind.name}: {str(statement)[:80]}")
+            raise UnsafeProgram(
+                f"only rules and weak constraints are allowed, found {kind.name}: {str(statement)[:80]}"
+            )
         _collect_atoms(statement, used)
     unknown = sorted(sig for sig in used if sig not in VOCABULARY)
     if unknown:

@@ -26,10 +26,14 @@ def register(subparsers: Any) -> None:
         ),
     )
     add_common_arguments(parser)
-    parser.add_argument("--ros2", action="store_true", required=True, help="drive the robot through ROS 2 (the only link for now)")
+    parser.add_argument(
+        "--ros2", action="store_true", required=True, help="drive the robot through ROS 2 (the only link for now)"
+    )
     parser.add_argument("--robot", required=True, metavar="ID", help="the robot's id in the site file")
     add_ros2_link_arguments(parser)
-    parser.add_argument("--no-planner-hold", action="store_true", help="keep executing the current command when the planner goes away")
+    parser.add_argument(
+        "--no-planner-hold", action="store_true", help="keep executing the current command when the planner goes away"
+    )
     parser.set_defaults(func=_run)
 
 
@@ -43,7 +47,15 @@ def _run(args: argparse.Namespace) -> int:
 
         site = load_site(args.site)
         config = ros2_config_from(args)
-        return RobotService(site, args.robot, config.link(args.robot), config.naming(args.robot), options_from(args), namespace=args.namespace,
-                            clock=make_clock(args.clock), options=RobotOptions(hold_without_planner=not args.no_planner_hold))
+        return RobotService(
+            site,
+            args.robot,
+            config.link(args.robot),
+            config.naming(args.robot),
+            options_from(args),
+            namespace=args.namespace,
+            clock=make_clock(args.clock),
+            options=RobotOptions(hold_without_planner=not args.no_planner_hold),
+        )
 
     return run_service(build)

@@ -15,8 +15,8 @@ shutting down).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import Callable
 
 from protocol.execution import REACH, START_TOLERANCE, command_problem, dwell_problem
 from protocol.messages import RobotCommand, RobotStatus
@@ -63,8 +63,16 @@ class Driver:
             return "stale"
         self.command, self.last_action_id = cmd, cmd.action_id
         self._follower, self._crossings = None, []
-        self._set(state="moving", plan_id=cmd.plan_id, action_id=cmd.action_id, action=cmd.action, args=list(cmd.args),
-                  waiting_door="", detail="", progress=0.0)
+        self._set(
+            state="moving",
+            plan_id=cmd.plan_id,
+            action_id=cmd.action_id,
+            action=cmd.action,
+            args=list(cmd.args),
+            waiting_door="",
+            detail="",
+            progress=0.0,
+        )
         self.changed = True  # a new action id even if the state stays "moving"
         if cmd.action == "stop":
             self.phase = "idle"
@@ -104,7 +112,9 @@ class Driver:
 
     # ------------------------------------------------------------------ control
 
-    def control(self, pose: tuple[float, float, float], now: float, door_open: Callable[[str], bool]) -> tuple[float, float]:
+    def control(
+        self, pose: tuple[float, float, float], now: float, door_open: Callable[[str], bool]
+    ) -> tuple[float, float]:
         """The velocity (v, omega) to command now, the robot being at ``pose`` (map frame)."""
         if self.phase == "drive":
             return self._drive(pose, now, door_open)
@@ -114,7 +124,9 @@ class Driver:
             self._dwell(now)
         return 0.0, 0.0
 
-    def _drive(self, pose: tuple[float, float, float], now: float, door_open: Callable[[str], bool]) -> tuple[float, float]:
+    def _drive(
+        self, pose: tuple[float, float, float], now: float, door_open: Callable[[str], bool]
+    ) -> tuple[float, float]:
         follower = self._follower
         if follower is None:
             self._arrived(pose, now, door_open)
@@ -149,7 +161,9 @@ class Driver:
             self._wait_open(door_open)
         else:
             # An object waits where the site file puts it until its robot loads it.
-            problem = dwell_problem(self.site, pose[0], pose[1], cmd, self.site.objects[cmd.args[0]].position, self.config.reach)
+            problem = dwell_problem(
+                self.site, pose[0], pose[1], cmd, self.site.objects[cmd.args[0]].position, self.config.reach
+            )
             if problem:
                 self.refuse(problem)
                 return
@@ -198,5 +212,12 @@ class Driver:
     def status(self, world_version: int) -> RobotStatus:
         """A copy of the status to report, with the world version the robot last heard of."""
         s = self.s
-        return replace(s, args=list(s.args), carrying=list(s.carrying), delivered=list(s.delivered), detail=s.detail[:512],
-                       progress=max(0.0, min(1.0, s.progress)), world_version=world_version)
+        return replace(
+            s,
+            args=list(s.args),
+            carrying=list(s.carrying),
+            delivered=list(s.delivered),
+            detail=s.detail[:512],
+            progress=max(0.0, min(1.0, s.progress)),
+            world_version=world_version,
+        )

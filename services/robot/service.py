@@ -49,11 +49,23 @@ class RobotOptions:
 
 
 class RobotService(Service):
-    def __init__(self, site: Site, robot: str, link: RobotLink, naming: TopicNaming, zenoh_options: ZenohOptions, *,
-                 namespace: str | None = None, clock: Any = None, options: RobotOptions = RobotOptions()) -> None:
+    def __init__(
+        self,
+        site: Site,
+        robot: str,
+        link: RobotLink,
+        naming: TopicNaming,
+        zenoh_options: ZenohOptions,
+        *,
+        namespace: str | None = None,
+        clock: Any = None,
+        options: RobotOptions = RobotOptions(),
+    ) -> None:
         if robot not in site.robots:
             raise ValueError(f"robot {robot!r} is not on site {site.name!r} (robots: {', '.join(sorted(site.robots))})")
-        super().__init__("robot", namespace or site.name, zenoh_options, instance=f"robot-{robot}-{os.getpid()}", clock=clock)
+        super().__init__(
+            "robot", namespace or site.name, zenoh_options, instance=f"robot-{robot}-{os.getpid()}", clock=clock
+        )
         self.site = site
         self.robot = robot
         self.link = link
@@ -61,11 +73,21 @@ class RobotService(Service):
         self.options = options
         p = site.params
         speed = min(link.max_speed, p.robot_speed) if link.max_speed else p.robot_speed
-        self.driver = Driver(robot, site, DriverConfig(controller=ControllerConfig(speed=speed, max_turn_rate=link.max_turn_rate),
-                                                       radius=p.robot_radius, load_time=p.load_time, capacity=p.robot_capacity,
-                                                       control_period=link.control_period))
+        self.driver = Driver(
+            robot,
+            site,
+            DriverConfig(
+                controller=ControllerConfig(speed=speed, max_turn_rate=link.max_turn_rate),
+                radius=p.robot_radius,
+                load_time=p.load_time,
+                capacity=p.robot_capacity,
+                control_period=link.control_period,
+            ),
+        )
         start = site.robots[robot].start
-        self.map_to_odom: tuple[float, float, float] | None = None if link.tf_topic else (link.map_to_odom or tuple(start))
+        self.map_to_odom: tuple[float, float, float] | None = (
+            None if link.tf_topic else (link.map_to_odom or tuple(start))
+        )
         self.pose: tuple[float, float, float] | None = None
         self._velocity = (0.0, 0.0)
         self._pose_at = -math.inf  # site time the last pose arrived
@@ -91,11 +113,22 @@ class RobotService(Service):
         self.subscribe(keys.robot_command(self.robot), RobotCommand, self._on_command, ordered=True)
         self.advertise(keys.robot_pose(self.robot))
         self.advertise(keys.robot_status(self.robot))
-        self.hold(self.session.liveliness().declare_subscriber(keys.liveliness("planner"), self._on_planner_token, history=True))
+        self.hold(
+            self.session.liveliness().declare_subscriber(
+                keys.liveliness("planner"), self._on_planner_token, history=True
+            )
+        )
         self.every(WATCHDOG, self._watchdog)
         self.every(HEARTBEAT, lambda: self._publish_status(force=True), first=0.0)
-        self.log.info("robot %s: %s on %s (%s, domain %d), pose from %s", self.robot, link.cmd_vel, link.namespace,
-                      self.naming.key_format, self.naming.domain, pose_key)
+        self.log.info(
+            "robot %s: %s on %s (%s, domain %d), pose from %s",
+            self.robot,
+            link.cmd_vel,
+            link.namespace,
+            self.naming.key_format,
+            self.naming.domain,
+            pose_key,
+        )
 
     def on_stop_signal(self) -> None:
         self.log.info("received %s: stopping the base", self.signals.name)
@@ -131,7 +164,10 @@ class RobotService(Service):
 
     def _on_tf(self, msg: Any, key: str) -> None:
         for tr in msg.transforms:
-            if tr.header.frame_id.strip("/") == self.link.map_frame and tr.child_frame_id.strip("/") == self.link.odom_frame:
+            if (
+                tr.header.frame_id.strip("/") == self.link.map_frame
+                and tr.child_frame_id.strip("/") == self.link.odom_frame
+            ):
                 t = tr.transform
                 transform = (t.translation.x, t.translation.y, ros.yaw_of(t.rotation))
                 if all(math.isfinite(value) for value in transform):
@@ -150,7 +186,9 @@ class RobotService(Service):
         result = self.driver.assign(cmd, self.pose, self.clock.now())
         self.count(f"commands_{result}")
         if result == "refused":
-            self.log.warning("command %d (%s %s) refused: %s", cmd.action_id, cmd.action, cmd.args, self.driver.s.detail)
+            self.log.warning(
+                "command %d (%s %s) refused: %s", cmd.action_id, cmd.action, cmd.args, self.driver.s.detail
+            )
             self._send(0.0, 0.0)
         self._publish_status()
 
@@ -214,7 +252,10 @@ class RobotService(Service):
             return
         self._last_pose_pub = (now, wall)
         x, y, theta = self.pose
-        self.publish(self.keys.robot_pose(self.robot), RobotPose(robot=self.robot, x=x, y=y, theta=theta, vel=velocity[0], omega=velocity[1]))
+        self.publish(
+            self.keys.robot_pose(self.robot),
+            RobotPose(robot=self.robot, x=x, y=y, theta=theta, vel=velocity[0], omega=velocity[1]),
+        )
 
     def _publish_status(self, force: bool = False) -> None:
         if not (force or self.driver.changed):

@@ -39,8 +39,17 @@ FEEDBACK_TIMEOUT = 5.0  # s to wait for the restrictor's ack
 
 
 class BridgeService(Service):
-    def __init__(self, site: Site, naming: TopicNaming, zenoh_options: ZenohOptions, *, namespace: str | None = None,
-                 ros_namespace: str = "/arroch", map_frame: str = "map", clock: Any = None) -> None:
+    def __init__(
+        self,
+        site: Site,
+        naming: TopicNaming,
+        zenoh_options: ZenohOptions,
+        *,
+        namespace: str | None = None,
+        ros_namespace: str = "/arroch",
+        map_frame: str = "map",
+        clock: Any = None,
+    ) -> None:
         super().__init__("ros2bridge", namespace or site.name, zenoh_options, clock=clock)
         self.site = site
         self.naming = naming
@@ -87,7 +96,10 @@ class BridgeService(Service):
             self.count("intents_unknown_robot")
             return
         PoseStamped = ros.t("geometry_msgs/msg/PoseStamped")
-        poses = [PoseStamped(header=ros.header(max(t, 0.0), self.map_frame), pose=ros.pose(x, y, th)) for t, x, y, th in intent.trajectory]
+        poses = [
+            PoseStamped(header=ros.header(max(t, 0.0), self.map_frame), pose=ros.pose(x, y, th))
+            for t, x, y, th in intent.trajectory
+        ]
         publisher.publish(ros.t(ros.PATH)(header=ros.header(intent.stamp, self.map_frame), poses=poses))
 
     def _on_door(self, door: DoorState, key: str) -> None:
@@ -129,7 +141,11 @@ class BridgeService(Service):
     def _on_feedback(self, msg: Any, key: str) -> None:
         try:
             request = json.loads(msg.data)
-            if not isinstance(request, dict) or not isinstance(request.get("kind"), str) or not isinstance(request.get("params", {}), dict):
+            if (
+                not isinstance(request, dict)
+                or not isinstance(request.get("kind"), str)
+                or not isinstance(request.get("params", {}), dict)
+            ):
                 raise ValueError('expected a JSON object {"kind": "...", "params": {...}}')
         except ValueError as exc:
             self.count("feedback_refused_json")
@@ -154,8 +170,15 @@ class BridgeService(Service):
             if ack is None:
                 self._ack({"request": request, "accepted": False, "reason": "no answer from the restrictor"})
             else:
-                self._ack({"request": request, "accepted": ack.accepted, "reason": ack.reason, "constraint_id": ack.constraint_id,
-                           "constraints_version": ack.constraints_version})
+                self._ack(
+                    {
+                        "request": request,
+                        "accepted": ack.accepted,
+                        "reason": ack.reason,
+                        "constraint_id": ack.constraint_id,
+                        "constraints_version": ack.constraints_version,
+                    }
+                )
 
     def _ack(self, body: dict[str, Any]) -> None:
         try:

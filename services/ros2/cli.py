@@ -23,8 +23,15 @@ def register(subparsers: Any) -> None:
     )
     add_common_arguments(bridge)
     add_ros2_link_arguments(bridge)
-    bridge.add_argument("--ros-namespace", default="/arroch", metavar="NS", help="ROS namespace of the bridge's topics (default /arroch)")
-    bridge.add_argument("--map-frame", default="map", metavar="FRAME", help="frame of everything published (default map)")
+    bridge.add_argument(
+        "--ros-namespace",
+        default="/arroch",
+        metavar="NS",
+        help="ROS namespace of the bridge's topics (default /arroch)",
+    )
+    bridge.add_argument(
+        "--map-frame", default="map", metavar="FRAME", help="frame of everything published (default map)"
+    )
     bridge.set_defaults(func=_run)
     parser.set_defaults(func=lambda args: parser.print_help() or 2)
 
@@ -41,7 +48,14 @@ def _run(args: argparse.Namespace) -> int:
         full_topic("/", args.ros_namespace.strip("/") or "arroch")  # ValueError (exit 2) for a bad namespace
         site = load_site(args.site)
         config = ros2_config_from(args)
-        return BridgeService(site, config.naming(), options_from(args), namespace=args.namespace, ros_namespace=args.ros_namespace,
-                             map_frame=args.map_frame, clock=make_clock(args.clock))
+        return BridgeService(
+            site,
+            config.naming(),
+            options_from(args),
+            namespace=args.namespace,
+            ros_namespace=args.ros_namespace,
+            map_frame=args.map_frame,
+            clock=make_clock(args.clock),
+        )
 
     return run_service(build)

@@ -42,16 +42,43 @@ def _color(r: float, g: float, b: float, a: float = 1.0) -> Any:
     return ros.t("std_msgs/msg/ColorRGBA")(r=r, g=g, b=b, a=a)
 
 
-def marker(at: float, frame: str, ns: str, mid: int, kind: int, x: float, y: float, z: float, yaw: float,
-           scale: tuple[float, float, float], color: Any, text: str = "", frame_locked: bool = False) -> Any:
+def marker(
+    at: float,
+    frame: str,
+    ns: str,
+    mid: int,
+    kind: int,
+    x: float,
+    y: float,
+    z: float,
+    yaw: float,
+    scale: tuple[float, float, float],
+    color: Any,
+    text: str = "",
+    frame_locked: bool = False,
+) -> Any:
     """One ADD marker with every field set (CDR has no optional fields)."""
     t = ros.t
     return t("visualization_msgs/msg/Marker")(
-        header=ros.header(at, frame), ns=ns, id=mid, type=kind, action=0, pose=ros.pose(x, y, yaw, z),
-        scale=ros.vector3(*scale), color=color, lifetime=t("builtin_interfaces/msg/Duration")(sec=0, nanosec=0),
-        frame_locked=frame_locked, points=[], colors=[], texture_resource="",
-        texture=t("sensor_msgs/msg/CompressedImage")(header=ros.header(0.0, ""), format="", data=np.zeros(0, dtype=np.uint8)),
-        uv_coordinates=[], text=text, mesh_resource="",
+        header=ros.header(at, frame),
+        ns=ns,
+        id=mid,
+        type=kind,
+        action=0,
+        pose=ros.pose(x, y, yaw, z),
+        scale=ros.vector3(*scale),
+        color=color,
+        lifetime=t("builtin_interfaces/msg/Duration")(sec=0, nanosec=0),
+        frame_locked=frame_locked,
+        points=[],
+        colors=[],
+        texture_resource="",
+        texture=t("sensor_msgs/msg/CompressedImage")(
+            header=ros.header(0.0, ""), format="", data=np.zeros(0, dtype=np.uint8)
+        ),
+        uv_coordinates=[],
+        text=text,
+        mesh_resource="",
         mesh_file=t("visualization_msgs/msg/MeshFile")(filename="", data=np.zeros(0, dtype=np.uint8)),
         mesh_use_embedded_materials=False,
     )
@@ -63,8 +90,21 @@ def site_markers(site: Site, state: SiteState, at: float, frame: str = "map") ->
     out = []
     for i, wall in enumerate(site.walls):
         x0, y0, x1, y1 = wall.box
-        out.append(marker(at, frame, "walls", i, cube, (x0 + x1) / 2, (y0 + y1) / 2, wall.height / 2, 0.0,
-                          (x1 - x0, y1 - y0, wall.height), _color(0.6, 0.6, 0.6, 0.6)))
+        out.append(
+            marker(
+                at,
+                frame,
+                "walls",
+                i,
+                cube,
+                (x0 + x1) / 2,
+                (y0 + y1) / 2,
+                wall.height / 2,
+                0.0,
+                (x1 - x0, y1 - y0, wall.height),
+                _color(0.6, 0.6, 0.6, 0.6),
+            )
+        )
     for i, (did, leaf) in enumerate(site.door_leaves.items()):
         is_open = state.doors_open.get(did, False)
         hx, hy = leaf.hinge
@@ -74,7 +114,9 @@ def site_markers(site: Site, state: SiteState, at: float, frame: str = "map") ->
         out.append(marker(at, frame, "doors", i, cube, cx, cy, 1.04, yaw, (leaf.length, leaf.thickness, 2.08), color))
         label = f"{did} {'open' if is_open else 'closed'}{' (human)' if site.doors[did].human_operated else ''}"
         ox, oy = site.doors[did].center
-        out.append(marker(at, frame, "door_labels", i, text, ox, oy, 2.3, 0.0, (0.0, 0.0, 0.25), _color(1, 1, 1), label))
+        out.append(
+            marker(at, frame, "door_labels", i, text, ox, oy, 2.3, 0.0, (0.0, 0.0, 0.25), _color(1, 1, 1), label)
+        )
     for lm in site.landmarks:
         x, y, z = lm.position
         out.append(marker(at, frame, "tags", lm.tag, cube, x, y, z, lm.yaw, (0.005, lm.size, lm.size), _color(0, 0, 0)))
@@ -82,15 +124,43 @@ def site_markers(site: Site, state: SiteState, at: float, frame: str = "map") ->
     radius = site.params.robot_radius
     for i, rid in enumerate(sorted(site.robots)):
         r, g, b = colors[rid]
-        out.append(marker(at, f"{rid}/base_link", "robots", i, cylinder, 0.0, 0.0, ROBOT_HEIGHT / 2, 0.0,
-                          (2 * radius, 2 * radius, ROBOT_HEIGHT), _color(r, g, b), frame_locked=True))
+        out.append(
+            marker(
+                at,
+                f"{rid}/base_link",
+                "robots",
+                i,
+                cylinder,
+                0.0,
+                0.0,
+                ROBOT_HEIGHT / 2,
+                0.0,
+                (2 * radius, 2 * radius, ROBOT_HEIGHT),
+                _color(r, g, b),
+                frame_locked=True,
+            )
+        )
     for i, (oid, spec) in enumerate(site.objects.items()):
         r, g, b = colors.get(spec.robot, (0.5, 0.5, 0.5))
         color = _color(0.7 * r, 0.7 * g, 0.7 * b, 0.4 if oid in state.delivered else 1.0)
         carrier = state.carried_by.get(oid)
         if carrier:
-            out.append(marker(at, f"{carrier}/base_link", "objects", i, cube, 0.0, 0.0, CARRIED_Z, 0.0, (0.2, 0.2, 0.2), color,
-                              frame_locked=True))
+            out.append(
+                marker(
+                    at,
+                    f"{carrier}/base_link",
+                    "objects",
+                    i,
+                    cube,
+                    0.0,
+                    0.0,
+                    CARRIED_Z,
+                    0.0,
+                    (0.2, 0.2, 0.2),
+                    color,
+                    frame_locked=True,
+                )
+            )
         else:
             x, y = state.object_at.get(oid) or spec.position
             out.append(marker(at, frame, "objects", i, cube, x, y, FLOOR_Z, 0.0, (0.2, 0.2, 0.2), color))

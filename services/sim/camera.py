@@ -21,15 +21,15 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Sequence
 
 import cv2
 import numpy as np
 
-from protocol.messages import CameraFrame, CameraTruth
 from protocol.frames import camera_from_yaw_pitch, gravity_in_camera, quat_from_matrix
+from protocol.messages import CameraFrame, CameraTruth
 
 #: Near and far clipping planes of the rendering (m). Near is small so a tablet held close to a
 #: wall still sees it; far covers any site this project generates. Depth precision is no issue:
@@ -72,9 +72,13 @@ class CameraSpec:
             if not isinstance(side, numbers.Integral) or not MIN_SIDE <= side <= MAX_SIDE:
                 raise ValueError(f"camera {name} must be an integer within [{MIN_SIDE}, {MAX_SIDE}], got {side!r}")
         if not isinstance(self.supersample, numbers.Integral) or not 1 <= self.supersample <= MAX_SUPERSAMPLE:
-            raise ValueError(f"camera supersample must be an integer within [1, {MAX_SUPERSAMPLE}], got {self.supersample!r}")
+            raise ValueError(
+                f"camera supersample must be an integer within [1, {MAX_SUPERSAMPLE}], got {self.supersample!r}"
+            )
         if max(self.width, self.height) * self.supersample > MAX_SIDE:
-            raise ValueError(f"camera image {self.width}x{self.height} supersampled {self.supersample}x exceeds {MAX_SIDE} pixels a side")
+            raise ValueError(
+                f"camera image {self.width}x{self.height} supersampled {self.supersample}x exceeds {MAX_SIDE} pixels a side"
+            )
         # Plain Python numbers from here on (numpy scalars would leak into messages and JSON).
         object.__setattr__(self, "position", tuple(float(v) for v in self.position))
         for name in ("width", "height", "supersample"):
@@ -84,8 +88,17 @@ class CameraSpec:
 
     @classmethod
     def from_degrees(
-        cls, x: float, y: float, z: float, yaw_deg: float, pitch_deg: float, width: int = 640, height: int = 480, vfov_deg: float = 60.0, supersample: int = 1
-    ) -> "CameraSpec":
+        cls,
+        x: float,
+        y: float,
+        z: float,
+        yaw_deg: float,
+        pitch_deg: float,
+        width: int = 640,
+        height: int = 480,
+        vfov_deg: float = 60.0,
+        supersample: int = 1,
+    ) -> CameraSpec:
         """The command-line form: position, then yaw and pitch in degrees."""
         return cls((x, y, z), math.radians(yaw_deg), math.radians(pitch_deg), width, height, vfov_deg, supersample)
 
@@ -201,14 +214,27 @@ def frame_message(
     height, width = rgb.shape[:2]
     if (width, height) != (camera.width, camera.height):
         raise ValueError(f"image is {width}x{height} but the camera is {camera.width}x{camera.height}")
-    gravity = [] if gravity_noise_deg is None else [float(v) for v in gravity_in_camera(camera.R_world_camera, gravity_noise_deg, rng)]
-    return CameraFrame(camera=camera_id, jpeg=encode_jpeg(rgb, quality), width=width, height=height, intrinsics=camera.intrinsics[:4],
-                       distortion=[0.0] * 5, gravity=gravity)
+    gravity = (
+        []
+        if gravity_noise_deg is None
+        else [float(v) for v in gravity_in_camera(camera.R_world_camera, gravity_noise_deg, rng)]
+    )
+    return CameraFrame(
+        camera=camera_id,
+        jpeg=encode_jpeg(rgb, quality),
+        width=width,
+        height=height,
+        intrinsics=camera.intrinsics[:4],
+        distortion=[0.0] * 5,
+        gravity=gravity,
+    )
 
 
 def truth_message(camera_id: str, camera: CameraSpec, frame_seq: int) -> CameraTruth:
     """The CameraTruth going with the frame published with sequence number ``frame_seq``."""
-    return CameraTruth(camera=camera_id, frame_seq=frame_seq, position=list(camera.position), quaternion=camera.quaternion)
+    return CameraTruth(
+        camera=camera_id, frame_seq=frame_seq, position=list(camera.position), quaternion=camera.quaternion
+    )
 
 
 def truth_json(camera: CameraSpec) -> dict[str, list[float]]:

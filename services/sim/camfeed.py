@@ -60,22 +60,51 @@ class CameraOptions:
 
 
 def add_camera_arguments(group: Any) -> None:
-    group.add_argument("--camera", metavar="SPEC", help="'tablet' (follows the human) or X,Y,Z,YAW,PITCH (fixed; degrees)")
-    group.add_argument("--camera-id", default="tablet", metavar="ID", help="camera id in camera/<id>/frame|truth (default tablet)")
-    group.add_argument("--camera-rate", type=float, default=2.0, metavar="HZ", help="frames per wall second (default 2)")
+    group.add_argument(
+        "--camera", metavar="SPEC", help="'tablet' (follows the human) or X,Y,Z,YAW,PITCH (fixed; degrees)"
+    )
+    group.add_argument(
+        "--camera-id", default="tablet", metavar="ID", help="camera id in camera/<id>/frame|truth (default tablet)"
+    )
+    group.add_argument(
+        "--camera-rate", type=float, default=2.0, metavar="HZ", help="frames per wall second (default 2)"
+    )
     group.add_argument("--camera-size", default="640x480", metavar="WxH", help="image size (default 640x480)")
-    group.add_argument("--camera-fov", type=float, default=60.0, metavar="DEG", help="vertical field of view (default 60)")
-    group.add_argument("--camera-height", type=float, default=1.3, metavar="M", help="tablet height above the floor (default 1.3)")
-    group.add_argument("--camera-pitch", type=float, default=0.0, metavar="DEG", help="tablet pitch, > 0 looks up (default 0)")
-    group.add_argument("--camera-hold", type=float, default=30.0, metavar="S",
-                       help="lockstep: a frame every S site seconds, time held until the AR client's overlay of it comes back "
-                            "(default 30; 0: frames at --camera-rate per wall second instead)")
-    group.add_argument("--camera-hold-timeout", type=float, default=1.5, metavar="S",
-                       help="lockstep: wall seconds a held frame waits for its overlay before time goes on (default 1.5)")
-    group.add_argument("--camera-gravity-noise", type=float, default=1.0, metavar="DEG",
-                       help="each frame carries gravity in the camera frame as an IMU measures it: the truth turned by "
-                            "N(0, DEG) about each axis (default 1)")
-    group.add_argument("--camera-no-gravity", action="store_true", help="send frames without gravity (a camera without an IMU)")
+    group.add_argument(
+        "--camera-fov", type=float, default=60.0, metavar="DEG", help="vertical field of view (default 60)"
+    )
+    group.add_argument(
+        "--camera-height", type=float, default=1.3, metavar="M", help="tablet height above the floor (default 1.3)"
+    )
+    group.add_argument(
+        "--camera-pitch", type=float, default=0.0, metavar="DEG", help="tablet pitch, > 0 looks up (default 0)"
+    )
+    group.add_argument(
+        "--camera-hold",
+        type=float,
+        default=30.0,
+        metavar="S",
+        help="lockstep: a frame every S site seconds, time held until the AR client's overlay of it comes back "
+        "(default 30; 0: frames at --camera-rate per wall second instead)",
+    )
+    group.add_argument(
+        "--camera-hold-timeout",
+        type=float,
+        default=1.5,
+        metavar="S",
+        help="lockstep: wall seconds a held frame waits for its overlay before time goes on (default 1.5)",
+    )
+    group.add_argument(
+        "--camera-gravity-noise",
+        type=float,
+        default=1.0,
+        metavar="DEG",
+        help="each frame carries gravity in the camera frame as an IMU measures it: the truth turned by "
+        "N(0, DEG) about each axis (default 1)",
+    )
+    group.add_argument(
+        "--camera-no-gravity", action="store_true", help="send frames without gravity (a camera without an IMU)"
+    )
 
 
 def camera_options_from(args: argparse.Namespace) -> CameraOptions | None:
@@ -100,10 +129,18 @@ def camera_options_from(args: argparse.Namespace) -> CameraOptions | None:
     noise = getattr(args, "camera_gravity_noise", 1.0)
     if not (math.isfinite(noise) and 0.0 <= noise <= 90.0):
         raise ValueError(f"--camera-gravity-noise must be within [0, 90] degrees, got {noise}")
-    common = dict(id=args.camera_id, rate=args.camera_rate, width=width, height=height, fov=args.camera_fov,
-                  tablet_height=args.camera_height, tablet_pitch=math.radians(args.camera_pitch),
-                  hold=args.camera_hold, hold_timeout=args.camera_hold_timeout,
-                  gravity_noise=None if getattr(args, "camera_no_gravity", False) else getattr(args, "camera_gravity_noise", 1.0))
+    common = dict(
+        id=args.camera_id,
+        rate=args.camera_rate,
+        width=width,
+        height=height,
+        fov=args.camera_fov,
+        tablet_height=args.camera_height,
+        tablet_pitch=math.radians(args.camera_pitch),
+        hold=args.camera_hold,
+        hold_timeout=args.camera_hold_timeout,
+        gravity_noise=None if getattr(args, "camera_no_gravity", False) else getattr(args, "camera_gravity_noise", 1.0),
+    )
     if spec == "tablet":
         options = CameraOptions(follow_human=True, **common)
     else:
@@ -211,8 +248,10 @@ class FrameHold:
         return True
 
     def summary(self) -> str:
-        return (f"{self.held} held frames ({self.released} released by their overlay, {self.timed_out} timed out), "
-                f"{self.render_wall:.1f} s wall rendering them, {self.wait_wall:.1f} s waiting for overlays")
+        return (
+            f"{self.held} held frames ({self.released} released by their overlay, {self.timed_out} timed out), "
+            f"{self.render_wall:.1f} s wall rendering them, {self.wait_wall:.1f} s waiting for overlays"
+        )
 
     def blocker(self) -> str:
         if not self.active:
@@ -257,7 +296,9 @@ class CameraFeed:
         self._next = wall + 1.0 / self.options.rate
         self.mirror.sync()
         spec = camera_spec(self.options, self.engine.human_pose())
-        frame = frame_message(self.options.id, self.world.render(spec), spec, gravity_noise_deg=self.options.gravity_noise, rng=self._rng)
+        frame = frame_message(
+            self.options.id, self.world.render(spec), spec, gravity_noise_deg=self.options.gravity_noise, rng=self._rng
+        )
         service.publish(service.keys.camera_frame(self.options.id), frame)
         service.publish(service.keys.camera_truth(self.options.id), truth_message(self.options.id, spec, frame.seq))
         self.frames += 1

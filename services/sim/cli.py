@@ -34,38 +34,86 @@ def register(subparsers: Any) -> None:
         conflict_handler="resolve",  # our --mode (clock mode) replaces the Zenoh --mode
     )
     add_common_arguments(parser)
-    parser.add_argument("--zenoh-mode", choices=ZENOH_MODES, help="Zenoh session mode (default client; env ARROCH_ZENOH_MODE)")
+    parser.add_argument(
+        "--zenoh-mode", choices=ZENOH_MODES, help="Zenoh session mode (default client; env ARROCH_ZENOH_MODE)"
+    )
     run = parser.add_argument_group("simulation")
-    run.add_argument("--method", choices=METHODS, default="arroch", help="arroch (default), no-feedback or no-comm (paper §V-A)")
-    run.add_argument("--mode", choices=MODES, default=None, help="clock mode: realtime (default), rate (with --rate) or lockstep")
-    run.add_argument("--rate", type=float, metavar="K", help="run K times faster than real time (implies --mode rate); with "
-                     "--mode lockstep, at most K times faster (to watch a mission, or hurt it, as it goes)")
+    run.add_argument(
+        "--method", choices=METHODS, default="arroch", help="arroch (default), no-feedback or no-comm (paper §V-A)"
+    )
+    run.add_argument(
+        "--mode", choices=MODES, default=None, help="clock mode: realtime (default), rate (with --rate) or lockstep"
+    )
+    run.add_argument(
+        "--rate",
+        type=float,
+        metavar="K",
+        help="run K times faster than real time (implies --mode rate); with "
+        "--mode lockstep, at most K times faster (to watch a mission, or hurt it, as it goes)",
+    )
     run.add_argument("--seed", type=int, default=0, help="seed of the run's random numbers (default 0)")
     run.add_argument("--until-done", action="store_true", help="exit (code 0) once mission_done is published")
-    run.add_argument("--time-limit", type=float, metavar="S", help="end the mission unfinished after S sim seconds (default 7200; 0: never)")
+    run.add_argument(
+        "--time-limit",
+        type=float,
+        metavar="S",
+        help="end the mission unfinished after S sim seconds (default 7200; 0: never)",
+    )
     run.add_argument("--tick", type=float, metavar="S", help="sim seconds per engine step (default 0.05, i.e. 20 Hz)")
-    run.add_argument("--pose-rate", type=float, default=20.0, metavar="HZ", help="pose publication rate in sim time (default 20)")
-    run.add_argument("--lockstep-abort", type=float, default=None, metavar="S",
-                     help="lockstep: wall seconds to wait for the ack of the human's feedback before the run fails "
-                          "(exit code 3; default 120). Time stands still meanwhile, so the wait never changes the mission")
+    run.add_argument(
+        "--pose-rate", type=float, default=20.0, metavar="HZ", help="pose publication rate in sim time (default 20)"
+    )
+    run.add_argument(
+        "--lockstep-abort",
+        type=float,
+        default=None,
+        metavar="S",
+        help="lockstep: wall seconds to wait for the ack of the human's feedback before the run fails "
+        "(exit code 3; default 120). Time stands still meanwhile, so the wait never changes the mission",
+    )
     run.add_argument("--metrics-out", metavar="FILE.json", help="write the mission's metrics there when it ends")
     run.add_argument("--events-out", metavar="FILE.jsonl", help="write every event there, one JSON line each")
     real = parser.add_argument_group("real robots and ROS 2 bases (docs/ros2.md)")
-    real.add_argument("--robots", choices=("sim", "none"), default="sim", help="none: the robots are real, each driven by its own "
-                      "`arroch robot --ros2`; the simulator keeps doors, objects and the human (default sim)")
-    real.add_argument("--ros2-bases", action="store_true", help="each robot is a simulated ROS 2 mobile base: Twist on cmd_vel in, "
-                      "Odometry out; `arroch robot --ros2` drives it")
+    real.add_argument(
+        "--robots",
+        choices=("sim", "none"),
+        default="sim",
+        help="none: the robots are real, each driven by its own "
+        "`arroch robot --ros2`; the simulator keeps doors, objects and the human (default sim)",
+    )
+    real.add_argument(
+        "--ros2-bases",
+        action="store_true",
+        help="each robot is a simulated ROS 2 mobile base: Twist on cmd_vel in, "
+        "Odometry out; `arroch robot --ros2` drives it",
+    )
     from protocol.ros2.config import add_ros2_link_arguments
 
     add_ros2_link_arguments(real)
     human = parser.add_argument_group("simulated human")
-    human.add_argument("--human-config", metavar="FILE", help="TOML file with the human model's parameters ([human] table; see docs)")
-    human.add_argument("--door-probability", type=float, metavar="P", help="chance per waiting robot per decision interval that she goes to open (default 0.5)")
-    human.add_argument("--task-mean", type=float, metavar="S", help="mean length of her own task in seconds (default 600)")
-    human.add_argument("--interruption-cost", type=float, metavar="S",
-                       help="seconds of her task lost each time she leaves it during a focus interval (default 0)")
-    human.add_argument("--focus-reading", choices=FOCUS_READINGS,
-                       help="faithful (default): only a declared focus interval keeps her from doors; strict: any focus interval does")
+    human.add_argument(
+        "--human-config", metavar="FILE", help="TOML file with the human model's parameters ([human] table; see docs)"
+    )
+    human.add_argument(
+        "--door-probability",
+        type=float,
+        metavar="P",
+        help="chance per waiting robot per decision interval that she goes to open (default 0.5)",
+    )
+    human.add_argument(
+        "--task-mean", type=float, metavar="S", help="mean length of her own task in seconds (default 600)"
+    )
+    human.add_argument(
+        "--interruption-cost",
+        type=float,
+        metavar="S",
+        help="seconds of her task lost each time she leaves it during a focus interval (default 0)",
+    )
+    human.add_argument(
+        "--focus-reading",
+        choices=FOCUS_READINGS,
+        help="faithful (default): only a declared focus interval keeps her from doors; strict: any focus interval does",
+    )
     from .camfeed import add_camera_arguments
 
     add_camera_arguments(parser.add_argument_group("virtual tablet camera"))
@@ -113,9 +161,17 @@ def build_options(args: argparse.Namespace) -> Any:
         raise ValueError("--pose-rate must be > 0")
     if args.lockstep_abort is not None and not args.lockstep_abort > 0:
         raise ValueError(f"--lockstep-abort must be > 0 wall seconds (got {args.lockstep_abort:g})")
-    overrides = {"door_probability": args.door_probability, "task_mean": args.task_mean,
-                 "interruption_cost": args.interruption_cost, "focus_reading": args.focus_reading}
-    human = HumanConfig.from_toml(args.human_config, **overrides) if args.human_config else HumanConfig(**{k: v for k, v in overrides.items() if v is not None})
+    overrides = {
+        "door_probability": args.door_probability,
+        "task_mean": args.task_mean,
+        "interruption_cost": args.interruption_cost,
+        "focus_reading": args.focus_reading,
+    }
+    human = (
+        HumanConfig.from_toml(args.human_config, **overrides)
+        if args.human_config
+        else HumanConfig(**{k: v for k, v in overrides.items() if v is not None})
+    )
     return SimOptions(
         method=args.method,
         mode=mode,

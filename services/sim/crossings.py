@@ -14,8 +14,8 @@ trajectory must not make one happen either (the fault tests count them).
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import Iterable
 
 from protocol.plane import segment_distance
 
@@ -60,7 +60,14 @@ class ClosedDoorWatch:
                 key = (robot.id, door.id)
                 inside.add(key)
                 if key not in self._inside:
-                    entered.append(Crossing(robot.id, door.id, round(depth, 6), round(door.fraction, 6),
-                                            (round(robot.x, 6), round(robot.y, 6), round(robot.theta, 6))))
+                    entered.append(
+                        Crossing(
+                            robot.id,
+                            door.id,
+                            round(depth, 6),
+                            round(door.fraction, 6),
+                            (round(robot.x, 6), round(robot.y, 6), round(robot.theta, 6)),
+                        )
+                    )
         self._inside = inside
         return entered

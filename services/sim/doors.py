@@ -22,10 +22,9 @@ there, e.g. inside the human's room beside her door, sees them overlap the openi
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Iterable
-
 import math
+from collections.abc import Iterable
+from dataclasses import dataclass, field
 
 from protocol.plane import segment_distance
 from protocol.site.model import DoorLeaf, Opening
@@ -80,7 +79,13 @@ class Door:
 class Doors:
     """Every door of the site and its leaf state; stepped once per engine tick."""
 
-    def __init__(self, doors: Iterable[Opening], config: DoorConfig, robot_radius: float, leaves: dict[str, DoorLeaf] | None = None) -> None:
+    def __init__(
+        self,
+        doors: Iterable[Opening],
+        config: DoorConfig,
+        robot_radius: float,
+        leaves: dict[str, DoorLeaf] | None = None,
+    ) -> None:
         self.config = config
         self.robot_radius = robot_radius
         leaves = leaves or {}
@@ -137,7 +142,9 @@ class Doors:
                 if door.fraction >= 1.0:
                     if door.human_operated:
                         door.hold_until = now + dt + self.config.hold_time
-                    changes.append(DoorChange(door.id, True, door.opened_by, door.hold_until if door.human_operated else 0.0))
+                    changes.append(
+                        DoorChange(door.id, True, door.opened_by, door.hold_until if door.human_operated else 0.0)
+                    )
             elif door.target_open and self._closing_due(door, now + dt, robot_positions):
                 door.target_open = False
                 changes.append(DoorChange(door.id, False, door.opened_by))

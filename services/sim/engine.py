@@ -21,8 +21,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-import numpy as np
-
 from protocol.messages import RobotCommand
 from protocol.pursuit import ControllerConfig
 from protocol.site.model import Site
@@ -30,10 +28,10 @@ from protocol.site.model import Site
 from .crossings import ClosedDoorWatch
 from .doors import DoorChange, DoorConfig, Doors
 from .human import Declare, HumanConfig, HumanModel, OpenDoor, TaskDone
-from .streams import Streams
 from .metrics import MetricsRecorder
 from .objects import Objects
 from .robots import Outcome, Robot, RobotConfig, RobotExecutor
+from .streams import Streams
 
 HUMAN_DOOR_STANDOFF = 0.5  # m in front of a door where the human stands to open it
 
@@ -69,7 +67,14 @@ class SimEvent:
     data: dict[str, Any] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
-        return {"time": self.time, "kind": self.kind, "robot": self.robot, "door": self.door, "object": self.object, "data": self.data}
+        return {
+            "time": self.time,
+            "kind": self.kind,
+            "robot": self.robot,
+            "door": self.door,
+            "object": self.object,
+            "data": self.data,
+        }
 
 
 @dataclass(frozen=True)
@@ -101,12 +106,18 @@ class Engine:
         self.streams = Streams(seed)  # the run's only source of randomness, keyed by purpose (streams.py)
         self.doors = Doors(
             site.doors.values(),
-            DoorConfig(swing_time=self.config.door_swing_time, hold_time=p.door_hold_time, auto_close_delay=self.config.auto_close_delay),
+            DoorConfig(
+                swing_time=self.config.door_swing_time,
+                hold_time=p.door_hold_time,
+                auto_close_delay=self.config.auto_close_delay,
+            ),
             p.robot_radius,
             site.door_leaves,
         )
         self.objects = Objects(site.objects)
-        controller = ControllerConfig(speed=p.robot_speed, max_turn_rate=self.config.max_turn_rate, lookahead=self.config.lookahead)
+        controller = ControllerConfig(
+            speed=p.robot_speed, max_turn_rate=self.config.max_turn_rate, lookahead=self.config.lookahead
+        )
         self.executor = RobotExecutor(
             site,
             self.doors,
@@ -170,7 +181,9 @@ class Engine:
     def start(self) -> None:
         """The mission starts: the first state the planner must answer."""
         self._new_world()
-        self._emit("mission_started", data={"method": self.method, "seed": self.seed, "world_version": self.world_version})
+        self._emit(
+            "mission_started", data={"method": self.method, "seed": self.seed, "world_version": self.world_version}
+        )
 
     def step(self) -> None:
         """Advance one tick."""
@@ -186,8 +199,12 @@ class Engine:
             self._door_change(change, t1)
         for crossing in self.closed_doors.check(self.robots.values()):
             self.metrics.closed_door_crossings += 1
-            self._emit("closed_door_crossing", robot=crossing.robot, door=crossing.door,
-                       data={"depth": crossing.depth, "fraction": crossing.fraction, "pose": list(crossing.pose)})
+            self._emit(
+                "closed_door_crossing",
+                robot=crossing.robot,
+                door=crossing.door,
+                data={"depth": crossing.depth, "fraction": crossing.fraction, "pose": list(crossing.pose)},
+            )
         self._track_waiting(t1)
         waiting: dict[str, dict[str, float]] = {d: {} for d in self.human_doors}
         for rid, (door, since) in self._waiting_since.items():
@@ -205,7 +222,17 @@ class Engine:
         that robot), ``"external"`` (a robot its own driver executes) or ``"unknown_robot"``."""
         robot = self.robots.get(cmd.robot)
         if robot is None:
-            self._emit("action_failed", robot=cmd.robot, data={"plan_id": cmd.plan_id, "action_id": cmd.action_id, "action": cmd.action, "args": list(cmd.args), "reason": f"no robot {cmd.robot!r} on this site"})
+            self._emit(
+                "action_failed",
+                robot=cmd.robot,
+                data={
+                    "plan_id": cmd.plan_id,
+                    "action_id": cmd.action_id,
+                    "action": cmd.action,
+                    "args": list(cmd.args),
+                    "reason": f"no robot {cmd.robot!r} on this site",
+                },
+            )
             return "unknown_robot"
         if robot.id in self.external:
             self.external[robot.id].command(cmd)
@@ -216,13 +243,21 @@ class Engine:
         self._report(self.executor.assign(robot, cmd), self.time)
         return "applied"
 
-    def feedback_answered(self, request: FeedbackRequest, *, accepted: bool | None, reason: str = "", constraints_version: int = 0) -> None:
+    def feedback_answered(
+        self, request: FeedbackRequest, *, accepted: bool | None, reason: str = "", constraints_version: int = 0
+    ) -> None:
         """The restrictor's answer to the human's feedback (``accepted=None``: none came)."""
         self.metrics.feedback_answer(accepted)
         self._emit(
             "feedback_answered",
             door=str(request.params.get("door", "")),
-            data={"request": request.id, "sent": request.time, "accepted": accepted, "reason": reason, "constraints_version": constraints_version},
+            data={
+                "request": request.id,
+                "sent": request.time,
+                "accepted": accepted,
+                "reason": reason,
+                "constraints_version": constraints_version,
+            },
         )
 
     # ------------------------------------------------------------------ outputs
@@ -240,7 +275,16 @@ class Engine:
 
     # ------------------------------------------------------------------ internals
 
-    def _emit(self, kind: str, *, robot: str = "", door: str = "", object: str = "", data: dict[str, Any] | None = None, at: float | None = None) -> None:
+    def _emit(
+        self,
+        kind: str,
+        *,
+        robot: str = "",
+        door: str = "",
+        object: str = "",
+        data: dict[str, Any] | None = None,
+        at: float | None = None,
+    ) -> None:
         self._events.append(SimEvent(self.time if at is None else at, kind, robot, door, object, data or {}))
 
     def _new_world(self) -> int:
@@ -293,10 +337,16 @@ class Engine:
             self._emit("human_opens_door", door=action.door, data={"opening": self.human.counters.door_openings})
         elif isinstance(action, Declare):
             self._feedback_ids += 1
-            request = FeedbackRequest(self._feedback_ids, t, "door_unavailable", {"door": action.door, "minutes": action.minutes})
+            request = FeedbackRequest(
+                self._feedback_ids, t, "door_unavailable", {"door": action.door, "minutes": action.minutes}
+            )
             self._feedback.append(request)
             self.metrics.feedback_sent += 1
-            self._emit("feedback_sent", door=action.door, data={"request": request.id, "kind": request.kind, "params": dict(request.params)})
+            self._emit(
+                "feedback_sent",
+                door=action.door,
+                data={"request": request.id, "kind": request.kind, "params": dict(request.params)},
+            )
         else:
             self.metrics.human_done = action.time
             self._emit("human_done", data={"task_duration": self.human.task_duration}, at=action.time)
@@ -333,10 +383,11 @@ class Engine:
             "focus": h.focus_report(),
             "focus_started": h.counters.focus_started,
         }
-        return self.metrics.summary(time=self.time, completed=self.completed, robots=robots, human=human, world_versions=self.world_version)
+        return self.metrics.summary(
+            time=self.time, completed=self.completed, robots=robots, human=human, world_versions=self.world_version
+        )
 
 
 def engine_config_with(**overrides: Any) -> EngineConfig:
     """An :class:`EngineConfig` with the given fields changed (``None`` values are ignored)."""
     return replace(EngineConfig(), **{k: v for k, v in overrides.items() if v is not None})
-

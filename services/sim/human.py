@@ -98,7 +98,7 @@ class HumanConfig:
             raise ValueError("human config: " + "; ".join(problems))
 
     @classmethod
-    def from_toml(cls, path: str | Path, **overrides: Any) -> "HumanConfig":
+    def from_toml(cls, path: str | Path, **overrides: Any) -> HumanConfig:
         """Read ``[human]`` (or top-level keys) from a TOML file; ``overrides`` win over the file.
 
         Unknown keys are refused by name, so a typo never silently falls back to a default."""
@@ -122,7 +122,11 @@ class HumanConfig:
                 values[name] = value
                 continue
             want = int if known[name] in ("int", int) else float
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or (want is int and not isinstance(value, int)):
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or (want is int and not isinstance(value, int))
+            ):
                 raise ValueError(f"human config {path}: {name} must be a{'n integer' if want is int else ' number'}")
             values[name] = want(value)
         return replace(cls(**values), **{k: v for k, v in overrides.items() if v is not None})
@@ -241,7 +245,9 @@ class HumanModel:
         """
         cfg = self.config
         rng = self.streams.generator("focus")
-        lengths = [60.0 * int(rng.integers(cfg.focus_min_minutes, cfg.focus_max_minutes + 1)) for _ in range(cfg.focus_count)]
+        lengths = [
+            60.0 * int(rng.integers(cfg.focus_min_minutes, cfg.focus_max_minutes + 1)) for _ in range(cfg.focus_count)
+        ]
         while lengths and sum(lengths) > 0.9 * duration:
             lengths.pop()
         free = duration - sum(lengths)
@@ -256,8 +262,11 @@ class HumanModel:
     def _would_declare(self, index: int) -> bool:
         """Whether she declares focus interval ``index`` (ARROCH only). The draw has a stream of its
         own (keyed by the interval), so drawing it or not moves no other draw of hers."""
-        return self.method == "arroch" and bool(self.door_points) and \
-            self.streams.uniform("declare", index) < self.config.declare_probability
+        return (
+            self.method == "arroch"
+            and bool(self.door_points)
+            and self.streams.uniform("declare", index) < self.config.declare_probability
+        )
 
     # ------------------------------------------------------------------ queries
 
@@ -396,7 +405,9 @@ class HumanModel:
                 self.counters.turned_back += 1
                 self.trip = _Trip(self.trip.door, "back", self.trip.walked)
 
-    def _decide_seen(self, t1: float, waiting: dict[str, dict[str, float]], door_open: dict[str, bool], draw: bool) -> None:
+    def _decide_seen(
+        self, t1: float, waiting: dict[str, dict[str, float]], door_open: dict[str, bool], draw: bool
+    ) -> None:
         for door in sorted(waiting):
             if door not in self.door_points:
                 continue
@@ -435,5 +446,7 @@ class HumanModel:
         self.trip = _Trip(door, "to", self.walk_time[door])
 
     def focus_report(self) -> list[dict[str, Any]]:
-        return [{"start": f.start, "end": f.end, "minutes": f.minutes, "declared": declared}
-                for f, declared in zip(self.focus, self.declared)]
+        return [
+            {"start": f.start, "end": f.end, "minutes": f.minutes, "declared": declared}
+            for f, declared in zip(self.focus, self.declared)
+        ]

@@ -30,7 +30,9 @@ class ObjectState:
 
 class Objects:
     def __init__(self, specs: dict[str, ObjectSpec]) -> None:
-        self.items: dict[str, ObjectState] = {oid: ObjectState(spec, *spec.position) for oid, spec in sorted(specs.items())}
+        self.items: dict[str, ObjectState] = {
+            oid: ObjectState(spec, *spec.position) for oid, spec in sorted(specs.items())
+        }
         self.changed: set[str] = set(self.items)  # ids whose pose or carrier changed since last read
 
     def __contains__(self, oid: str) -> bool:

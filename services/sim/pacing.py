@@ -67,7 +67,9 @@ class LockstepGate:
         self.plan_id = plan.plan_id
         self.plan_world = plan.world_version
         self.plan_constraints = plan.constraints_version
-        self.fronts = {rid: steps[0].action_id for rid, steps in plan.robots.items() if steps and steps[0].action_id > 0}
+        self.fronts = {
+            rid: steps[0].action_id for rid, steps in plan.robots.items() if steps and steps[0].action_id > 0
+        }
         return True
 
     def feedback_sent(self) -> None:
@@ -88,7 +90,10 @@ class LockstepGate:
         if self.feedback_pending:
             return "feedback", "waiting for the ack of the human's feedback"
         if self.plan_world < world_version:
-            return "plan", f"waiting for a plan answering world version {world_version} (latest answers {self.plan_world})"
+            return (
+                "plan",
+                f"waiting for a plan answering world version {world_version} (latest answers {self.plan_world})",
+            )
         if self.plan_constraints < self.constraints_needed:
             return "plan", f"waiting for a plan answering constraints version {self.constraints_needed}"
         for rid, action_id in self.fronts.items():

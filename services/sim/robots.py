@@ -136,7 +136,9 @@ class RobotExecutor:
                 if obj.spec.robot != robot.id:
                     raise CommandError(f"load: object {target!r} belongs to robot {obj.spec.robot!r}")
                 if obj.delivered or obj.carrier is not None:
-                    raise CommandError(f"load: object {target!r} is {'delivered' if obj.delivered else 'carried by ' + str(obj.carrier)}")
+                    raise CommandError(
+                        f"load: object {target!r} is {'delivered' if obj.delivered else 'carried by ' + str(obj.carrier)}"
+                    )
                 if len(robot.carrying) >= self.config.capacity:
                     raise CommandError(f"load: robot is full ({self.config.capacity} object(s))")
             elif target not in robot.carrying:
@@ -180,7 +182,10 @@ class RobotExecutor:
             # Approaching a door to go through it next: an automatic one opens as the robot comes
             # near, so it does not have to stop at it when gothrough follows.
             opening = self.site.opening(cmd.args[0])
-            if opening.kind == "door" and math.dist((robot.x, robot.y), opening.center) <= cfg.auto_open_distance + cfg.radius:
+            if (
+                opening.kind == "door"
+                and math.dist((robot.x, robot.y), opening.center) <= cfg.auto_open_distance + cfg.radius
+            ):
                 self.doors.request_open(opening.id, robot.id)
         step = follower.step(robot.x, robot.y, robot.theta, dt, s_limit)
         if blocking and not step.held and self._breaks_guard(robot, step, blocking):
@@ -277,7 +282,9 @@ class RobotExecutor:
         self._set(robot, state="failed", waiting_door="", detail=reason)
         return [self._outcome(robot, "action_failed", new_world=True, reason=reason)]
 
-    def _outcome(self, robot: Robot, kind: str, *, door: str = "", object: str = "", new_world: bool = False, reason: str = "") -> Outcome:
+    def _outcome(
+        self, robot: Robot, kind: str, *, door: str = "", object: str = "", new_world: bool = False, reason: str = ""
+    ) -> Outcome:
         cmd = robot.command
         data: dict[str, Any] = {}
         if cmd is not None:
@@ -295,4 +302,3 @@ class RobotExecutor:
             if getattr(robot, name) != value:
                 setattr(robot, name, value)
                 robot.status_changed = True
-

@@ -28,8 +28,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from protocol.messages import RobotCommand, RobotPose, RobotStatus
-from protocol.pursuit import Path, integrate, path_crossings
 from protocol.plane import wrap
+from protocol.pursuit import Path, integrate, path_crossings
 from protocol.ros2 import types as ros
 from protocol.ros2.config import Ros2Config
 from protocol.ros2.node import RosNode, RosPublisher
@@ -73,8 +73,18 @@ class RosBase:
         ox, oy, oth = self.origin
         dx, dy = robot.x - ox, robot.y - oy
         c, s = math.cos(oth), math.sin(oth)
-        self.odom.publish(ros.odometry(now, self.odom_frame, self.base_frame, c * dx + s * dy, -s * dx + c * dy,
-                                       wrap(robot.theta - oth), robot.v, robot.omega))
+        self.odom.publish(
+            ros.odometry(
+                now,
+                self.odom_frame,
+                self.base_frame,
+                c * dx + s * dy,
+                -s * dx + c * dy,
+                wrap(robot.theta - oth),
+                robot.v,
+                robot.omega,
+            )
+        )
 
 
 @dataclass
@@ -97,7 +107,10 @@ class ExternalRobot:
         """The planner's command for this robot (the driver executes it; the sim needs its doors)."""
         if cmd.trajectory:
             path = Path(cmd.trajectory)
-            self.door_route = [d for _, d in path_crossings(path, {d.id: d.opening.endpoints for d in self.engine.doors.doors.values()})]
+            self.door_route = [
+                d
+                for _, d in path_crossings(path, {d.id: d.opening.endpoints for d in self.engine.doors.doors.values()})
+            ]
         else:
             self.door_route = []
         if cmd.action in ("approach", "opendoor") and cmd.args and cmd.args[0] in self.engine.doors:
@@ -116,12 +129,19 @@ class ExternalRobot:
                 objects.place(oid, robot.x, robot.y, delivered_at=self.engine.time)
                 self._pending.append(self._outcome(st, "delivered", object=oid))
         robot.carrying, robot.delivered = list(st.carrying), list(st.delivered)
-        robot.state, robot.waiting_door, robot.detail, robot.progress = st.state, st.waiting_door, st.detail, st.progress
+        robot.state, robot.waiting_door, robot.detail, robot.progress = (
+            st.state,
+            st.waiting_door,
+            st.detail,
+            st.progress,
+        )
         robot.last_action_id = max(robot.last_action_id, st.action_id)
         if st.state == "waiting_at_door" and (st.action_id, st.waiting_door) != self.waiting_reported:
             self.waiting_reported = (st.action_id, st.waiting_door)
             self._pending.append(self._outcome(st, "waiting_at_door", door=st.waiting_door))
-        if st.action_id > self.reported_action and (st.state in ("done", "failed") or (st.state == "idle" and st.action == "stop")):
+        if st.action_id > self.reported_action and (
+            st.state in ("done", "failed") or (st.state == "idle" and st.action == "stop")
+        ):
             self.reported_action = st.action_id
             if st.state == "failed":
                 self._pending.append(self._outcome(st, "action_failed", new_world=True, reason=st.detail or "failed"))
@@ -153,7 +173,13 @@ class ExternalRobot:
             robot.x, robot.y, robot.theta = integrate(robot.x, robot.y, robot.theta, v, omega, dt)
             robot.v, robot.omega = v, omega
         elif self.pose is not None:
-            robot.x, robot.y, robot.theta, robot.v, robot.omega = self.pose.x, self.pose.y, self.pose.theta, self.pose.vel, self.pose.omega
+            robot.x, robot.y, robot.theta, robot.v, robot.omega = (
+                self.pose.x,
+                self.pose.y,
+                self.pose.theta,
+                self.pose.vel,
+                self.pose.omega,
+            )
         if robot.state == "waiting_at_door":
             robot.wait_time += dt
         self._open_doors_ahead(robot)
@@ -167,10 +193,17 @@ class ExternalRobot:
             if math.dist((robot.x, robot.y), engine.doors[door_id].opening.center) <= reach:
                 engine.doors.request_open(door_id, self.id)
 
-    def _outcome(self, st: RobotStatus, kind: str, *, door: str = "", object: str = "", new_world: bool = False, reason: str = "") -> Outcome:
+    def _outcome(
+        self, st: RobotStatus, kind: str, *, door: str = "", object: str = "", new_world: bool = False, reason: str = ""
+    ) -> Outcome:
         robot = self.engine.robots[self.id]
-        data: dict[str, Any] = {"plan_id": st.plan_id, "action_id": st.action_id, "action": st.action, "args": list(st.args),
-                                "pose": [round(robot.x, 6), round(robot.y, 6), round(robot.theta, 6)]}
+        data: dict[str, Any] = {
+            "plan_id": st.plan_id,
+            "action_id": st.action_id,
+            "action": st.action,
+            "args": list(st.args),
+            "pose": [round(robot.x, 6), round(robot.y, 6), round(robot.theta, 6)],
+        }
         if reason:
             data["reason"] = reason
         return Outcome(kind, self.id, door=door, object=object, data=data, new_world=new_world)
@@ -190,16 +223,23 @@ class ExternalRobots:
     def setup(self, service: Any) -> None:
         keys = service.keys
         for rid, ext in self.robots.items():
-            service.subscribe(keys.robot_status(rid), RobotStatus, lambda st, key, ext=ext: ext.on_status(st), ordered=True)
+            service.subscribe(
+                keys.robot_status(rid), RobotStatus, lambda st, key, ext=ext: ext.on_status(st), ordered=True
+            )
             if self.ros2 is None:
                 service.subscribe(keys.robot_pose(rid), RobotPose, lambda p, key, ext=ext: ext.on_pose(p), latest=True)
                 continue
             link = self.ros2.link(rid)
             node = RosNode(service, self.ros2.naming(rid), f"arroch_sim_base_{rid}", link.namespace)
             start = self.engine.site.robots[rid].start
-            ext.base = RosBase(node.publisher(link.pose_topic, ros.ODOMETRY), tuple(start), link.odom_frame, link.base_frame)
-            node.subscribe(link.cmd_vel, ros.TWIST, lambda msg, key, ext=ext: ext.on_twist(msg, self.engine.time)
-                           or service.count("twists_not_finite"))
+            ext.base = RosBase(
+                node.publisher(link.pose_topic, ros.ODOMETRY), tuple(start), link.odom_frame, link.base_frame
+            )
+            node.subscribe(
+                link.cmd_vel,
+                ros.TWIST,
+                lambda msg, key, ext=ext: ext.on_twist(msg, self.engine.time) or service.count("twists_not_finite"),
+            )
         if self.ros2 is not None:
             # A driver started while time stands still (lockstep waiting for a plan) still learns where its
             # robot is; while the driver moves the robot, every tick's odometry does that.
@@ -228,8 +268,12 @@ class ExternalRobots:
             base = ext.base
             if base is not None and base.awaiting and wall - base.awaiting_since > ANSWER_TIMEOUT:
                 # A driver that died or hangs must not stop the world: its base stops on its own (no Twist).
-                log.warning("no cmd_vel from %s's driver for %.0f s: lockstep goes on without waiting for it "
-                            "until it answers again", rid, ANSWER_TIMEOUT)
+                log.warning(
+                    "no cmd_vel from %s's driver for %.0f s: lockstep goes on without waiting for it "
+                    "until it answers again",
+                    rid,
+                    ANSWER_TIMEOUT,
+                )
                 base.awaiting, base.silent = False, True
         waiting = [rid for rid, ext in self.robots.items() if ext.base is not None and ext.base.awaiting]
         return f"cmd_vel of {', '.join(waiting)} answering the last odometry" if waiting else ""

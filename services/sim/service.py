@@ -38,16 +38,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
-from protocol.messages import Clock, DoorState, Event, Overlay, RobotCommand, RobotPose, RobotStatus, TeamPlan
 from protocol.keys import chunk_at
+from protocol.messages import Clock, DoorState, Event, Overlay, RobotCommand, RobotPose, RobotStatus, TeamPlan
 from protocol.service import Service
 from protocol.site.model import Site
 from protocol.transport import ZenohOptions
 
+from .camfeed import MAX_MISSED
 from .engine import Engine, EngineConfig, FeedbackRequest, SimEvent
 from .feedback import FeedbackSender
 from .human import HumanConfig
-from .camfeed import MAX_MISSED
 from .pacing import LockstepGate, WallPacer
 
 log = logging.getLogger("arroch.sim")
@@ -73,12 +73,18 @@ class SimOptions:
     engine: EngineConfig = field(default_factory=EngineConfig)
     human: HumanConfig = field(default_factory=HumanConfig)
     camera: Any = None  # a services.sim.camfeed.CameraOptions, or None
-    lockstep_abort: float = FEEDBACK_ABORT  # lockstep: wall s to wait for an answer (feedback ack) before failing the run
+    lockstep_abort: float = (
+        FEEDBACK_ABORT  # lockstep: wall s to wait for an answer (feedback ack) before failing the run
+    )
     robots: str = "sim"  # "none": every robot is real, executed by its own driver (services/sim/ros2_base.py)
     ros2_bases: Any = None  # a protocol.ros2.config.Ros2Config: every robot is a simulated ROS 2 base
 
     def as_params(self) -> dict[str, Any]:
-        return {"mode": self.mode, "rate": self.rate if self.mode == "rate" else (1.0 if self.mode == "realtime" else 0.0), "pose_rate": self.pose_rate}
+        return {
+            "mode": self.mode,
+            "rate": self.rate if self.mode == "rate" else (1.0 if self.mode == "realtime" else 0.0),
+            "pose_rate": self.pose_rate,
+        }
 
 
 class EngineClock:
@@ -94,7 +100,9 @@ class EngineClock:
 
 
 class SimService(Service):
-    def __init__(self, site: Site, options: SimOptions, zenoh_options: ZenohOptions, *, namespace: str | None = None) -> None:
+    def __init__(
+        self, site: Site, options: SimOptions, zenoh_options: ZenohOptions, *, namespace: str | None = None
+    ) -> None:
         clock = EngineClock()
         super().__init__("sim", namespace or site.name, zenoh_options, clock=clock)  # type: ignore[arg-type]
         self.site = site
@@ -127,7 +135,9 @@ class SimService(Service):
         if options.robots == "none" or options.ros2_bases is not None:
             from .ros2_base import ExternalRobots
 
-            self._external = ExternalRobots(self.engine, sorted(self.engine.robots), ros2=options.ros2_bases, lockstep=options.mode == "lockstep")
+            self._external = ExternalRobots(
+                self.engine, sorted(self.engine.robots), ros2=options.ros2_bases, lockstep=options.mode == "lockstep"
+            )
 
     # ------------------------------------------------------------------ set-up
 
@@ -138,14 +148,20 @@ class SimService(Service):
         self.subscribe(self.keys.plan(), TeamPlan, self._on_plan)
         hc = self.options.human
         lockstep = self.options.mode == "lockstep"
-        self._sender = FeedbackSender(self, timeout=hc.feedback_timeout, retries=hc.feedback_retries,
-                                      abort_after=self.options.lockstep_abort if lockstep else None)
+        self._sender = FeedbackSender(
+            self,
+            timeout=hc.feedback_timeout,
+            retries=hc.feedback_retries,
+            abort_after=self.options.lockstep_abort if lockstep else None,
+        )
         if self._external is not None:
             self._external.setup(self)
         if self.options.camera is not None:
             from .camfeed import CameraFeed  # pybullet only when a camera is asked for
 
-            self._camera = CameraFeed(self.site, self.engine, self.options.camera, lockstep=self.options.mode == "lockstep")
+            self._camera = CameraFeed(
+                self.site, self.engine, self.options.camera, lockstep=self.options.mode == "lockstep"
+            )
             if self._camera.hold is not None:
                 self.subscribe(self.keys.overlay(self.options.camera.id), Overlay, self._on_overlay)
         self._started_wall = time.monotonic()
@@ -159,8 +175,13 @@ class SimService(Service):
         self.every(period, self._pump, first=0.0)
         log.info(
             "sim %s: method %s, mode %s%s, seed %d, %d robots, %d objects",
-            self.site.name, self.options.method, self.options.mode,
-            f" x{self.options.rate:g}" if self.options.mode == "rate" or self.pacer is not None else "", self.options.seed, len(self.engine.robots), len(self.engine.objects.items),
+            self.site.name,
+            self.options.method,
+            self.options.mode,
+            f" x{self.options.rate:g}" if self.options.mode == "rate" or self.pacer is not None else "",
+            self.options.seed,
+            len(self.engine.robots),
+            len(self.engine.objects.items),
         )
 
     def teardown(self) -> None:
@@ -240,7 +261,9 @@ class SimService(Service):
                     self._publish_clock()
                 elif wall - self._blocked_since >= STALL_WARNING and not self._stall_reported:
                     # Usually a planner that is not running, or a command it never sent.
-                    self.log.warning("lockstep stalled %.0f s at t=%.2f: %s", wall - self._blocked_since, self.engine.time, blocker)
+                    self.log.warning(
+                        "lockstep stalled %.0f s at t=%.2f: %s", wall - self._blocked_since, self.engine.time, blocker
+                    )
                     self._stall_reported = True
                 self._paused_heartbeat(wall)
                 return
@@ -292,7 +315,9 @@ class SimService(Service):
         for rid, r in self.engine.robots.items():
             if rid in self.engine.external:
                 continue  # its driver publishes its pose
-            self.publish(self.keys.robot_pose(rid), RobotPose(robot=rid, x=r.x, y=r.y, theta=r.theta, vel=r.v, omega=r.omega))
+            self.publish(
+                self.keys.robot_pose(rid), RobotPose(robot=rid, x=r.x, y=r.y, theta=r.theta, vel=r.v, omega=r.omega)
+            )
 
     def _publish_states(self, *, everything: bool) -> None:
         version = self.engine.world_version
@@ -323,7 +348,9 @@ class SimService(Service):
             if did in self.engine.door_changed or did not in self._door_since:
                 self._door_since[did] = self.engine.time
             until = door.hold_until if door.human_operated and door.passable else 0.0
-            state = DoorState(door=did, open=door.passable, by=self.engine.door_by.get(did, ""), until=until, world_version=version)
+            state = DoorState(
+                door=did, open=door.passable, by=self.engine.door_by.get(did, ""), until=until, world_version=version
+            )
             # Stamped with the time of its last change: a repetition must not look like news.
             state.src, state.seq, state.stamp = self.src, self.next_seq(), self._door_since[did]
             self.publish(self.keys.door_state(did), state, stamp=False)
@@ -345,10 +372,14 @@ class SimService(Service):
         the camera's held frame) and why, in words; ``("", "")`` when it may advance."""
         if self.options.mode != "lockstep":
             return "", ""
-        kind, gate = self.gate.waits_for(self.engine.world_version, {rid: r.last_action_id for rid, r in self.engine.robots.items()})
+        kind, gate = self.gate.waits_for(
+            self.engine.world_version, {rid: r.last_action_id for rid, r in self.engine.robots.items()}
+        )
         hold = self._camera.hold.blocker() if self._camera is not None and self._camera.hold is not None else ""
         drivers = self._external.blocker() if self._external is not None else ""
-        return kind or ("camera" if hold else "") or ("command" if drivers else ""), "; ".join(b for b in (gate, hold, drivers) if b)
+        return kind or ("camera" if hold else "") or ("command" if drivers else ""), "; ".join(
+            b for b in (gate, hold, drivers) if b
+        )
 
     def _camera_hold(self) -> None:
         """Lockstep with a camera: take the held frame when one is due; end a hold that timed out."""
@@ -362,8 +393,13 @@ class SimService(Service):
                 self.log.warning(
                     "camera frame %s got no overlay on %s within %.1f s: time goes on without it (is an AR client on "
                     "camera %s running?); after %d such frames in a row, frames come at the wall rate until an overlay "
-                    "is seen (said once)", hold.seq, self.keys.overlay(self.options.camera.id), hold.timeout,
-                    self.options.camera.id, MAX_MISSED)
+                    "is seen (said once)",
+                    hold.seq,
+                    self.keys.overlay(self.options.camera.id),
+                    hold.timeout,
+                    self.options.camera.id,
+                    MAX_MISSED,
+                )
             return
         t = self.engine.time
         if not hold.due(t):
@@ -387,9 +423,18 @@ class SimService(Service):
         mode = self.options.mode
         rate = self.options.rate if mode == "rate" else 1.0
         awaiting, blocker = self._waits_for() if not self.engine.done else ("", "")
-        self.publish(self.keys.clock(), Clock(time=self.engine.time, mode=mode, rate=rate, world_version=self.engine.world_version,
-                                              paused=self.engine.done or bool(blocker), awaiting=awaiting,
-                                              constraints_version=self.gate.constraints_needed))
+        self.publish(
+            self.keys.clock(),
+            Clock(
+                time=self.engine.time,
+                mode=mode,
+                rate=rate,
+                world_version=self.engine.world_version,
+                paused=self.engine.done or bool(blocker),
+                awaiting=awaiting,
+                constraints_version=self.gate.constraints_needed,
+            ),
+        )
 
     def _paused_heartbeat(self, wall: float) -> None:
         if wall - self._last_clock_wall >= PAUSED_CLOCK:
@@ -412,10 +457,15 @@ class SimService(Service):
             request = answer.request
             assert isinstance(request, FeedbackRequest)
             if answer.aborted:
-                self.log.error("lockstep aborted at t=%.2f: no ack of the human's feedback %s %s within %.0f wall s "
-                               "(is the restrictor running?); going on without it would make this run depend on the "
-                               "machine's load, so it ends here, as failed", self.engine.time, request.kind,
-                               dict(request.params), self.options.lockstep_abort)
+                self.log.error(
+                    "lockstep aborted at t=%.2f: no ack of the human's feedback %s %s within %.0f wall s "
+                    "(is the restrictor running?); going on without it would make this run depend on the "
+                    "machine's load, so it ends here, as failed",
+                    self.engine.time,
+                    request.kind,
+                    dict(request.params),
+                    self.options.lockstep_abort,
+                )
                 self.count("feedback_aborted")
                 self.exit_code = EXIT_ABORTED
                 self.stop()
@@ -424,8 +474,14 @@ class SimService(Service):
             accepted = None if ack is None else ack.accepted
             cv = ack.constraints_version if ack is not None else 0
             self.gate.feedback_answered(accepted, cv)
-            self.engine.feedback_answered(request, accepted=accepted, reason=ack.reason if ack else "no ack", constraints_version=cv)
-            self.count("feedback_accepted" if accepted else ("feedback_refused" if accepted is False else "feedback_unanswered"))
+            self.engine.feedback_answered(
+                request, accepted=accepted, reason=ack.reason if ack else "no ack", constraints_version=cv
+            )
+            self.count(
+                "feedback_accepted"
+                if accepted
+                else ("feedback_refused" if accepted is False else "feedback_unanswered")
+            )
             self._publish_tick(force_poses=False)
 
     # ------------------------------------------------------------------ the end
@@ -437,16 +493,30 @@ class SimService(Service):
         summary = self.engine.summary()
         self.log.info(
             "mission %s at t=%.1f s (team %.1f s), %.1f s wall (%.0fx real time)",
-            "done" if self.engine.completed else "ended unfinished", self.engine.time,
-            summary["team_completion_time"] or float("nan"), wall, self.engine.time / wall if wall > 0 else float("inf"),
+            "done" if self.engine.completed else "ended unfinished",
+            self.engine.time,
+            summary["team_completion_time"] or float("nan"),
+            wall,
+            self.engine.time / wall if wall > 0 else float("inf"),
         )
         if self._camera is not None:
             hold = self._camera.hold
-            self.log.info("camera %s: %d frames%s", self.options.camera.id, self._camera.frames, f"; {hold.summary()}" if hold else "")
+            self.log.info(
+                "camera %s: %d frames%s",
+                self.options.camera.id,
+                self._camera.frames,
+                f"; {hold.summary()}" if hold else "",
+            )
         if self.options.metrics_out:
             out = dict(summary)
-            out["run"] = {"wall_time": wall, "realtime_factor": self.engine.time / wall if wall > 0 else None, "counters": self.counters_snapshot()}
-            Path(self.options.metrics_out).write_text(json.dumps(out, indent=2, sort_keys=True) + "\n", encoding="utf-8")
+            out["run"] = {
+                "wall_time": wall,
+                "realtime_factor": self.engine.time / wall if wall > 0 else None,
+                "counters": self.counters_snapshot(),
+            }
+            Path(self.options.metrics_out).write_text(
+                json.dumps(out, indent=2, sort_keys=True) + "\n", encoding="utf-8"
+            )
         if self._events_file is not None:
             self._events_file.flush()
         if self.options.until_done:

@@ -50,17 +50,43 @@ def add_snapshot_arguments(parser: argparse.ArgumentParser) -> None:
         "x right, y down, z forward) and the pinhole intrinsics [fx, fy, cx, cy, w, h] matching the pixels."
     )
     # SUPPRESS: a --site given before "snapshot" (on "arroch sim") must not be reset by this default.
-    parser.add_argument("--site", "--config", dest="site", default=argparse.SUPPRESS, metavar="FILE", help="site file (TOML); default: the packaged 'office' site")
     parser.add_argument(
-        "--camera", required=True, type=_camera_pose, metavar="X,Y,Z,YAW,PITCH",
-        help="camera position in metres (world frame: x east, y north, z up) and its direction in DEGREES: "
-             "YAW = viewing direction counter-clockwise from +x (0 east, 90 north), PITCH > 0 looks up; no roll "
-             "(the same convention as 'arroch sim --camera X,Y,Z,YAW,PITCH'). E.g. 8.0,2.0,1.3,-70,5 (inside storage, facing its south wall)",
+        "--site",
+        "--config",
+        dest="site",
+        default=argparse.SUPPRESS,
+        metavar="FILE",
+        help="site file (TOML); default: the packaged 'office' site",
     )
-    parser.add_argument("--size", type=_image_size, default=(640, 480), metavar="WxH", help="image size in pixels (default 640x480)")
-    parser.add_argument("--fov", type=float, default=60.0, metavar="DEG", help="vertical field of view in degrees (default 60)")
-    parser.add_argument("--supersample", type=int, default=1, metavar="S", help="render S times larger and average down, anti-aliased (1-4, default 1)")
-    parser.add_argument("--open", action="append", default=[], metavar="DOOR", help="show DOOR open (repeatable; 'all' opens every door)")
+    parser.add_argument(
+        "--camera",
+        required=True,
+        type=_camera_pose,
+        metavar="X,Y,Z,YAW,PITCH",
+        help="camera position in metres (world frame: x east, y north, z up) and its direction in DEGREES: "
+        "YAW = viewing direction counter-clockwise from +x (0 east, 90 north), PITCH > 0 looks up; no roll "
+        "(the same convention as 'arroch sim --camera X,Y,Z,YAW,PITCH'). E.g. 8.0,2.0,1.3,-70,5 (inside storage, facing its south wall)",
+    )
+    parser.add_argument(
+        "--size", type=_image_size, default=(640, 480), metavar="WxH", help="image size in pixels (default 640x480)"
+    )
+    parser.add_argument(
+        "--fov", type=float, default=60.0, metavar="DEG", help="vertical field of view in degrees (default 60)"
+    )
+    parser.add_argument(
+        "--supersample",
+        type=int,
+        default=1,
+        metavar="S",
+        help="render S times larger and average down, anti-aliased (1-4, default 1)",
+    )
+    parser.add_argument(
+        "--open",
+        action="append",
+        default=[],
+        metavar="DOOR",
+        help="show DOOR open (repeatable; 'all' opens every door)",
+    )
     parser.add_argument("--out", required=True, metavar="F.png", help="the rendered image (PNG)")
     parser.add_argument("--truth", required=True, metavar="T.json", help="the ground truth (JSON)")
 

@@ -32,9 +32,9 @@ from __future__ import annotations
 import logging
 import math
 import tempfile
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable
 
 import cv2
 import numpy as np
@@ -206,33 +206,66 @@ class World:
         self._bodies[name] = body
         return body
 
-    def _box(self, name: str, half: Iterable[float], center: Iterable[float], color: RGBA, *, collide: bool = True, yaw: float = 0.0) -> int:
+    def _box(
+        self,
+        name: str,
+        half: Iterable[float],
+        center: Iterable[float],
+        color: RGBA,
+        *,
+        collide: bool = True,
+        yaw: float = 0.0,
+    ) -> int:
         half = [float(v) for v in half]
         visual = self.pb.createVisualShape(pybullet.GEOM_BOX, halfExtents=half, rgbaColor=color)
         collision = self.pb.createCollisionShape(pybullet.GEOM_BOX, halfExtents=half) if collide else -1
-        body = self.pb.createMultiBody(baseMass=0, baseCollisionShapeIndex=collision, baseVisualShapeIndex=visual, basePosition=list(center), baseOrientation=_yaw_quat(yaw))
+        body = self.pb.createMultiBody(
+            baseMass=0,
+            baseCollisionShapeIndex=collision,
+            baseVisualShapeIndex=visual,
+            basePosition=list(center),
+            baseOrientation=_yaw_quat(yaw),
+        )
         return self._add(name, body)
 
     def _build(self) -> None:
         site, p = self.site, self.site.params
         x0, y0, x1, y1 = site.bounds
         m = FLOOR_MARGIN
-        self._box("floor", ((x1 - x0) / 2 + m, (y1 - y0) / 2 + m, FLOOR_DEPTH / 2), ((x0 + x1) / 2, (y0 + y1) / 2, -FLOOR_DEPTH / 2), FLOOR_COLOR)
+        self._box(
+            "floor",
+            ((x1 - x0) / 2 + m, (y1 - y0) / 2 + m, FLOOR_DEPTH / 2),
+            ((x0 + x1) / 2, (y0 + y1) / 2, -FLOOR_DEPTH / 2),
+            FLOOR_COLOR,
+        )
         for i, wall in enumerate(site.walls):
             bx0, by0, bx1, by1 = wall.box
             name = f"wall:{i}"
-            self._box(name, ((bx1 - bx0) / 2, (by1 - by0) / 2, wall.height / 2), ((bx0 + bx1) / 2, (by0 + by1) / 2, wall.height / 2), WALL_COLOR)
+            self._box(
+                name,
+                ((bx1 - bx0) / 2, (by1 - by0) / 2, wall.height / 2),
+                ((bx0 + bx1) / 2, (by0 + by1) / 2, wall.height / 2),
+                WALL_COLOR,
+            )
             self.wall_names.append(name)
         if p.wall_height > OPENING_HEIGHT:
             for opening in site.openings.values():
                 self._lintel(opening.id, opening.endpoints, opening.axis)
         for did, leaf in site.door_leaves.items():
             color = HUMAN_LEAF_COLOR if site.doors[did].human_operated else LEAF_COLOR
-            self._doors[did] = self._box(did, (leaf.length / 2, leaf.thickness / 2, self._leaf_height / 2), (0.0, 0.0, 0.0), color)
+            self._doors[did] = self._box(
+                did, (leaf.length / 2, leaf.thickness / 2, self._leaf_height / 2), (0.0, 0.0, 0.0), color
+            )
             self.set_door_opening(did, 0.0)
         self._build_landmarks()
         for oid, spec in site.objects.items():
-            self._objects[oid] = self._box(oid, (OBJECT_HALF,) * 3, (*spec.position, FLOOR_HEIGHT), _shade(self._colors[spec.robot], OBJECT_SHADE), collide=False)
+            self._objects[oid] = self._box(
+                oid,
+                (OBJECT_HALF,) * 3,
+                (*spec.position, FLOOR_HEIGHT),
+                _shade(self._colors[spec.robot], OBJECT_SHADE),
+                collide=False,
+            )
             self._carrier[oid] = None
         for rid, spec in site.robots.items():
             self._robots[rid] = _Robot(self._add(rid, self._robot_body(self._colors[rid])), spec.start)
@@ -246,7 +279,13 @@ class World:
         half_along = (math.dist((ax, ay), (bx, by))) / 2
         half = (half_along, t / 2) if axis == "x" else (t / 2, half_along)
         name = f"lintel:{opening_id}"
-        self._box(name, (*half, (h - OPENING_HEIGHT) / 2), ((ax + bx) / 2, (ay + by) / 2, (h + OPENING_HEIGHT) / 2), WALL_COLOR, collide=False)
+        self._box(
+            name,
+            (*half, (h - OPENING_HEIGHT) / 2),
+            ((ax + bx) / 2, (ay + by) / 2, (h + OPENING_HEIGHT) / 2),
+            WALL_COLOR,
+            collide=False,
+        )
         self.lintel_names.append(name)
 
     def _build_landmarks(self) -> None:
@@ -276,8 +315,16 @@ class World:
         # Counter-clockwise seen from the front (TL, BL, BR and TL, BR, TR): the face the renderer keeps.
         indices = [0, 3, 2, 0, 2, 1]
         normals = [list(landmark.normal)] * 4
-        visual = self.pb.createVisualShape(pybullet.GEOM_MESH, vertices=vertices, indices=indices, uvs=uvs, normals=normals, rgbaColor=WHITE)
-        body = self.pb.createMultiBody(baseMass=0, baseCollisionShapeIndex=-1, baseVisualShapeIndex=visual, basePosition=center.tolist(), baseOrientation=_IDENTITY)
+        visual = self.pb.createVisualShape(
+            pybullet.GEOM_MESH, vertices=vertices, indices=indices, uvs=uvs, normals=normals, rgbaColor=WHITE
+        )
+        body = self.pb.createMultiBody(
+            baseMass=0,
+            baseCollisionShapeIndex=-1,
+            baseVisualShapeIndex=visual,
+            basePosition=center.tolist(),
+            baseOrientation=_IDENTITY,
+        )
         return self._add(f"tag:{landmark.tag}", body)
 
     def _warn_if_buried(self, landmark: Landmark) -> None:
@@ -288,7 +335,13 @@ class World:
             if bx0 < x < bx1 and by0 < y < by1 and 0.0 < z < wall.height:
                 log.warning(
                     "landmark tag %d at (%.3f, %.3f, %.3f) lies inside wall %d's thickness (box %s): the camera cannot see it; "
-                    "put it just in front of the wall's face", landmark.tag, x, y, z, i, wall.box,
+                    "put it just in front of the wall's face",
+                    landmark.tag,
+                    x,
+                    y,
+                    z,
+                    i,
+                    wall.box,
                 )
                 return
 
@@ -301,9 +354,15 @@ class World:
             radii=[r, 0.0, 0.0],
             lengths=[ROBOT_HEIGHT, 0.0, 0.0],
             halfExtents=[[0.0] * 3, list(bar), list(bumper)],
-            visualFramePositions=[[0.0, 0.0, ROBOT_HEIGHT / 2], [r - bar[0], 0.0, ROBOT_HEIGHT + bar[2]], [r - 0.01, 0.0, ROBOT_HEIGHT * 0.6]],
+            visualFramePositions=[
+                [0.0, 0.0, ROBOT_HEIGHT / 2],
+                [r - bar[0], 0.0, ROBOT_HEIGHT + bar[2]],
+                [r - 0.01, 0.0, ROBOT_HEIGHT * 0.6],
+            ],
         )
-        collision = self.pb.createCollisionShape(pybullet.GEOM_CYLINDER, radius=r, height=ROBOT_HEIGHT, collisionFramePosition=[0.0, 0.0, ROBOT_HEIGHT / 2])
+        collision = self.pb.createCollisionShape(
+            pybullet.GEOM_CYLINDER, radius=r, height=ROBOT_HEIGHT, collisionFramePosition=[0.0, 0.0, ROBOT_HEIGHT / 2]
+        )
         body = self.pb.createMultiBody(baseMass=0, baseCollisionShapeIndex=collision, baseVisualShapeIndex=visual)
         for shape, rgba in enumerate((color, HEADING_COLOR, HEADING_COLOR)):
             self.pb.changeVisualShape(body, -1, shapeIndex=shape, rgbaColor=rgba)
@@ -318,8 +377,16 @@ class World:
             radii=[HUMAN_RADIUS, head, 0.0],
             lengths=[torso, 0.0, 0.0],
             halfExtents=[[0.0] * 3, [0.0] * 3, list(tablet)],
-            visualFramePositions=[[0.0, 0.0, torso / 2], [0.0, 0.0, HUMAN_HEIGHT - head], [HUMAN_RADIUS + 0.12, 0.0, 1.15]],
-            visualFrameOrientations=[list(_IDENTITY), list(_IDENTITY), list(pybullet.getQuaternionFromEuler((0.0, -0.5, 0.0)))],
+            visualFramePositions=[
+                [0.0, 0.0, torso / 2],
+                [0.0, 0.0, HUMAN_HEIGHT - head],
+                [HUMAN_RADIUS + 0.12, 0.0, 1.15],
+            ],
+            visualFrameOrientations=[
+                list(_IDENTITY),
+                list(_IDENTITY),
+                list(pybullet.getQuaternionFromEuler((0.0, -0.5, 0.0))),
+            ],
         )
         body = self.pb.createMultiBody(baseMass=0, baseCollisionShapeIndex=-1, baseVisualShapeIndex=visual)
         for shape, rgba in enumerate((SHIRT_COLOR, SKIN_COLOR, TABLET_COLOR)):
@@ -347,7 +414,11 @@ class World:
         leaf = self.site.door_leaves[did]
         yaw = leaf.closed_yaw + f * _angle_diff(leaf.open_yaw, leaf.closed_yaw)
         hx, hy = leaf.hinge
-        center = (hx + leaf.length / 2 * math.cos(yaw), hy + leaf.length / 2 * math.sin(yaw), LEAF_FLOOR_GAP + self._leaf_height / 2)
+        center = (
+            hx + leaf.length / 2 * math.cos(yaw),
+            hy + leaf.length / 2 * math.sin(yaw),
+            LEAF_FLOOR_GAP + self._leaf_height / 2,
+        )
         self.pb.resetBasePositionAndOrientation(self._doors[did], center, _yaw_quat(yaw))
         self._door_fraction[did] = f
 
@@ -494,7 +565,7 @@ class World:
                 pass
             self._pb = None
 
-    def __enter__(self) -> "World":
+    def __enter__(self) -> World:
         return self
 
     def __exit__(self, *exc: object) -> None:

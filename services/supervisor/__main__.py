@@ -7,13 +7,14 @@ import sys
 
 from protocol.runner import setup_logging
 
-from .cli import add_up_arguments, run_up
 from .cli import __doc__ as UP_DOC
+from .cli import add_up_arguments, run_up
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m services.supervisor", description=UP_DOC,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog="python -m services.supervisor", description=UP_DOC, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     add_up_arguments(parser)
     args = parser.parse_args(argv)
     setup_logging(args.log_level)

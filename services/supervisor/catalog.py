@@ -18,9 +18,9 @@ from __future__ import annotations
 import re
 import shlex
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 ARROCH: tuple[str, ...] = (sys.executable, "-m", "services.cli")
 _NAME = re.compile(r"^[a-z][a-z0-9_\-]{0,31}$")
@@ -39,7 +39,7 @@ class MissionOptions:
 
 
 # How each option is spelled on a service's command line (the services' own flags).
-OPTION_FLAGS: dict[str, Callable[["Launch"], list[str]]] = {
+OPTION_FLAGS: dict[str, Callable[[Launch], list[str]]] = {
     "method": lambda l: ["--method", l.mission.method] if l.mission.method else [],
     "mode": lambda l: ["--mode", l.mission.mode] if l.mission.mode else [],
     "rate": lambda l: ["--rate", f"{l.mission.rate:g}"] if l.mission.rate is not None else [],
@@ -54,15 +54,19 @@ OPTION_FLAGS: dict[str, Callable[["Launch"], list[str]]] = {
     # A few overlay frames spread over the run, kept with its other records.
     "snapshots": lambda l: ["--snapshots", str(l.run_dir / OVERLAY_FOLDER)] if l.run_dir else [],
     # The run's recording, with the merged log's lines, and (arroch up --view) the live Foxglove view.
-    "recording": lambda l: (["--out", str(l.run_dir / RECORDING)] if l.run_dir else []) + _logs(l)
-    + (["--view", "--view-port", str(l.mission.view_port)] if l.mission.view_port is not None else []),
+    "recording": lambda l: (
+        (["--out", str(l.run_dir / RECORDING)] if l.run_dir else [])
+        + _logs(l)
+        + (["--view", "--view-port", str(l.mission.view_port)] if l.mission.view_port is not None else [])
+    ),
     "view": lambda l: ["--port", str(l.mission.view_port)] + _logs(l),
 }
 RECORDING = "run.mcap"
 
 
-def _logs(launch: "Launch") -> list[str]:
+def _logs(launch: Launch) -> list[str]:
     return ["--logs", str(launch.run_dir / "supervisor.log")] if launch.run_dir else []
+
 
 RECORDER_NAME = "recorder"  # its service name (liveliness), which the sim waits for
 SIM_CAMERA_ID = "tablet"  # the sim's default --camera-id, which is also the AR client's default --camera
@@ -96,21 +100,38 @@ SERVICES: dict[str, ServiceSpec] = {
         ServiceSpec("restrictor", ("restrictor",), ("state",), "feedback -> constraints"),
         # The sim starts the mission clock: the planner and restrictor must be listening by then, and
         # the AR client (when this run has one) watching, so its overlays cover the whole mission.
-        ServiceSpec("sim", ("sim",), ("method", "mode", "rate", "seed", "camera"), "simulated robots, doors, human, tablet camera",
-                    after=("planner", "restrictor", "ar", RECORDER_NAME)),
+        ServiceSpec(
+            "sim",
+            ("sim",),
+            ("method", "mode", "rate", "seed", "camera"),
+            "simulated robots, doors, human, tablet camera",
+            after=("planner", "restrictor", "ar", RECORDER_NAME),
+        ),
         ServiceSpec("ar", ("ar",), ("snapshots",), "AR client: overlays of the camera frames"),
         # Any free port: the printed URL carries it with the run's token. Its identity is the AR role's.
-        ServiceSpec("tablet", ("tablet", "--port", "0", "--no-qr"), ("camera_source",), "tablet page (HTTPS; URL and token printed)",
-                    role="ar"),
+        ServiceSpec(
+            "tablet",
+            ("tablet", "--port", "0", "--no-qr"),
+            ("camera_source",),
+            "tablet page (HTTPS; URL and token printed)",
+            role="ar",
+        ),
         ServiceSpec("ping", ("ping", "serve"), (), "echo server for link checks (arroch ping send)"),
     )
 }
 DEFAULT_SERVICES: tuple[str, ...] = ("planner", "restrictor", "sim", "ar")
 # Not chosen with --services: ``arroch up`` adds it to every run with a sim unless --no-record. It
 # reads what the supervisor's role may read (every key but robot commands, in the secure profile).
-RECORDER = ServiceSpec(RECORDER_NAME, ("record",), ("recording",), "records the run to run.mcap (and serves it live with --view)",
-                       role="supervisor")
-VIEWER = ServiceSpec(RECORDER_NAME, ("view",), ("view",), "serves the run live to Foxglove (--view with --no-record)", role="supervisor")
+RECORDER = ServiceSpec(
+    RECORDER_NAME,
+    ("record",),
+    ("recording",),
+    "records the run to run.mcap (and serves it live with --view)",
+    role="supervisor",
+)
+VIEWER = ServiceSpec(
+    RECORDER_NAME, ("view",), ("view",), "serves the run live to Foxglove (--view with --no-record)", role="supervisor"
+)
 ROUTER = "router"
 SUPERVISOR_ROLE = "supervisor"
 
@@ -163,8 +184,10 @@ def parse_services(text: str | None) -> list[ServiceSpec]:
     names = [part.strip() for part in text.split(",") if part.strip()]
     unknown = [name for name in names if name not in SERVICES]
     if unknown:
-        raise ValueError(f"unknown service{'s' if len(unknown) > 1 else ''} {', '.join(map(repr, unknown))} "
-                         f"(known: {', '.join(SERVICES)})")
+        raise ValueError(
+            f"unknown service{'s' if len(unknown) > 1 else ''} {', '.join(map(repr, unknown))} "
+            f"(known: {', '.join(SERVICES)})"
+        )
     repeated = sorted({name for name in names if names.count(name) > 1})
     if repeated:
         raise ValueError(f"service {', '.join(repeated)} listed twice")
@@ -202,8 +225,12 @@ def parse_child(entry: str, launch: Launch) -> tuple[str, list[str]]:
         raise ValueError(f"--child {entry!r}: the name must be lower-case letters, digits, '_' or '-' (at most 32)")
     if name in SERVICES or name in (ROUTER, "up"):
         raise ValueError(f"--child {entry!r}: {name!r} is taken; pick another name")
-    values = {"{python}": sys.executable, "{connect}": ",".join(launch.connect),
-              "{namespace}": launch.namespace, "{site}": launch.site or ""}
+    values = {
+        "{python}": sys.executable,
+        "{connect}": ",".join(launch.connect),
+        "{namespace}": launch.namespace,
+        "{site}": launch.site or "",
+    }
     try:
         words = shlex.split(command)
     except ValueError as exc:

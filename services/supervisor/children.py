@@ -16,8 +16,8 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 log = logging.getLogger("arroch.up")
 
@@ -68,9 +68,17 @@ def describe_exit(code: int) -> str:
 class Child:
     """One supervised process. ``on_line(name, line)`` receives its merged stdout/stderr."""
 
-    def __init__(self, name: str, argv: list[str], *, env: dict[str, str] | None = None,
-                 on_line: Callable[[str, str], None], cwd: str | None = None,
-                 policy: RestartPolicy | None = None, restart: bool = True) -> None:
+    def __init__(
+        self,
+        name: str,
+        argv: list[str],
+        *,
+        env: dict[str, str] | None = None,
+        on_line: Callable[[str, str], None],
+        cwd: str | None = None,
+        policy: RestartPolicy | None = None,
+        restart: bool = True,
+    ) -> None:
         self.name = name
         self.argv = argv
         self.env = env or {}
@@ -101,8 +109,15 @@ class Child:
         self.ready.clear()
         wrapped = [sys.executable, launch.__file__, str(os.getpid()), "--", *self.argv]
         self.popen = subprocess.Popen(
-            wrapped, cwd=self.cwd, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT, text=True, errors="replace", start_new_session=True,
+            wrapped,
+            cwd=self.cwd,
+            env=env,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            errors="replace",
+            start_new_session=True,
         )
         self.started_at = time.monotonic()
         self.starts += 1

@@ -29,9 +29,19 @@ from protocol.clock import make_clock
 from protocol.runner import LOG_FORMAT, add_common_arguments
 from protocol.transport import DEFAULT_ROUTER, ZenohOptions, free_tcp_port
 
-from .catalog import DEFAULT_SERVICES, RECORDER, SERVICES, SUPERVISOR_ROLE, VIEWER, Launch, MissionOptions, parse_child, parse_services
+from .catalog import (
+    DEFAULT_SERVICES,
+    RECORDER,
+    SERVICES,
+    SUPERVISOR_ROLE,
+    VIEWER,
+    Launch,
+    MissionOptions,
+    parse_child,
+    parse_services,
+)
 from .output import Output, OutputHandler
-from .supervisor import UpConfig, Supervisor
+from .supervisor import Supervisor, UpConfig
 
 log = logging.getLogger("arroch.up")
 
@@ -83,14 +93,20 @@ def build_config(args: argparse.Namespace) -> tuple[UpConfig, ZenohOptions]:
     services += _recording(args, services)
     config_dir = Path(args.zenoh_config_dir).resolve() if args.zenoh_config_dir else None
     if config_dir is not None:
-        needed = list(dict.fromkeys(s.identity for s in services)) + [SUPERVISOR_ROLE] + (["router"] if args.router else [])
+        needed = (
+            list(dict.fromkeys(s.identity for s in services)) + [SUPERVISOR_ROLE] + (["router"] if args.router else [])
+        )
         missing = [f"{config_dir / name}.json5" for name in needed if not (config_dir / f"{name}.json5").is_file()]
         if missing:
-            raise ValueError(f"missing Zenoh configs {', '.join(missing)} (arroch deploy render --out-dir {config_dir})")
+            raise ValueError(
+                f"missing Zenoh configs {', '.join(missing)} (arroch deploy render --out-dir {config_dir})"
+            )
     if args.rate is not None and args.rate <= 0:
         raise ValueError(f"--rate must be positive, got {args.rate}")
     if args.rate is not None and args.mode not in (None, "rate", "lockstep"):
-        raise ValueError(f"--rate K runs the simulation K times faster (at most, in lockstep); it does not go with --mode {args.mode}")
+        raise ValueError(
+            f"--rate K runs the simulation K times faster (at most, in lockstep); it does not go with --mode {args.mode}"
+        )
     router_listen = args.router_listen
     if args.router and router_listen is None and config_dir is None:
         router_listen = f"tcp/127.0.0.1:{free_tcp_port()}"
@@ -105,10 +121,20 @@ def build_config(args: argparse.Namespace) -> tuple[UpConfig, ZenohOptions]:
     else:
         connect = [part.strip() for part in (args.connect or DEFAULT_ROUTER).split(",") if part.strip()]
     launch = Launch(
-        namespace=_namespace(args), connect=connect, zenoh_config_dir=config_dir, site=args.site,
-        clock=args.clock if args.clock != "sim" else None, log_level=args.log_level,
-        mission=MissionOptions(method=args.method, mode=args.mode, rate=args.rate, seed=args.seed, camera=args.camera,
-                               view_port=args.view_port if args.view else None),
+        namespace=_namespace(args),
+        connect=connect,
+        zenoh_config_dir=config_dir,
+        site=args.site,
+        clock=args.clock if args.clock != "sim" else None,
+        log_level=args.log_level,
+        mission=MissionOptions(
+            method=args.method,
+            mode=args.mode,
+            rate=args.rate,
+            seed=args.seed,
+            camera=args.camera,
+            view_port=args.view_port if args.view else None,
+        ),
     )
     extra = [parse_child(entry, launch) for entry in args.child or []]
     names = [s.name for s in services] + [name for name, _ in extra]
@@ -118,10 +144,19 @@ def build_config(args: argparse.Namespace) -> tuple[UpConfig, ZenohOptions]:
         raise ValueError("nothing to run: no services, no --child, and --no-router")
     totals = _totals(args.site) if any(s.name == "sim" for s in services) or args.until_done else None
     config = UpConfig(
-        services=services, launch=launch, extra_children=extra, start_router=args.router,
-        router_listen=router_listen, until_done=args.until_done, timeout=args.timeout,
-        run_base=Path(args.run_dir), progress_interval=args.progress_interval or (0.5 if args.progress == "bar" else 5.0),
-        stop_timeout=args.stop_timeout, start_timeout=args.start_timeout, max_restarts=args.max_restarts, totals=totals,
+        services=services,
+        launch=launch,
+        extra_children=extra,
+        start_router=args.router,
+        router_listen=router_listen,
+        until_done=args.until_done,
+        timeout=args.timeout,
+        run_base=Path(args.run_dir),
+        progress_interval=args.progress_interval or (0.5 if args.progress == "bar" else 5.0),
+        stop_timeout=args.stop_timeout,
+        start_timeout=args.start_timeout,
+        max_restarts=args.max_restarts,
+        totals=totals,
     )
     if config_dir is not None:
         options = ZenohOptions(config_file=str(config_dir / f"{SUPERVISOR_ROLE}.json5"))
@@ -153,46 +188,116 @@ def run_up(args: argparse.Namespace) -> int:
 def add_up_arguments(parser: argparse.ArgumentParser) -> None:
     add_common_arguments(parser, zenoh=False)  # --site, --namespace, --clock, --log-level (passed on)
     known = ", ".join(f"{name} ({spec.help})" for name, spec in SERVICES.items())
-    parser.add_argument("--services", metavar="LIST", help=f"comma-separated services to run (default {','.join(DEFAULT_SERVICES)}; "
-                                                           f"'' for none). Known: {known}")
-    parser.add_argument("--child", action="append", metavar="NAME=COMMAND",
-                        help="also run and supervise COMMAND as NAME (repeatable); {python} {connect} {namespace} {site} are filled in")
+    parser.add_argument(
+        "--services",
+        metavar="LIST",
+        help=f"comma-separated services to run (default {','.join(DEFAULT_SERVICES)}; '' for none). Known: {known}",
+    )
+    parser.add_argument(
+        "--child",
+        action="append",
+        metavar="NAME=COMMAND",
+        help="also run and supervise COMMAND as NAME (repeatable); {python} {connect} {namespace} {site} are filled in",
+    )
     mission = parser.add_argument_group("mission (passed to the services that take them)")
     mission.add_argument("--method", help="planning method / baseline (e.g. arroch, no-feedback, no-comm)")
-    mission.add_argument("--mode", choices=("realtime", "rate", "lockstep"),
-                         help="simulation clock: realtime, rate (with --rate) or lockstep (time advances only when every request is answered)")
-    mission.add_argument("--rate", type=float, metavar="K", help="simulate at K times real time (with --mode lockstep: at most)")
+    mission.add_argument(
+        "--mode",
+        choices=("realtime", "rate", "lockstep"),
+        help="simulation clock: realtime, rate (with --rate) or lockstep (time advances only when every request is answered)",
+    )
+    mission.add_argument(
+        "--rate", type=float, metavar="K", help="simulate at K times real time (with --mode lockstep: at most)"
+    )
     mission.add_argument("--seed", type=int, metavar="N", help="random seed of the simulation")
-    mission.add_argument("--camera", metavar="SPEC", help="the sim's virtual camera: 'tablet' (the human's tablet) or X,Y,Z,YAW,PITCH; "
-                                                         "the ar client and the tablet page (viewer mode) show it")
+    mission.add_argument(
+        "--camera",
+        metavar="SPEC",
+        help="the sim's virtual camera: 'tablet' (the human's tablet) or X,Y,Z,YAW,PITCH; "
+        "the ar client and the tablet page (viewer mode) show it",
+    )
     view = parser.add_argument_group("recording and live view")
-    view.add_argument("--record", action=argparse.BooleanOptionalAction, default=None,
-                      help="record the run to <run folder>/run.mcap (default: when the run has a sim; arroch runs show DIR reads it)")
-    view.add_argument("--view", action="store_true", help="serve the run live to Foxglove (WebSocket; layout docs/foxglove-layout.json)")
-    view.add_argument("--view-port", type=int, default=8765, metavar="PORT", help="with --view: the port (default 8765)")
+    view.add_argument(
+        "--record",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="record the run to <run folder>/run.mcap (default: when the run has a sim; arroch runs show DIR reads it)",
+    )
+    view.add_argument(
+        "--view",
+        action="store_true",
+        help="serve the run live to Foxglove (WebSocket; layout docs/foxglove-layout.json)",
+    )
+    view.add_argument(
+        "--view-port", type=int, default=8765, metavar="PORT", help="with --view: the port (default 8765)"
+    )
     run = parser.add_argument_group("supervision")
-    run.add_argument("--until-done", action="store_true", help="stop when the mission_done event arrives and print its metrics")
+    run.add_argument(
+        "--until-done", action="store_true", help="stop when the mission_done event arrives and print its metrics"
+    )
     run.add_argument("--timeout", type=float, metavar="S", help="give up (exit 1) after S seconds")
-    run.add_argument("--run-dir", default="runs", metavar="DIR", help="where runs/<timestamp>/ folders go (default ./runs)")
-    run.add_argument("--progress", choices=("auto", "bar", "line", "off"), default="auto",
-                     help="progress display (default: a bar on a terminal, else a line every --progress-interval)")
-    run.add_argument("--progress-interval", type=float, metavar="S", help="seconds between progress updates (default 5; bar 0.5)")
-    run.add_argument("--max-restarts", type=int, default=5, metavar="N", help="restarts of one child per minute before giving up (default 5)")
-    run.add_argument("--stop-timeout", type=float, default=5.0, metavar="S", help="seconds a child gets after SIGTERM before SIGKILL (default 5)")
-    run.add_argument("--start-timeout", type=float, default=60.0, metavar="S",
-                     help="seconds a service waits for those it starts after (the sim for the planner and restrictor) before starting anyway (default 60)")
+    run.add_argument(
+        "--run-dir", default="runs", metavar="DIR", help="where runs/<timestamp>/ folders go (default ./runs)"
+    )
+    run.add_argument(
+        "--progress",
+        choices=("auto", "bar", "line", "off"),
+        default="auto",
+        help="progress display (default: a bar on a terminal, else a line every --progress-interval)",
+    )
+    run.add_argument(
+        "--progress-interval", type=float, metavar="S", help="seconds between progress updates (default 5; bar 0.5)"
+    )
+    run.add_argument(
+        "--max-restarts",
+        type=int,
+        default=5,
+        metavar="N",
+        help="restarts of one child per minute before giving up (default 5)",
+    )
+    run.add_argument(
+        "--stop-timeout",
+        type=float,
+        default=5.0,
+        metavar="S",
+        help="seconds a child gets after SIGTERM before SIGKILL (default 5)",
+    )
+    run.add_argument(
+        "--start-timeout",
+        type=float,
+        default=60.0,
+        metavar="S",
+        help="seconds a service waits for those it starts after (the sim for the planner and restrictor) before starting anyway (default 60)",
+    )
     net = parser.add_argument_group("zenoh")
-    net.add_argument("--router", action=argparse.BooleanOptionalAction, default=True,
-                     help="start a router (default) or use one that runs elsewhere (--no-router)")
-    net.add_argument("--router-listen", metavar="ENDPOINT", help="where the started router listens (default a free port on 127.0.0.1)")
-    net.add_argument("--connect", metavar="ENDPOINTS", help=f"with --no-router: the router to use (default {DEFAULT_ROUTER})")
-    net.add_argument("--zenoh-config-dir", metavar="DIR",
-                     help="per-role configs from `arroch deploy render --out-dir` (router.json5, <service>.json5, supervisor.json5)")
+    net.add_argument(
+        "--router",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="start a router (default) or use one that runs elsewhere (--no-router)",
+    )
+    net.add_argument(
+        "--router-listen",
+        metavar="ENDPOINT",
+        help="where the started router listens (default a free port on 127.0.0.1)",
+    )
+    net.add_argument(
+        "--connect", metavar="ENDPOINTS", help=f"with --no-router: the router to use (default {DEFAULT_ROUTER})"
+    )
+    net.add_argument(
+        "--zenoh-config-dir",
+        metavar="DIR",
+        help="per-role configs from `arroch deploy render --out-dir` (router.json5, <service>.json5, supervisor.json5)",
+    )
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser("up", help="run a router and the services, supervised, with mission progress",
-                            description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = sub.add_parser(
+        "up",
+        help="run a router and the services, supervised, with mission progress",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     add_up_arguments(parser)
     parser.set_defaults(func=run_up)
     from .deployment.cli import register as register_deploy

@@ -75,15 +75,20 @@ class MissionProgress:
         for rid in sorted(self.robots):
             robot = self.robots[rid]
             count = f"{len(robot.delivered)}/{robot.total}" if robot.total is not None else str(len(robot.delivered))
-            state = f"waiting at {robot.waiting_door}" if robot.state == "waiting_at_door" and robot.waiting_door else robot.state
+            state = (
+                f"waiting at {robot.waiting_door}"
+                if robot.state == "waiting_at_door" and robot.waiting_door
+                else robot.state
+            )
             parts.append(f"{rid} {count} {state}")
         return ", ".join(parts) or "no robot heard yet"
 
     def line(self) -> str:
         done, total = self.delivered()
         delivered = f"{done}/{total}" if total is not None else str(done)
-        text = (f"t={self.sim_time:.1f}s delivered {delivered} [{self._robots_text()}] "
-                f"door openings {self.door_openings}")
+        text = (
+            f"t={self.sim_time:.1f}s delivered {delivered} [{self._robots_text()}] door openings {self.door_openings}"
+        )
         if self.conflicts:
             text += f" plan conflicts {self.conflicts}"
         return text + (" (mission done)" if self.done else "")

@@ -30,7 +30,7 @@ class RunDir:
         self._events: TextIO = open(path / "events.jsonl", "a", encoding="utf-8")
 
     @classmethod
-    def create(cls, base: Path) -> "RunDir":
+    def create(cls, base: Path) -> RunDir:
         """A new folder ``base/YYYYmmdd-HHMMSS`` (``-2``, ``-3``... if two runs start in one second)."""
         stamp = time.strftime("%Y%m%d-%H%M%S")
         base.mkdir(parents=True, exist_ok=True)

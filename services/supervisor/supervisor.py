@@ -62,8 +62,9 @@ class UpConfig:
 
 
 class Supervisor(Service):
-    def __init__(self, config: UpConfig, output: Output, zenoh_options: ZenohOptions,
-                 clock: WallClock | SimClock | None = None) -> None:
+    def __init__(
+        self, config: UpConfig, output: Output, zenoh_options: ZenohOptions, clock: WallClock | SimClock | None = None
+    ) -> None:
         super().__init__(SUPERVISOR_ROLE, config.launch.namespace, zenoh_options, clock=clock)
         self.config = config
         self.output = output
@@ -114,10 +115,13 @@ class Supervisor(Service):
 
     def setup(self) -> None:
         self.subscribe(self.keys.event(), Event, self._on_event)
-        self.subscribe(self.keys.robot_status("*"), RobotStatus, lambda msg, key: self.progress.on_status(msg), latest=True)
+        self.subscribe(
+            self.keys.robot_status("*"), RobotStatus, lambda msg, key: self.progress.on_status(msg), latest=True
+        )
         # history=True: tokens declared before this subscriber count too.
-        self._declared.append(self.session.liveliness().declare_subscriber(
-            self.keys.liveliness("*", "*"), self._on_token, history=True))
+        self._declared.append(
+            self.session.liveliness().declare_subscriber(self.keys.liveliness("*", "*"), self._on_token, history=True)
+        )
         self.every(TICK, self._tick)
         self.every(self.config.progress_interval, self._show_progress)
 
@@ -179,7 +183,10 @@ class Supervisor(Service):
                 return False
             if not self.router.running():
                 self.router.flush_output()
-                log.error("the router %s before it was ready (its output is above)", describe_exit(self.router.returncode() or 0))
+                log.error(
+                    "the router %s before it was ready (its output is above)",
+                    describe_exit(self.router.returncode() or 0),
+                )
                 return False
             if time.monotonic() > deadline:
                 log.error("the router did not report ready within %.0f s", self.config.router_timeout)
@@ -211,8 +218,12 @@ class Supervisor(Service):
             if missing and now - self._started < self.config.start_timeout:
                 continue
             if missing:
-                log.warning("starting %s although %s did not come up within %.0f s", child.name, ", ".join(missing),
-                            self.config.start_timeout)
+                log.warning(
+                    "starting %s although %s did not come up within %.0f s",
+                    child.name,
+                    ", ".join(missing),
+                    self.config.start_timeout,
+                )
             del self._waiting[child.name]
             self._start(child)
 
@@ -252,13 +263,23 @@ class Supervisor(Service):
         delay = child.policy.next_delay(now, child.ran_for())
         if delay is None:
             child.gave_up = True
-            log.error("%s %s; it was restarted %d times in the last minute: giving up", child.name, how,
-                      child.policy.restarts_last_minute)
+            log.error(
+                "%s %s; it was restarted %d times in the last minute: giving up",
+                child.name,
+                how,
+                child.policy.restarts_last_minute,
+            )
             self._fail(f"{child.name} keeps crashing")
             return
         child.restart_at = now + delay
-        log.warning("%s %s after %.1f s; restarting it in %.1f s (%d restart(s) in the last minute)",
-                    child.name, how, child.ran_for(), delay, child.policy.restarts_last_minute)
+        log.warning(
+            "%s %s after %.1f s; restarting it in %.1f s (%d restart(s) in the last minute)",
+            child.name,
+            how,
+            child.ran_for(),
+            delay,
+            child.policy.restarts_last_minute,
+        )
 
     def _fail(self, reason: str) -> None:
         self.exit_code = 1
@@ -274,8 +295,12 @@ class Supervisor(Service):
         self.output.attach_log(self.run_dir.log)
         launch = self.config.launch
         launch.run_dir = self.run_dir.path
-        log.info("run folder %s; namespace %s; services %s", self.run_dir.path, launch.namespace,
-                 ", ".join(s.name for s in self.config.services) or "none")
+        log.info(
+            "run folder %s; namespace %s; services %s",
+            self.run_dir.path,
+            launch.namespace,
+            ", ".join(s.name for s in self.config.services) or "none",
+        )
         try:
             if self.config.start_router and not self._start_router():
                 if not self.stopping:
@@ -316,14 +341,19 @@ class Supervisor(Service):
             for line in ["mission metrics:", *self.progress.metrics_text().splitlines()]:
                 self.output.line("up", line)
         if self.run_dir is not None:
-            self.run_dir.write_json("run.json", {
-                "namespace": self.config.launch.namespace,
-                "services": [s.name for s in self.config.services],
-                "children": {c.name: {"argv": c.argv, "starts": c.starts, "last_exit": c.returncode()} for c in everyone},
-                "stop_reason": self.stop_reason or "done",
-                "exit_code": self.exit_code,
-                "mission_done": self.progress.done,
-                "wall_seconds": round(time.monotonic() - self._started, 3),
-            })
+            self.run_dir.write_json(
+                "run.json",
+                {
+                    "namespace": self.config.launch.namespace,
+                    "services": [s.name for s in self.config.services],
+                    "children": {
+                        c.name: {"argv": c.argv, "starts": c.starts, "last_exit": c.returncode()} for c in everyone
+                    },
+                    "stop_reason": self.stop_reason or "done",
+                    "exit_code": self.exit_code,
+                    "mission_done": self.progress.done,
+                    "wall_seconds": round(time.monotonic() - self._started, 3),
+                },
+            )
             self.run_dir.close()
         self.output.close()

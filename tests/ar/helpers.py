@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import dataclasses
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 import numpy as np
 
-from protocol.site import load_site
 from protocol.frames import CameraPose, look_at, rotation_angle
+from protocol.site import load_site
 from services.ar_client.project import Intrinsics
 
 SITES = Path(__file__).parent / "sites"
@@ -24,19 +24,21 @@ SINGLE_CENTRE = np.array([13.949, 4.0, 1.4])
 CLUSTER_CENTRE = np.array([0.051, 5.0, 1.35])
 
 
-@lru_cache(maxsize=None)
+@cache
 def site(name: str):  # noqa: ANN201
     return load_site(SITES / f"{name}.toml")
 
 
-@lru_cache(maxsize=None)
+@cache
 def only_tags(name: str, tags: tuple[int, ...]):  # noqa: ANN201
     """The site with only ``tags`` on its walls (to render frames in which only those can be seen)."""
     full = site(name)
     return dataclasses.replace(full, landmarks=[lm for lm in full.landmarks if lm.tag in tags])
 
 
-def view_of(target: np.ndarray, facing_yaw: float, distance: float, obliquity_deg: float, height: float = 1.2) -> CameraPose:
+def view_of(
+    target: np.ndarray, facing_yaw: float, distance: float, obliquity_deg: float, height: float = 1.2
+) -> CameraPose:
     """A camera ``distance`` m from ``target`` (horizontally), ``obliquity_deg`` off the wall normal ``facing_yaw``, aimed at it."""
     a = facing_yaw + np.radians(obliquity_deg)
     xy = target[:2] + distance * np.array([np.cos(a), np.sin(a)])
@@ -45,4 +47,6 @@ def view_of(target: np.ndarray, facing_yaw: float, distance: float, obliquity_de
 
 def errors(estimate: CameraPose, truth: CameraPose) -> tuple[float, float]:
     """Position error (m) and rotation error (degrees)."""
-    return float(np.linalg.norm(estimate.position - truth.position)), float(np.degrees(rotation_angle(estimate.R_wc, truth.R_wc)))
+    return float(np.linalg.norm(estimate.position - truth.position)), float(
+        np.degrees(rotation_angle(estimate.R_wc, truth.R_wc))
+    )

@@ -117,8 +117,8 @@ def test_a_landmark_seen_from_the_front_has_its_tl_corner_top_left(detector):
     """The site's corner convention on rendered pixels: a level camera facing a wall tag sees the
     landmark's ``corners()[0]`` (TL) at the top-left of the detected quad, and each detector's named
     corners land on the projections of ``corners()`` (the texture, the site and the detectors agree)."""
-    from services.ar_client.detect import TagDetector
     from protocol.frames import look_at
+    from services.ar_client.detect import TagDetector
     from services.ar_client.project import Projector
     from services.ar_client.synth import render
     from tests.ar.helpers import HD, only_tags

@@ -10,8 +10,8 @@ import cv2
 import numpy as np
 import pytest
 
-from services.ar_client.detect import TagDetector
 from protocol.frames import look_at, matrix_from_quat, rotation_angle
+from services.ar_client.detect import TagDetector
 from services.ar_client.synth import render
 from tests.ar.helpers import HALL_FILE, HD, site
 from tests.procs import ROOT, arroch
@@ -48,18 +48,40 @@ def test_localize_says_why_when_it_cannot(tmp_path):
     assert r.returncode == 1
     data = json.loads(r.stdout)
     assert data == {"ok": False, "reason": "no landmark tag in view", "tags": []}
-    wrong_size = _run("ar", "localize", "--site", str(HALL_FILE), "--image", str(blank), "--intrinsics", "500,500,320,240,640,480")
+    wrong_size = _run(
+        "ar", "localize", "--site", str(HALL_FILE), "--image", str(blank), "--intrinsics", "500,500,320,240,640,480"
+    )
     assert wrong_size.returncode == 2 and "1280x720" in wrong_size.stderr
-    missing = _run("ar", "localize", "--site", str(HALL_FILE), "--image", str(tmp_path / "nope.png"), "--intrinsics", INTRINSICS)
+    missing = _run(
+        "ar", "localize", "--site", str(HALL_FILE), "--image", str(tmp_path / "nope.png"), "--intrinsics", INTRINSICS
+    )
     assert missing.returncode == 2 and "cannot read image" in missing.stderr
 
 
 def test_render_draws_a_state_file_over_an_image(frame_png, tmp_path):
-    state = {"time": 0.0, "poses": {"r0": [2.0, 5.0, 0.0]}, "intents": {"r0": [[0, 2.0, 5.0, 0], [10, 1.0, 4.0, 0]]}, "doors": {}}
+    state = {
+        "time": 0.0,
+        "poses": {"r0": [2.0, 5.0, 0.0]},
+        "intents": {"r0": [[0, 2.0, 5.0, 0], [10, 1.0, 4.0, 0]]},
+        "doors": {},
+    }
     state_file = tmp_path / "state.json"
     state_file.write_text(json.dumps(state))
     out = tmp_path / "out.png"
-    r = _run("ar", "render", "--site", str(HALL_FILE), "--image", frame_png, "--intrinsics", INTRINSICS, "--state", str(state_file), "--out", str(out))
+    r = _run(
+        "ar",
+        "render",
+        "--site",
+        str(HALL_FILE),
+        "--image",
+        frame_png,
+        "--intrinsics",
+        INTRINSICS,
+        "--state",
+        str(state_file),
+        "--out",
+        str(out),
+    )
     assert r.returncode == 0, r.stderr
     drawn = cv2.imread(str(out))
     plain = cv2.imread(frame_png)
@@ -68,7 +90,20 @@ def test_render_draws_a_state_file_over_an_image(frame_png, tmp_path):
     assert changed.sum() > 500  # the avatar, path and status were drawn
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"poses": {"r0": [1, 2]}}))
-    r = _run("ar", "render", "--site", str(HALL_FILE), "--image", frame_png, "--intrinsics", INTRINSICS, "--state", str(bad), "--out", str(out))
+    r = _run(
+        "ar",
+        "render",
+        "--site",
+        str(HALL_FILE),
+        "--image",
+        frame_png,
+        "--intrinsics",
+        INTRINSICS,
+        "--state",
+        str(bad),
+        "--out",
+        str(out),
+    )
     assert r.returncode == 2 and "poses.r0" in r.stderr
 
 
@@ -106,12 +141,26 @@ def test_localize_takes_gravity_and_picks_a_single_tags_right_solution(tmp_path)
     truth = single_tag_view(-30.0)
     path = tmp_path / "one-tag.png"
     cv2.imwrite(str(path), render(only_tags("hall", (10,)), truth, VGA, seed=430).image)
-    common = ("ar", "localize", "--site", str(HALL_FILE), "--image", str(path), "--intrinsics", ",".join(f"{v:g}" for v in VGA.as_list()), "--json")
+    common = (
+        "ar",
+        "localize",
+        "--site",
+        str(HALL_FILE),
+        "--image",
+        str(path),
+        "--intrinsics",
+        ",".join(f"{v:g}" for v in VGA.as_list()),
+        "--json",
+    )
     blind = json.loads(_run(*common).stdout)
     assert blind["ok"] and blind["ambiguous"] and "gravity_error_deg" not in blind
     g = ",".join(f"{v:.4f}" for v in gravity_in_camera(truth.R_wc))
     seen = json.loads(_run(*common, "--gravity", g).stdout)
     assert seen["ok"] and seen["gravity_error_deg"] < 2.0
-    assert np.linalg.norm(np.array(seen["position"]) - truth.position) < 0.1 < np.linalg.norm(np.array(blind["position"]) - truth.position)
+    assert (
+        np.linalg.norm(np.array(seen["position"]) - truth.position)
+        < 0.1
+        < np.linalg.norm(np.array(blind["position"]) - truth.position)
+    )
     bad = _run(*common, "--gravity", "1,2")
     assert bad.returncode == 2 and "gravity" in bad.stderr

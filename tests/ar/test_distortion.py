@@ -24,7 +24,9 @@ def distorted(image: np.ndarray, lens: Lens) -> np.ndarray:
     h, w = image.shape
     u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
     ideal = lens.undistort(np.stack([u, v], axis=-1))
-    return cv2.remap(image, ideal[..., 0].astype(np.float32), ideal[..., 1].astype(np.float32), cv2.INTER_LINEAR, borderValue=120)
+    return cv2.remap(
+        image, ideal[..., 0].astype(np.float32), ideal[..., 1].astype(np.float32), cv2.INTER_LINEAR, borderValue=120
+    )
 
 
 def test_lens_round_trip():

@@ -35,7 +35,9 @@ def test_every_usable_library_entry_becomes_a_button_with_parameter_chips():
     assert panel.press_at((x0 + x1) / 2, (y0 + y1) / 2) == chip.action
     assert panel.values("door_unavailable")["minutes"] == 30
     assert not panel.ready("cancel") and not panel.press("cancel")
-    panel.on_constraints(ConstraintSet(version=3, constraints=[Constraint(id="c7", kind="forbid_room", start=0, end=60, asp="")]))
+    panel.on_constraints(
+        ConstraintSet(version=3, constraints=[Constraint(id="c7", kind="forbid_room", start=0, end=60, asp="")])
+    )
     assert panel.ready("cancel") and panel.values("cancel") == {"constraint_id": "c7"}
     assert panel.press_at(-5, -5) is None
 
@@ -49,7 +51,20 @@ def test_a_small_frame_still_lays_out_without_overflow():
 
 @pytest.mark.integration
 def test_a_press_reaches_the_restrictor_and_its_ack_comes_back(router, namespace, client, spawn, tmp_path):
-    restrictor = spawn(arroch("restrictor", "--namespace", namespace, "--connect", router, "--clock", "wall", "--state-dir", str(tmp_path / "state")), name="restrictor")
+    restrictor = spawn(
+        arroch(
+            "restrictor",
+            "--namespace",
+            namespace,
+            "--connect",
+            router,
+            "--clock",
+            "wall",
+            "--state-dir",
+            str(tmp_path / "state"),
+        ),
+        name="restrictor",
+    )
     restrictor.wait_for("up on namespace", timeout=30)
     panel = _panel(restrictor_sender(client, timeout=10.0))
     panel.set_value("door_unavailable", "door", OFFICE_DOOR)
@@ -62,7 +77,9 @@ def test_a_press_reaches_the_restrictor_and_its_ack_comes_back(router, namespace
     assert result is not None and result.status == "accepted", result
     assert result.constraint_id and result.params == {"door": OFFICE_DOOR, "minutes": 15}
     # The answer is on screen.
-    assert any(p.kind == "text" and p.text.startswith("door_unavailable: accepted") for p in panel.primitives(1280, 720))
+    assert any(
+        p.kind == "text" and p.text.startswith("door_unavailable: accepted") for p in panel.primitives(1280, 720)
+    )
 
     # A value the restrictor refuses (here: a room the site does not have) comes back with its reason.
     assert panel.press("forbid_room", {"room": "ballroom", "minutes": 5})

@@ -18,8 +18,8 @@ import cv2
 import numpy as np
 import pytest
 
-from services.ar_client.detect import TagDetector
 from protocol.frames import CameraPose, camera_from_yaw_pitch
+from services.ar_client.detect import TagDetector
 from services.ar_client.localize import Localizer
 from services.ar_client.synth import render
 from tests.ar.helpers import CLUSTER_CENTRE, HD, SINGLE_CENTRE, SINGLE_TAG, VGA, errors, only_tags, site, view_of
@@ -121,7 +121,12 @@ def test_a_misplaced_tag_is_rejected_as_an_outlier(detector):
     hall = site("hall")
     wrong = dataclasses.replace(
         hall,
-        landmarks=[dataclasses.replace(lm, position=(lm.position[0], lm.position[1] + 0.3, lm.position[2])) if lm.tag == 2 else lm for lm in hall.landmarks],
+        landmarks=[
+            dataclasses.replace(lm, position=(lm.position[0], lm.position[1] + 0.3, lm.position[2]))
+            if lm.tag == 2
+            else lm
+            for lm in hall.landmarks
+        ],
     )
     truth = view_of(CLUSTER_CENTRE, 0.0, 2.5, 20.0)
     frame = render(hall, truth, HD, seed=5)  # the real wall

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from protocol.codec import decode, encode
+from protocol.frames import camera_from_yaw_pitch, look_at
 from protocol.messages import DoorState, Intent, Overlay, RobotPose, RobotStatus
 from services.ar_client.draw import draw
-from protocol.frames import camera_from_yaw_pitch, look_at
 from services.ar_client.overlay import DOOR_CLOSED, DOOR_OPEN, OverlayBuilder
 from services.ar_client.pipeline import BadFrame, Pipeline
 from services.ar_client.project import Projector
@@ -24,10 +24,22 @@ EYE = look_at([5.0, 5.8, 1.4], [2.0, 3.0, 0.3])
 def _world(door_open: bool | None = None) -> WorldView:
     w = WorldView()
     w.on_pose(RobotPose(robot="r0", x=3.0, y=5.0, theta=np.pi))  # in the hall: in plain view
-    w.on_pose(RobotPose(robot="r1", x=1.0, y=3.3, theta=0.0))  # in room a: seen through d_a (line crosses y=4 at x=2.12)
+    w.on_pose(
+        RobotPose(robot="r1", x=1.0, y=3.3, theta=0.0)
+    )  # in room a: seen through d_a (line crosses y=4 at x=2.12)
     w.on_status(RobotStatus(robot="r1", state="waiting_at_door"))
     # r0 drives west along the hall, turns south through d_a into room a.
-    w.on_intent(Intent(robot="r0", trajectory=[[0.0, 3.0, 5.0, np.pi], [2.0, 2.0, 5.0, -np.pi / 2], [6.0, 2.0, 3.0, -np.pi / 2], [22.0, 2.0, 0.6, -np.pi / 2]]))
+    w.on_intent(
+        Intent(
+            robot="r0",
+            trajectory=[
+                [0.0, 3.0, 5.0, np.pi],
+                [2.0, 2.0, 5.0, -np.pi / 2],
+                [6.0, 2.0, 3.0, -np.pi / 2],
+                [22.0, 2.0, 0.6, -np.pi / 2],
+            ],
+        )
+    )
     if door_open is not None:
         w.on_door(DoorState(door="d_a", open=door_open, by="human"))
     return w
@@ -106,7 +118,16 @@ def test_drawn_pixels_carry_the_robot_colour_solid_or_translucent():
         rgb = np.array(builder.colour(rid)[:3], dtype=float)
         bgr = rgb[::-1]
         expected = bgr if solid else 0.5 * bgr + 0.5 * 100.0  # X-ray: half-transparent over the frame
-        ring = np.array([[(3.0 if rid == "r0" else 1.0) + 0.25 * np.cos(a), (5.0 if rid == "r0" else 3.3) + 0.25 * np.sin(a), 0.45] for a in np.linspace(0, 2 * np.pi, 48)])
+        ring = np.array(
+            [
+                [
+                    (3.0 if rid == "r0" else 1.0) + 0.25 * np.cos(a),
+                    (5.0 if rid == "r0" else 3.3) + 0.25 * np.sin(a),
+                    0.45,
+                ]
+                for a in np.linspace(0, 2 * np.pi, 48)
+            ]
+        )
         uv, front = proj.project_points(ring)
         hits = 0
         for u, v in np.round(uv[front]).astype(int):

@@ -87,7 +87,9 @@ def test_a_pose_tilted_against_gravity_is_rejected():
     for k in range(5):
         assert f.update(level, k / 15.0, gravity).accepted
     tilt = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(0.15), -np.sin(0.15)], [0.0, np.sin(0.15), np.cos(0.15)]])
-    tilted = CameraPose(R_wc=level.R_wc @ tilt, position=level.position + [0.02, 0.0, 0.0])  # 8.6 deg pitch, a small step
+    tilted = CameraPose(
+        R_wc=level.R_wc @ tilt, position=level.position + [0.02, 0.0, 0.0]
+    )  # 8.6 deg pitch, a small step
     r = f.update(tilted, 5 / 15.0, gravity)
     assert not r.accepted and "gravity" in r.reason
     assert np.degrees(rotation_angle(r.pose.R_wc, level.R_wc)) < 0.5

@@ -7,8 +7,8 @@ import cv2
 import numpy as np
 import pytest
 
-from services.ar_client.detect import TagDetector
 from protocol.frames import camera_from_yaw_pitch, look_at
+from services.ar_client.detect import TagDetector
 from services.ar_client.localize import Localizer
 from services.ar_client.project import NEAR, Intrinsics, Projector
 from services.ar_client.synth import render
@@ -19,7 +19,12 @@ def test_numpy_projection_matches_opencv_with_distortion():
     K = Intrinsics(700.0, 690.0, 321.3, 238.7, 640, 480, (-0.21, 0.08, 0.001, -0.0015, -0.01))
     pose = camera_from_yaw_pitch([1.0, 2.0, 1.4], yaw=0.3, pitch=-0.2, roll=0.05)
     rng = np.random.default_rng(1)
-    pts = pose.position + (pose.R_wc @ np.column_stack([rng.uniform(-1, 1, 200), rng.uniform(-1, 1, 200), rng.uniform(0.5, 6, 200)]).T).T
+    pts = (
+        pose.position
+        + (
+            pose.R_wc @ np.column_stack([rng.uniform(-1, 1, 200), rng.uniform(-1, 1, 200), rng.uniform(0.5, 6, 200)]).T
+        ).T
+    )
     ours, front = Projector(pose, K).project_points(pts)
     assert front.all()
     rvec, tvec = pose.rvec_tvec()
@@ -71,7 +76,9 @@ def test_a_floor_path_passing_under_the_tablet_keeps_its_visible_part():
     assert v[-1] > HD.height  # leaves through the bottom edge
 
 
-@pytest.mark.parametrize("K,distances", [(HD, (1.0, 2.0, 3.0, 4.0)), (VGA, (1.0, 2.0, 3.0))], ids=["1280x720", "640x480"])
+@pytest.mark.parametrize(
+    "K,distances", [(HD, (1.0, 2.0, 3.0, 4.0)), (VGA, (1.0, 2.0, 3.0))], ids=["1280x720", "640x480"]
+)
 def test_world_points_land_within_1px_of_the_truth(K, distances):
     """Localise from real pixels, then project points of the hall's floor, at avatar height and on
     the tags' wall: every point inside the image is within 1 px of where the true pose puts it, at

@@ -18,7 +18,9 @@ def test_random_bytes_noise_and_odd_sizes():
     world.on_pose(RobotPose(robot="r0", x=2.0, y=5.0, theta=0.0))
     # Odd intents: a single row, times going backwards, a far-away path.
     world.on_intent(Intent(robot="r0", trajectory=[[5.0, 1.0, 1.0, 0.0]]))
-    world.on_intent(Intent(robot="r1", trajectory=[[9.0, 1.0, 1.0, 0.0], [3.0, 2.0, 2.0, 0.0], [1.0, 900.0, -900.0, 0.0]]))
+    world.on_intent(
+        Intent(robot="r1", trajectory=[[9.0, 1.0, 1.0, 0.0], [3.0, 2.0, 2.0, 0.0], [1.0, 900.0, -900.0, 0.0]])
+    )
     pipeline = Pipeline(site("hall"), world)
     answered = refused = 0
     for k in range(60):

@@ -11,8 +11,8 @@ import cv2
 import numpy as np
 import pytest
 
-from protocol.messages import CameraFrame, Event, Overlay, RobotPose
 from protocol.frames import look_at
+from protocol.messages import CameraFrame, Event, Overlay, RobotPose
 from services.ar_client.synth import render
 from tests.ar.helpers import HALL_FILE, HD, VGA, site
 from tests.conftest import wait_for_message
@@ -40,7 +40,22 @@ def _stats(client, namespace: str) -> dict:  # noqa: ANN001
 
 
 def test_frames_in_overlays_out_and_bad_frames_do_not_kill_it(router, namespace, client, spawn):
-    ar = spawn(arroch("ar", "--site", str(HALL_FILE), "--namespace", namespace, "--connect", router, "--clock", "wall", "--camera", "tab1"), name="ar")
+    ar = spawn(
+        arroch(
+            "ar",
+            "--site",
+            str(HALL_FILE),
+            "--namespace",
+            namespace,
+            "--connect",
+            router,
+            "--clock",
+            "wall",
+            "--camera",
+            "tab1",
+        ),
+        name="ar",
+    )
     ar.wait_for("waiting for frames", timeout=30)
     overlays = client.collect(client.keys.overlay("tab1"), Overlay)
     time.sleep(0.5)  # let the subscriptions meet through the router
@@ -57,7 +72,9 @@ def test_frames_in_overlays_out_and_bad_frames_do_not_kill_it(router, namespace,
     # Garbage instead of a JPEG, and a frame with impossible intrinsics: counted, dropped, no overlay.
     client.publish(client.keys.camera_frame("tab1"), _frame(HD, b"\xff\xd8\xff garbage"))
     time.sleep(0.5)
-    bad = CameraFrame(camera="tab1", jpeg=_jpeg(frame.image), width=HD.width, height=HD.height, intrinsics=[0.0, 0.0, 1.0, 1.0])
+    bad = CameraFrame(
+        camera="tab1", jpeg=_jpeg(frame.image), width=HD.width, height=HD.height, intrinsics=[0.0, 0.0, 1.0, 1.0]
+    )
     client.publish(client.keys.camera_frame("tab1"), bad)
     time.sleep(0.5)
     assert _stats(client, namespace).get("bad_frames") == 2
@@ -87,8 +104,24 @@ def test_a_folder_of_images_is_processed_recorded_and_the_service_ends(router, n
     (folder / "intrinsics.json").write_text(json.dumps({"intrinsics": VGA.as_list()}))
     overlays = client.collect(client.keys.overlay("tablet"), Overlay)
     out = tmp_path / "out.mp4"
-    ar = spawn(arroch("ar", "--site", str(HALL_FILE), "--namespace", namespace, "--connect", router, "--clock", "wall",
-                      "--source", f"images:{folder}", "--record", str(out)), name="ar")
+    ar = spawn(
+        arroch(
+            "ar",
+            "--site",
+            str(HALL_FILE),
+            "--namespace",
+            namespace,
+            "--connect",
+            router,
+            "--clock",
+            "wall",
+            "--source",
+            f"images:{folder}",
+            "--record",
+            str(out),
+        ),
+        name="ar",
+    )
     assert ar.popen.wait(60) == 0, ar.output
     assert "source finished after 5 frames" in ar.output
     got = []

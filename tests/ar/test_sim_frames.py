@@ -20,8 +20,8 @@ import cv2
 import numpy as np
 import pytest
 
-from protocol.site import load_site
 from protocol.frames import CameraPose
+from protocol.site import load_site
 from services.ar_client.pipeline import Pipeline
 from services.ar_client.project import Intrinsics, Projector
 from tests.ar.helpers import errors
@@ -57,8 +57,14 @@ def _shot(world, cam, supersample: int = 1) -> tuple[np.ndarray, CameraPose, Int
     spec = camera_module.CameraSpec.from_degrees(*cam, width=1280, height=720, vfov_deg=50.0, supersample=supersample)
     rgb = world.render(spec)
     fx, fy, cx, cy, w, h = spec.intrinsics
-    truth = CameraPose(R_wc=np.asarray(spec.R_world_camera, dtype=np.float64), position=np.asarray(spec.position, dtype=np.float64))
-    return cv2.cvtColor(np.ascontiguousarray(rgb[..., :3]), cv2.COLOR_RGB2BGR), truth, Intrinsics(fx, fy, cx, cy, int(w), int(h))
+    truth = CameraPose(
+        R_wc=np.asarray(spec.R_world_camera, dtype=np.float64), position=np.asarray(spec.position, dtype=np.float64)
+    )
+    return (
+        cv2.cvtColor(np.ascontiguousarray(rgb[..., :3]), cv2.COLOR_RGB2BGR),
+        truth,
+        Intrinsics(fx, fy, cx, cy, int(w), int(h)),
+    )
 
 
 @pytest.mark.parametrize("cam", CAMERAS)
@@ -78,8 +84,12 @@ def test_the_sim_camera_pose_is_recovered_from_its_pixels(office, world, cam):
 def test_world_points_project_within_1px_on_antialiased_sim_frames(office, world, cam):
     x0, y0, x1, y1 = office.rooms["storage"].rect
     floor = [[x, y, 0.0] for x in np.linspace(x0 + 0.3, x1 - 0.3, 12) for y in np.linspace(y0 + 0.3, y1 - 0.3, 10)]
-    walls = [[x, y, z] for x in np.linspace(x0 + 0.2, x1 - 0.2, 12) for y in (y0 + 0.05, y1 - 0.05) for z in (0.3, 1.0, 1.8)]
-    walls += [[x, y, z] for x in (x0 + 0.05, x1 - 0.05) for y in np.linspace(y0 + 0.2, y1 - 0.2, 10) for z in (0.3, 1.0, 1.8)]
+    walls = [
+        [x, y, z] for x in np.linspace(x0 + 0.2, x1 - 0.2, 12) for y in (y0 + 0.05, y1 - 0.05) for z in (0.3, 1.0, 1.8)
+    ]
+    walls += [
+        [x, y, z] for x in (x0 + 0.05, x1 - 0.05) for y in np.linspace(y0 + 0.2, y1 - 0.2, 10) for z in (0.3, 1.0, 1.8)
+    ]
     points = np.array(floor + walls)
     image, truth, K = _shot(world, cam, supersample=2)
     pipeline = Pipeline(office)
@@ -104,14 +114,38 @@ def test_a_snapshot_file_localised_by_the_cli(tmp_path):
     from tests.procs import ROOT, arroch
 
     png, truth_file = tmp_path / "s.png", tmp_path / "s.json"
-    snap = subprocess.run(arroch("sim", "snapshot", "--camera", "9.6,3.4,1.5,-125,-10", "--size", "1280x720", "--fov", "50",
-                                 "--supersample", "2", "--out", str(png), "--truth", str(truth_file)),
-                          cwd=ROOT, capture_output=True, text=True, timeout=120)
+    snap = subprocess.run(
+        arroch(
+            "sim",
+            "snapshot",
+            "--camera",
+            "9.6,3.4,1.5,-125,-10",
+            "--size",
+            "1280x720",
+            "--fov",
+            "50",
+            "--supersample",
+            "2",
+            "--out",
+            str(png),
+            "--truth",
+            str(truth_file),
+        ),
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert snap.returncode == 0, snap.stderr[-1000:]
     truth = json.loads(truth_file.read_text())
     intrinsics = ",".join(f"{v:.10g}" for v in truth["intrinsics"])
-    r = subprocess.run(arroch("ar", "localize", "--image", str(png), "--intrinsics", intrinsics, "--json"),
-                       cwd=ROOT, capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        arroch("ar", "localize", "--image", str(png), "--intrinsics", intrinsics, "--json"),
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert r.returncode == 0, r.stderr[-1000:]
     data = json.loads(r.stdout)
     assert data["ok"] and len(data["tags"]) >= 4

@@ -26,10 +26,30 @@ CAMERA = "7.0,1.5,1.4,0,-5"
 def test_sim_frames_become_overlays_with_the_true_pose(router, namespace, client, spawn):
     overlays = client.collect(client.keys.overlay("tab"), Overlay)
     truths = client.collect(client.keys.camera_truth("tab"), CameraTruth)
-    ar = spawn(arroch("ar", "--namespace", namespace, "--connect", router, "--camera", "tab", "--clock", "sim"), name="ar")
+    ar = spawn(
+        arroch("ar", "--namespace", namespace, "--connect", router, "--camera", "tab", "--clock", "sim"), name="ar"
+    )
     ar.wait_for("waiting for frames", timeout=30)
-    sim = spawn(arroch("sim", "--namespace", namespace, "--connect", router, "--camera", CAMERA, "--camera-id", "tab",
-                       "--camera-rate", "3", "--camera-size", "1280x720", "--camera-fov", "50"), name="sim")
+    sim = spawn(
+        arroch(
+            "sim",
+            "--namespace",
+            namespace,
+            "--connect",
+            router,
+            "--camera",
+            CAMERA,
+            "--camera-id",
+            "tab",
+            "--camera-rate",
+            "3",
+            "--camera-size",
+            "1280x720",
+            "--camera-fov",
+            "50",
+        ),
+        name="sim",
+    )
     truth_by_seq: dict[int, CameraTruth] = {}
     matched = []
     deadline = time.monotonic() + 60

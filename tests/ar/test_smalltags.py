@@ -66,7 +66,9 @@ def test_noise_and_texture_decode_to_nothing():
     det = TagDetector("opencv")  # every one of the 587 codes allowed: the hardest case for false positives
     for k in range(6):
         noise = rng.integers(0, 256, (480, 640)).astype(np.uint8)
-        blocks = cv2.resize(rng.integers(0, 2, (60, 80)).astype(np.uint8) * 255, (640, 480), interpolation=cv2.INTER_NEAREST)
+        blocks = cv2.resize(
+            rng.integers(0, 2, (60, 80)).astype(np.uint8) * 255, (640, 480), interpolation=cv2.INTER_NEAREST
+        )
         image = cv2.GaussianBlur(noise if k % 2 else blocks, (0, 0), 0.7 + 0.2 * k)
         assert det.detect(image) == []
 

@@ -13,10 +13,23 @@ from protocol.messages import Overlay, Primitive
 from services.ar_client.snapshots import OverlaySnapshots, least_needed, shows_world
 
 
-def overlay(seq: int, *, ok: bool = True, layers: tuple[str, ...] = ("robot:r0", "intent:r0"), latency: float = 0.05) -> Overlay:
-    prims = [Primitive(kind="line", points=[[1.0, 1.0], [5.0, 5.0]], color=[255, 0, 0, 255], layer=layer) for layer in layers]
-    return Overlay(camera="tablet", frame_seq=seq, width=32, height=24, ok=ok, latency=latency, primitives=prims,
-                   position=[1.0, 2.0, 1.3] if ok else [], quaternion=[0.0, 0.0, 0.0, 1.0] if ok else [])
+def overlay(
+    seq: int, *, ok: bool = True, layers: tuple[str, ...] = ("robot:r0", "intent:r0"), latency: float = 0.05
+) -> Overlay:
+    prims = [
+        Primitive(kind="line", points=[[1.0, 1.0], [5.0, 5.0]], color=[255, 0, 0, 255], layer=layer) for layer in layers
+    ]
+    return Overlay(
+        camera="tablet",
+        frame_seq=seq,
+        width=32,
+        height=24,
+        ok=ok,
+        latency=latency,
+        primitives=prims,
+        position=[1.0, 2.0, 1.3] if ok else [],
+        quaternion=[0.0, 0.0, 0.0, 1.0] if ok else [],
+    )
 
 
 IMAGE = np.full((24, 32, 3), 90, np.uint8)
@@ -24,7 +37,9 @@ IMAGE = np.full((24, 32, 3), 90, np.uint8)
 
 def test_only_frames_with_a_pose_a_robot_an_intent_and_a_matching_drawing_are_kept(tmp_path: Path):
     assert shows_world(overlay(1)) and not shows_world(overlay(1, ok=False))
-    assert not shows_world(overlay(1, layers=("robot:r0", "door"))) and not shows_world(overlay(1, layers=("intent:r1",)))
+    assert not shows_world(overlay(1, layers=("robot:r0", "door"))) and not shows_world(
+        overlay(1, layers=("intent:r1",))
+    )
     keep = OverlaySnapshots(tmp_path / "overlays")
     assert keep.offer(overlay(1, layers=("robot:r0",)), IMAGE, 0.0) is None
     assert keep.offer(overlay(2, latency=2.0), IMAGE, 0.0) is None  # drawn 2 s of site time after its capture
@@ -32,7 +47,11 @@ def test_only_frames_with_a_pose_a_robot_an_intent_and_a_matching_drawing_are_ke
     assert path == tmp_path / "overlays" / "overlay-t00001.5-f3.png"
     assert cv2.imread(str(path)).shape == (24, 32, 3)
     record = json.loads(path.with_suffix(".json").read_text())
-    assert record["time"] == 1.5 and record["frame_seq"] == 3 and {p["layer"] for p in record["primitives"]} == {"robot:r0", "intent:r0"}
+    assert (
+        record["time"] == 1.5
+        and record["frame_seq"] == 3
+        and {p["layer"] for p in record["primitives"]} == {"robot:r0", "intent:r0"}
+    )
     assert not keep.wanted(5.0) and keep.offer(overlay(4), IMAGE, 5.0) is None  # within the minimum gap
 
 

@@ -51,12 +51,14 @@ def test_a_folder_needs_a_calibration_and_reads_in_name_order(tmp_path):
         (tmp_path / name).write_bytes(b"x")
     with pytest.raises(ValueError, match="intrinsics"):
         open_source(parse_source(f"images:{tmp_path}"), None)
-    (tmp_path / "intrinsics.json").write_text(json.dumps({"intrinsics": VGA.as_list(), "distortion": [0.1, 0, 0, 0, 0]}))
+    (tmp_path / "intrinsics.json").write_text(
+        json.dumps({"intrinsics": VGA.as_list(), "distortion": [0.1, 0, 0, 0, 0]})
+    )
     K = folder_intrinsics(tmp_path)
     assert K is not None and K.width == 640 and K.distortion[0] == 0.1
     source = open_source(parse_source(f"images:{tmp_path}"), None)
     assert isinstance(source, ImageFolderSource)
     assert [source.read().name, source.read().name, source.read()] == ["a.jpg", "b.png", None]
-    (tmp_path / "intrinsics.json").write_text("{\"intrinsics\": [1, 2]}")
+    (tmp_path / "intrinsics.json").write_text('{"intrinsics": [1, 2]}')
     with pytest.raises(ValueError, match="intrinsics.json"):
         folder_intrinsics(tmp_path)

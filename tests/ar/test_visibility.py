@@ -1,11 +1,11 @@
 """X-ray classification against hand-checked cases on the xray site (see its drawing):
 
-    y=6 +-----------------------------------------+
-        |                  hall                   |
-    y=4 +--[d_a: x 1.5-2.5]--+--[passage: x 5.4-6.6]--+
-        |         a          |          b             |
-    y=0 +--------------------+------------------------+
-        x=0                 x=4                      x=8
+y=6 +-----------------------------------------+
+    |                  hall                   |
+y=4 +--[d_a: x 1.5-2.5]--+--[passage: x 5.4-6.6]--+
+    |         a          |          b             |
+y=0 +--------------------+------------------------+
+    x=0                 x=4                      x=8
 """
 
 from __future__ import annotations

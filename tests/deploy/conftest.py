@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Callable, Iterator
 
 import pytest
 
@@ -13,8 +13,10 @@ from tests.procs import Proc, arroch
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    config.addinivalue_line("markers", "netns: builds Linux network namespaces (root, iproute2); "
-                                       "ARROCH_SKIP_NETNS=1 or -m 'not netns' deselects")
+    config.addinivalue_line(
+        "markers",
+        "netns: builds Linux network namespaces (root, iproute2); ARROCH_SKIP_NETNS=1 or -m 'not netns' deselects",
+    )
 
 
 @pytest.fixture(scope="session")

@@ -52,7 +52,10 @@ def require_netns() -> None:
     if shutil.which("ip") is None:
         pytest.fail(f"multi-host test needs the `ip` command (iproute2), which is not installed; {hint}", pytrace=False)
     if os.geteuid() != 0:
-        pytest.fail(f"multi-host test needs root to create network namespaces (running as uid {os.geteuid()}); {hint}", pytrace=False)
+        pytest.fail(
+            f"multi-host test needs root to create network namespaces (running as uid {os.geteuid()}); {hint}",
+            pytrace=False,
+        )
 
 
 @dataclass
@@ -90,7 +93,7 @@ class Lan:
     def hub(self) -> Host:
         return next(iter(self.hosts.values()))
 
-    def create(self) -> "Lan":
+    def create(self) -> Lan:
         try:
             for host in self.hosts.values():
                 _ip("netns", "add", host.netns)
@@ -103,15 +106,31 @@ class Lan:
             for host in list(self.hosts.values())[1:]:
                 port = f"p-{host.name[:10]}"
                 # Both ends are born inside namespaces: the machine's own namespace never sees them.
-                _ip("-n", hub.netns, "link", "add", port, "type", "veth", "peer", "name", host.interface, "netns", host.netns)
+                _ip(
+                    "-n",
+                    hub.netns,
+                    "link",
+                    "add",
+                    port,
+                    "type",
+                    "veth",
+                    "peer",
+                    "name",
+                    host.interface,
+                    "netns",
+                    host.netns,
+                )
                 _ip("-n", hub.netns, "link", "set", port, "master", "br0")
                 _ip("-n", hub.netns, "link", "set", port, "up")
                 _ip("-n", host.netns, "addr", "add", f"{host.address}/24", "dev", host.interface)
                 _ip("-n", host.netns, "link", "set", host.interface, "up")
         except NetnsError as exc:
             self.destroy()
-            pytest.fail(f"could not build the namespace LAN: {exc}; run as root with iproute2, "
-                        f"or set {SKIP_ENV}=1 to deselect these tests explicitly", pytrace=False)
+            pytest.fail(
+                f"could not build the namespace LAN: {exc}; run as root with iproute2, "
+                f"or set {SKIP_ENV}=1 to deselect these tests explicitly",
+                pytrace=False,
+            )
         return self
 
     def spawn(self, host: str, argv: list[str], *, name: str = "", env: dict[str, str] | None = None) -> Proc:
@@ -144,8 +163,10 @@ class Lan:
         if errors:
             raise NetnsError("; ".join(errors))
 
-    def __enter__(self) -> "Lan":
+    def __enter__(self) -> Lan:
         return self.create()
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
         self.destroy()

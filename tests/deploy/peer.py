@@ -102,7 +102,10 @@ def main() -> int:
             stats = sim_stats(watcher) or {}
         time.sleep(GRACE)
         stats = sim_stats(watcher) or stats
-        print(json.dumps({"attempts": attempts, "control": control_result, "repeats": REPEATS, "sim_stats": stats}), flush=True)
+        print(
+            json.dumps({"attempts": attempts, "control": control_result, "repeats": REPEATS, "sim_stats": stats}),
+            flush=True,
+        )
         return 0
     finally:
         for client in reversed(opened):

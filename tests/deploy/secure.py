@@ -12,8 +12,8 @@ from __future__ import annotations
 import contextlib
 import re
 import uuid
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Callable, Iterator
 
 from protocol.clock import WallClock
 from protocol.service import Service
@@ -39,15 +39,24 @@ def render_configs(certs: Path, foreign: Path, out: Path, *, router: str, listen
     """Write ``<role>.json5`` for every role, ``intruder``, ``nocert`` and ``foreign`` into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     for role in ROLES:
-        request = Request("secure", role, certs=certs, connect=[] if role == "router" else [router],
-                          listen=[listen] if role == "router" else [])
+        request = Request(
+            "secure",
+            role,
+            certs=certs,
+            connect=[] if role == "router" else [router],
+            listen=[listen] if role == "router" else [],
+        )
         (out / f"{role}.json5").write_text(render(request))
     # An identity the router's rules do not know: rendered as an AR client presenting its own certificate.
-    (out / f"{INTRUDER}.json5").write_text(render(Request("secure", "ar", certs=certs, name=INTRUDER, connect=[router])))
+    (out / f"{INTRUDER}.json5").write_text(
+        render(Request("secure", "ar", certs=certs, name=INTRUDER, connect=[router]))
+    )
     planner = (out / "planner.json5").read_text()
     nocert = re.sub(r"^\s*connect_(certificate|private_key):.*\n", "", planner, flags=re.M)
     (out / "nocert.json5").write_text(nocert.replace("enable_mtls: true", "enable_mtls: false"))
-    (out / "foreign.json5").write_text(planner.replace(str(certs.resolve() / "planner."), str(foreign.resolve() / "planner.")))
+    (out / "foreign.json5").write_text(
+        planner.replace(str(certs.resolve() / "planner."), str(foreign.resolve() / "planner."))
+    )
     return out
 
 
@@ -57,8 +66,14 @@ class RoleClient(TestClient):
     def __init__(self, namespace: str, config_file: Path, label: str) -> None:
         # TestClient's own constructor dials a plain endpoint; this one takes a whole config file.
         # Wall clock: these tests put raw payloads on every key, the clock key included.
-        Service.__init__(self, "testclient", namespace, ZenohOptions(config_file=str(config_file)),
-                         instance=f"test-{label}-{uuid.uuid4().hex[:6]}", clock=WallClock())
+        Service.__init__(
+            self,
+            "testclient",
+            namespace,
+            ZenohOptions(config_file=str(config_file)),
+            instance=f"test-{label}-{uuid.uuid4().hex[:6]}",
+            clock=WallClock(),
+        )
         self.queues = {}
 
 

@@ -31,10 +31,19 @@ def openssl(*args: str) -> str:
 
 def test_certs_name_the_role_list_the_addresses_and_reuse_the_authority(tmp_path: Path):
     make_certs(tmp_path, parse_hosts(["router", "planner"], ["router=10.0.0.1,router.lan"]))
-    text = openssl("x509", "-in", str(tmp_path / "router.pem"), "-noout", "-subject", "-ext", "subjectAltName,extendedKeyUsage")
+    text = openssl(
+        "x509", "-in", str(tmp_path / "router.pem"), "-noout", "-subject", "-ext", "subjectAltName,extendedKeyUsage"
+    )
     assert "CN = router" in text
-    for name in ("DNS:router", "DNS:router.lan", "DNS:localhost", "IP Address:10.0.0.1", "IP Address:127.0.0.1",
-                 "TLS Web Server Authentication", "TLS Web Client Authentication"):
+    for name in (
+        "DNS:router",
+        "DNS:router.lan",
+        "DNS:localhost",
+        "IP Address:10.0.0.1",
+        "IP Address:127.0.0.1",
+        "TLS Web Server Authentication",
+        "TLS Web Client Authentication",
+    ):
         assert name in text, text
     for key in ("ca.key", "router.key", "planner.key"):
         assert stat.S_IMODE((tmp_path / key).stat().st_mode) == 0o600
@@ -45,12 +54,15 @@ def test_certs_name_the_role_list_the_addresses_and_reuse_the_authority(tmp_path
     assert "OK" in openssl("verify", "-CAfile", str(tmp_path / "ca.pem"), str(tmp_path / "ar.pem"))
 
 
-@pytest.mark.parametrize("hosts, sans, message", [
-    (["router"], ["planner=10.0.0.2"], "'planner' is not one of the --hosts"),
-    (["router"], ["router=not an address!"], "neither an IP address nor a DNS name"),
-    (["ca"], [], "reserved"),
-    (["bad/name"], [], "use letters, digits"),
-])
+@pytest.mark.parametrize(
+    "hosts, sans, message",
+    [
+        (["router"], ["planner=10.0.0.2"], "'planner' is not one of the --hosts"),
+        (["router"], ["router=not an address!"], "neither an IP address nor a DNS name"),
+        (["ca"], [], "reserved"),
+        (["bad/name"], [], "use letters, digits"),
+    ],
+)
 def test_bad_certificate_requests_are_refused_clearly(hosts, sans, message):
     with pytest.raises(CertError, match=re.escape(message)):
         parse_hosts(hosts, sans)
@@ -59,11 +71,32 @@ def test_bad_certificate_requests_are_refused_clearly(hosts, sans, message):
 def test_deploy_cli_makes_certs_and_renders_every_role_into_configs_zenoh_accepts(tmp_path: Path):
     certs, out = tmp_path / "certs", tmp_path / "zenoh"
     hosts = ",".join([*acl.ROLES, *acl.INFRASTRUCTURE])
-    made = subprocess.run(arroch("deploy", "certs", "--out", str(certs), "--hosts", hosts, "--san", "router=10.0.0.1"),
-                          capture_output=True, text=True, timeout=60)
+    made = subprocess.run(
+        arroch("deploy", "certs", "--out", str(certs), "--hosts", hosts, "--san", "router=10.0.0.1"),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert made.returncode == 0, made.stderr
-    rendered = subprocess.run(arroch("deploy", "render", "--profile", "secure", "--role", "all", "--certs", str(certs),
-                                     "--router", "10.0.0.1:7447", "--out-dir", str(out)), capture_output=True, text=True, timeout=60)
+    rendered = subprocess.run(
+        arroch(
+            "deploy",
+            "render",
+            "--profile",
+            "secure",
+            "--role",
+            "all",
+            "--certs",
+            str(certs),
+            "--router",
+            "10.0.0.1:7447",
+            "--out-dir",
+            str(out),
+        ),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert rendered.returncode == 0, rendered.stderr
     for role in [*acl.ROLES, *acl.INFRASTRUCTURE]:
         config = zenoh.Config.from_file(str(out / f"{role}.json5"))
@@ -77,20 +110,28 @@ def test_deploy_cli_makes_certs_and_renders_every_role_into_configs_zenoh_accept
 def test_plain_profile_renders_router_peer_and_client():
     router = zenoh.Config.from_json5(render(Request("plain", "router")))
     assert router.get_json("listen/endpoints") == '["tcp/0.0.0.0:7447"]'
-    peer = zenoh.Config.from_json5(render(Request("plain", "sim", kind="peer", connect=["10.0.0.1:7447"], listen=["tcp/0.0.0.0:7448"])))
+    peer = zenoh.Config.from_json5(
+        render(Request("plain", "sim", kind="peer", connect=["10.0.0.1:7447"], listen=["tcp/0.0.0.0:7448"]))
+    )
     assert peer.get_json("mode") == '"peer"' and peer.get_json("listen/endpoints") == '["tcp/0.0.0.0:7448"]'
     client = zenoh.Config.from_json5(render(Request("plain", "ar", connect=["tcp/10.0.0.1:7447"])))
     assert client.get_json("scouting/multicast/enabled") == "false"
 
 
-@pytest.mark.parametrize("request_, message", [
-    (Request("secure", "planner", certs=Path("/nonexistent"), connect=["tcp/10.0.0.1:7447"]), "speaks TLS only"),
-    (Request("secure", "planner", certs=Path("/nonexistent"), connect=["10.0.0.1:7447"]), "missing /nonexistent/ca.pem"),
-    (Request("secure", "planner", connect=["10.0.0.1:7447"]), "needs --certs"),
-    (Request("plain", "planner"), "needs --router"),
-    (Request("plain", "planner", connect=["10.0.0.1"]), "has no port"),
-    (Request("plain", "wizard", connect=["10.0.0.1:7447"]), "role 'wizard' is not one of"),
-])
+@pytest.mark.parametrize(
+    "request_, message",
+    [
+        (Request("secure", "planner", certs=Path("/nonexistent"), connect=["tcp/10.0.0.1:7447"]), "speaks TLS only"),
+        (
+            Request("secure", "planner", certs=Path("/nonexistent"), connect=["10.0.0.1:7447"]),
+            "missing /nonexistent/ca.pem",
+        ),
+        (Request("secure", "planner", connect=["10.0.0.1:7447"]), "needs --certs"),
+        (Request("plain", "planner"), "needs --router"),
+        (Request("plain", "planner", connect=["10.0.0.1"]), "has no port"),
+        (Request("plain", "wizard", connect=["10.0.0.1:7447"]), "role 'wizard' is not one of"),
+    ],
+)
 def test_render_refuses_what_would_not_work(request_, message):
     with pytest.raises(RenderError, match=re.escape(message)):
         render(request_)
@@ -118,13 +159,17 @@ def _env_file() -> dict[str, str]:
 
 def _exec_start(unit: str) -> list[str]:
     """ExecStart as systemd expands it: ``${X}`` one word, ``$X`` split at spaces (none if empty)."""
-    line = next(l for l in (DEPLOY / "systemd" / f"arroch-{unit}.service").read_text().splitlines() if l.startswith("ExecStart="))
+    line = next(
+        l
+        for l in (DEPLOY / "systemd" / f"arroch-{unit}.service").read_text().splitlines()
+        if l.startswith("ExecStart=")
+    )
     env = _env_file()
     words: list[str] = []
     for word in shlex.split(line.removeprefix("ExecStart=")):
-        if (m := re.fullmatch(r"\$\{(\w+)\}", word)):
+        if m := re.fullmatch(r"\$\{(\w+)\}", word):
             words.append(env[m.group(1)])
-        elif (m := re.fullmatch(r"\$(\w+)", word)):
+        elif m := re.fullmatch(r"\$(\w+)", word):
             words.extend(env[m.group(1)].split())
         else:
             words.append(word)
@@ -158,8 +203,12 @@ def test_units_pass_systemd_analyze_verify(tmp_path: Path):
         text = (DEPLOY / "systemd" / f"arroch-{unit}.service").read_text()
         text = text.replace("/opt/arroch/.venv/bin/arroch", str(arroch_bin)).replace("/etc/arroch/arroch.env", str(env))
         (tmp_path / f"arroch-{unit}.service").write_text(text)
-    result = subprocess.run(["systemd-analyze", "verify", *(str(tmp_path / f"arroch-{u}.service") for u in UNITS)],
-                            capture_output=True, text=True, timeout=60)
+    result = subprocess.run(
+        ["systemd-analyze", "verify", *(str(tmp_path / f"arroch-{u}.service") for u in UNITS)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     problems = [line for line in (result.stdout + result.stderr).splitlines() if "arroch-" in line]
     assert result.returncode == 0 and not problems, result.stdout + result.stderr
 

@@ -34,8 +34,22 @@ UNAUTHORISED = ("nocert", "foreign", "intruder", "ar")
 
 
 def up(lan: Lan, host: str, configs: Path, runs: Path, namespace: str, *args: str) -> Proc:
-    return lan.spawn(host, arroch("up", "--namespace", namespace, "--progress", "off", "--zenoh-config-dir", str(configs),
-                                  "--run-dir", str(runs / host), *args), name=host)
+    return lan.spawn(
+        host,
+        arroch(
+            "up",
+            "--namespace",
+            namespace,
+            "--progress",
+            "off",
+            "--zenoh-config-dir",
+            str(configs),
+            "--run-dir",
+            str(runs / host),
+            *args,
+        ),
+        name=host,
+    )
 
 
 def the_run(runs: Path) -> Path:
@@ -43,7 +57,9 @@ def the_run(runs: Path) -> Path:
     return run
 
 
-def test_the_mission_completes_across_hosts_and_unauthorised_commands_never_reach_the_sim(lan: Lan, namespace: str, tmp_path: Path):
+def test_the_mission_completes_across_hosts_and_unauthorised_commands_never_reach_the_sim(
+    lan: Lan, namespace: str, tmp_path: Path
+):
     hub = lan.hub.address
     certs, foreign = make_pki(tmp_path, sans=[f"router={hub}"])
     configs = render_configs(certs, foreign, tmp_path / "zenoh", router=f"tls/{hub}:{PORT}", listen=f"tls/{hub}:{PORT}")
@@ -55,10 +71,42 @@ def test_the_mission_completes_across_hosts_and_unauthorised_commands_never_reac
     ar = up(lan, "ar", configs, runs, namespace, "--no-router", "--services", "ar")
     planning.wait_for("ar is up (", timeout=40)
     # The peer joins first (its start-up is slow), then acts as soon as the sim answers.
-    peer = lan.spawn("sim", [sys.executable, "-m", "tests.deploy.peer", "--configs", str(configs), "--namespace", namespace,
-                             "--try", ",".join(UNAUTHORISED), "--control", "planner"], name="peer")
-    sim = up(lan, "sim", configs, runs, namespace, "--no-router", "--services", "sim", "--camera", "tablet",
-             "--mode", "lockstep", "--seed", "1", "--until-done", "--timeout", str(MISSION_TIMEOUT))
+    peer = lan.spawn(
+        "sim",
+        [
+            sys.executable,
+            "-m",
+            "tests.deploy.peer",
+            "--configs",
+            str(configs),
+            "--namespace",
+            namespace,
+            "--try",
+            ",".join(UNAUTHORISED),
+            "--control",
+            "planner",
+        ],
+        name="peer",
+    )
+    sim = up(
+        lan,
+        "sim",
+        configs,
+        runs,
+        namespace,
+        "--no-router",
+        "--services",
+        "sim",
+        "--camera",
+        "tablet",
+        "--mode",
+        "lockstep",
+        "--seed",
+        "1",
+        "--until-done",
+        "--timeout",
+        str(MISSION_TIMEOUT),
+    )
     planning.wait_for("sim is up (", timeout=40)
     for host in ("sim", "ar"):  # real LAN links to the router's address, not loopback
         assert f"{hub}:{PORT}" in established(lan, host), established(lan, host)
@@ -80,10 +128,14 @@ def test_the_mission_completes_across_hosts_and_unauthorised_commands_never_reac
 
     # Nobody without the right got a command through; the control did.
     attempts = report["attempts"]
-    assert attempts["nocert"].startswith("cannot connect") and attempts["foreign"].startswith("cannot connect"), attempts
+    assert attempts["nocert"].startswith("cannot connect") and attempts["foreign"].startswith("cannot connect"), (
+        attempts
+    )
     assert attempts["intruder"].startswith("published") and attempts["ar"] == "published", attempts
     assert report["control"] == "published"
-    assert report["sim_stats"].get("commands_refused") == report["repeats"], report["sim_stats"]  # the control's, no more
+    assert report["sim_stats"].get("commands_refused") == report["repeats"], report[
+        "sim_stats"
+    ]  # the control's, no more
     assert "command for robot 'control' arrived on 'r0''s key" in sim.output
     for name in ("intruder", "ar"):
         assert f"command for robot '{name}'" not in sim.output

@@ -78,11 +78,16 @@ def test_roles_exchange_their_messages_over_tls(join):
     assert wait_for_message(statuses).state == "moving"
 
 
-@pytest.mark.parametrize("config, why", [
-    ("nocert", "presents no client certificate"),
-    ("foreign", "presents a certificate from another authority"),
-])
-def test_client_without_valid_credentials_cannot_connect(secure_router, secure_configs: Path, namespace: str, config: str, why: str):
+@pytest.mark.parametrize(
+    "config, why",
+    [
+        ("nocert", "presents no client certificate"),
+        ("foreign", "presents a certificate from another authority"),
+    ],
+)
+def test_client_without_valid_credentials_cannot_connect(
+    secure_router, secure_configs: Path, namespace: str, config: str, why: str
+):
     client = RoleClient(namespace, secure_configs / f"{config}.json5", config)
     with pytest.raises(zenoh.ZError, match="Unable to connect"):
         client.open()
@@ -129,8 +134,10 @@ def test_publish_guards_hold_for_every_key(join):
 def test_only_robots_read_commands_and_the_intruder_reads_nothing(join):
     planner, sim, ar, supervisor, intruder = (join(r) for r in ("planner", "sim", "ar", "supervisor", INTRUDER))
     everything = f"{planner.keys.prefix}/**"
-    seen = {who: Inbox(client.session, everything) for who, client in
-            (("sim", sim), ("ar", ar), ("supervisor", supervisor), (INTRUDER, intruder))}
+    seen = {
+        who: Inbox(client.session, everything)
+        for who, client in (("sim", sim), ("ar", ar), ("supervisor", supervisor), (INTRUDER, intruder))
+    }
     command = planner.session.declare_publisher(planner.keys.robot_command("r0"))
     plan = planner.session.declare_publisher(planner.keys.plan())
     assert wait_matching(command) and wait_matching(plan)
@@ -163,10 +170,14 @@ def test_feedback_queries_only_from_the_human_side_and_plan_served_only_by_the_p
         queryable.undeclare()
 
 
-def test_a_peer_with_the_secure_peer_profile_joins_through_the_router(join, pki, router_port: int, namespace: str, tmp_path: Path):
+def test_a_peer_with_the_secure_peer_profile_joins_through_the_router(
+    join, pki, router_port: int, namespace: str, tmp_path: Path
+):
     certs, _ = pki
     config = tmp_path / "sim-peer.json5"
-    config.write_text(render(Request("secure", "sim", kind="peer", certs=certs, connect=[f"tls/127.0.0.1:{router_port}"])))
+    config.write_text(
+        render(Request("secure", "sim", kind="peer", certs=certs, connect=[f"tls/127.0.0.1:{router_port}"]))
+    )
     supervisor = join("supervisor")
     statuses = supervisor.collect(supervisor.keys.robot_status("*"), RobotStatus)
     peer = RoleClient(namespace, config, "sim-peer").open()

@@ -9,7 +9,15 @@ from pathlib import Path
 import pytest
 
 from protocol.messages import Event, RobotStatus
-from services.supervisor.catalog import SERVICES, Launch, MissionOptions, parse_child, parse_services, router_argv, service_argv
+from services.supervisor.catalog import (
+    SERVICES,
+    Launch,
+    MissionOptions,
+    parse_child,
+    parse_services,
+    router_argv,
+    service_argv,
+)
 from services.supervisor.children import RestartPolicy, describe_exit
 from services.supervisor.output import Output
 from services.supervisor.progress import MissionProgress
@@ -35,12 +43,25 @@ def test_exit_descriptions():
 
 
 def test_each_service_gets_the_router_namespace_and_only_the_options_it_takes(tmp_path: Path):
-    launch = Launch(namespace="trial7", connect=["tcp/127.0.0.1:7555"], site="lab.toml", log_level="DEBUG",
-                    mission=MissionOptions(method="no-comm", mode="lockstep", seed=4), run_dir=tmp_path)
+    launch = Launch(
+        namespace="trial7",
+        connect=["tcp/127.0.0.1:7555"],
+        site="lab.toml",
+        log_level="DEBUG",
+        mission=MissionOptions(method="no-comm", mode="lockstep", seed=4),
+        run_dir=tmp_path,
+    )
     sim = service_argv(SERVICES["sim"], launch)
     assert sim[:3] == [sys.executable, "-m", "services.cli"] and sim[3] == "sim"
-    for pair in (["--namespace", "trial7"], ["--connect", "tcp/127.0.0.1:7555"], ["--site", "lab.toml"],
-                 ["--method", "no-comm"], ["--mode", "lockstep"], ["--seed", "4"], ["--log-level", "DEBUG"]):
+    for pair in (
+        ["--namespace", "trial7"],
+        ["--connect", "tcp/127.0.0.1:7555"],
+        ["--site", "lab.toml"],
+        ["--method", "no-comm"],
+        ["--mode", "lockstep"],
+        ["--seed", "4"],
+        ["--log-level", "DEBUG"],
+    ):
         assert " ".join(pair) in " ".join(sim), pair
     ar = service_argv(SERVICES["ar"], launch)
     assert "--method" not in ar and "--seed" not in ar
@@ -51,7 +72,9 @@ def test_each_service_gets_the_router_namespace_and_only_the_options_it_takes(tm
 def test_a_config_directory_replaces_the_endpoint_with_per_role_files(tmp_path: Path):
     launch = Launch(namespace="n", connect=[], zenoh_config_dir=tmp_path)
     planner = service_argv(SERVICES["planner"], launch)
-    assert planner[planner.index("--zenoh-config") + 1] == str(tmp_path / "planner.json5") and "--connect" not in planner
+    assert (
+        planner[planner.index("--zenoh-config") + 1] == str(tmp_path / "planner.json5") and "--connect" not in planner
+    )
     assert router_argv(launch, None)[-2:] == ["--zenoh-config", str(tmp_path / "router.json5")]
     assert launch.zenoh_env() == {"ARROCH_NAMESPACE": "n"}  # extra children read the files' router, not an env override
 

@@ -79,8 +79,16 @@ def the_run(run_dir: Path) -> Path:
 
 
 def test_up_merges_logs_restarts_killed_children_and_stops_cleanly_on_ctrl_c(spawn, namespace, tmp_path):
-    sup = up(spawn, tmp_path, "--services", "ping", "--namespace", namespace,
-             "--child", "pinger={python} -m services.cli ping send --count 5 --namespace {namespace}")
+    sup = up(
+        spawn,
+        tmp_path,
+        "--services",
+        "ping",
+        "--namespace",
+        namespace,
+        "--child",
+        "pinger={python} -m services.cli ping send --count 5 --namespace {namespace}",
+    )
     endpoint = sup.wait_for("[router] router ready on").rsplit(" ", 1)[1]
     # The extra child found the router and the namespace on its own, and its output is prefixed.
     assert re.search(rf"^\[pinger\] ping {namespace}: 5/5 echoes", sup.wait_for("[pinger] ping "))
@@ -121,11 +129,28 @@ def test_up_merges_logs_restarts_killed_children_and_stops_cleanly_on_ctrl_c(spa
 
 
 def test_up_backs_off_then_gives_up_on_a_crash_loop(spawn, router, namespace, tmp_path):
-    sup = up(spawn, tmp_path, "--no-router", "--connect", router, "--namespace", namespace, "--services", "",
-             "--max-restarts", "2", "--child", f"crash={CRASH}", "--child", f"idle={IDLE}")
+    sup = up(
+        spawn,
+        tmp_path,
+        "--no-router",
+        "--connect",
+        router,
+        "--namespace",
+        namespace,
+        "--services",
+        "",
+        "--max-restarts",
+        "2",
+        "--child",
+        f"crash={CRASH}",
+        "--child",
+        f"idle={IDLE}",
+    )
     assert exit_code(sup) == 1, sup.output
     out = sup.output
-    delays = [float(d) for d in re.findall(r"crash exited with code 3 after [\d.]+ s; restarting it in ([\d.]+) s", out)]
+    delays = [
+        float(d) for d in re.findall(r"crash exited with code 3 after [\d.]+ s; restarting it in ([\d.]+) s", out)
+    ]
     assert delays == [0.5, 1.0], out  # exponential backoff
     assert "crash exited with code 3; it was restarted 2 times in the last minute: giving up" in out
     assert len(started(sup)["crash"]) == 3
@@ -133,8 +158,21 @@ def test_up_backs_off_then_gives_up_on_a_crash_loop(spawn, router, namespace, tm
 
 
 def test_up_does_not_restart_a_child_with_a_configuration_error(spawn, router, namespace, tmp_path):
-    sup = up(spawn, tmp_path, "--no-router", "--connect", router, "--namespace", namespace, "--services", "",
-             "--child", f"bad={BAD_CONFIG}", "--child", f"idle={IDLE}")
+    sup = up(
+        spawn,
+        tmp_path,
+        "--no-router",
+        "--connect",
+        router,
+        "--namespace",
+        namespace,
+        "--services",
+        "",
+        "--child",
+        f"bad={BAD_CONFIG}",
+        "--child",
+        f"idle={IDLE}",
+    )
     assert exit_code(sup) == 1, sup.output
     assert "[bad] bad option" in sup.output
     assert "bad exited with code 2: its configuration is wrong" in sup.output
@@ -143,8 +181,22 @@ def test_up_does_not_restart_a_child_with_a_configuration_error(spawn, router, n
 
 
 def test_up_until_done_prints_the_metrics_and_writes_the_run_folder(spawn, router, namespace, client, tmp_path):
-    sup = up(spawn, tmp_path, "--no-router", "--connect", router, "--namespace", namespace, "--services", "",
-             "--until-done", "--child", f"idle={IDLE}", "--progress-interval", "0.5")
+    sup = up(
+        spawn,
+        tmp_path,
+        "--no-router",
+        "--connect",
+        router,
+        "--namespace",
+        namespace,
+        "--services",
+        "",
+        "--until-done",
+        "--child",
+        f"idle={IDLE}",
+        "--progress-interval",
+        "0.5",
+    )
     sup.wait_for("supervising")
     # Publish only once the supervisor's subscription has reached this client through the router.
     probe = client.session.declare_publisher(client.keys.event())
@@ -182,19 +234,28 @@ def test_a_supervisor_killed_outright_takes_its_children_with_it(spawn, namespac
         kill_leftovers(children)
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--services", "planner,bogus,ar"], "unknown service 'bogus' (known: planner, restrictor, sim, ar, tablet, ping)"),
-    (["--child", "ping=sleep 1"], "'ping' is taken"),
-    (["--child", "nocommand"], "expected NAME=COMMAND"),
-    (["--no-router", "--services", ""], "nothing to run"),
-    (["--zenoh-config-dir", "/nonexistent", "--services", "sim"], "missing Zenoh configs /nonexistent/sim.json5"),
-    # The tablet page runs as the AR identity: its config is ar.json5, asked for once.
-    (["--zenoh-config-dir", "/nonexistent", "--services", "ar,tablet", "--no-router", "--camera", "tablet"],
-     "missing Zenoh configs /nonexistent/ar.json5, /nonexistent/supervisor.json5 ("),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (
+            ["--services", "planner,bogus,ar"],
+            "unknown service 'bogus' (known: planner, restrictor, sim, ar, tablet, ping)",
+        ),
+        (["--child", "ping=sleep 1"], "'ping' is taken"),
+        (["--child", "nocommand"], "expected NAME=COMMAND"),
+        (["--no-router", "--services", ""], "nothing to run"),
+        (["--zenoh-config-dir", "/nonexistent", "--services", "sim"], "missing Zenoh configs /nonexistent/sim.json5"),
+        # The tablet page runs as the AR identity: its config is ar.json5, asked for once.
+        (
+            ["--zenoh-config-dir", "/nonexistent", "--services", "ar,tablet", "--no-router", "--camera", "tablet"],
+            "missing Zenoh configs /nonexistent/ar.json5, /nonexistent/supervisor.json5 (",
+        ),
+    ],
+)
 def test_up_refuses_bad_options_clearly(args, message, tmp_path):
-    result = subprocess.run(arroch("up", "--namespace", "t", "--run-dir", str(tmp_path), *args),
-                            capture_output=True, text=True, timeout=30)
+    result = subprocess.run(
+        arroch("up", "--namespace", "t", "--run-dir", str(tmp_path), *args), capture_output=True, text=True, timeout=30
+    )
     assert result.returncode == 2, result.stdout + result.stderr
     assert message in result.stdout, result.stdout
     assert not list(tmp_path.iterdir()), "a refused run must not leave a run folder"
@@ -202,7 +263,9 @@ def test_up_refuses_bad_options_clearly(args, message, tmp_path):
 
 def test_the_camera_option_reaches_the_sim_and_the_tablet_page_and_overlays_go_to_the_run_folder(tmp_path):
     run = tmp_path / "20260101-000000"
-    launch = Launch(namespace="n", zenoh_config_dir=tmp_path, mission=MissionOptions(camera="tablet", mode="lockstep"), run_dir=run)
+    launch = Launch(
+        namespace="n", zenoh_config_dir=tmp_path, mission=MissionOptions(camera="tablet", mode="lockstep"), run_dir=run
+    )
     sim, ar, tablet = (service_argv(SERVICES[name], launch) for name in ("sim", "ar", "tablet"))
     assert sim[sim.index("--camera") + 1] == "tablet" and sim[sim.index("--mode") + 1] == "lockstep"
     assert ar[ar.index("--snapshots") + 1] == str(run / "overlays") and "--camera" not in ar
@@ -211,7 +274,9 @@ def test_the_camera_option_reaches_the_sim_and_the_tablet_page_and_overlays_go_t
     assert "ar" in SERVICES["sim"].after  # the AR client watches from the mission's first frame
     # Without a camera the page takes each browser's own camera, and the sim renders nothing.
     plain = Launch(namespace="n", connect=["tcp/127.0.0.1:1"])
-    assert "--camera-source" not in service_argv(SERVICES["tablet"], plain) and "--camera" not in service_argv(SERVICES["sim"], plain)
+    assert "--camera-source" not in service_argv(SERVICES["tablet"], plain) and "--camera" not in service_argv(
+        SERVICES["sim"], plain
+    )
 
 
 def test_the_sim_starts_only_once_the_restrictor_is_up(spawn, namespace, tmp_path):
@@ -228,8 +293,25 @@ def test_the_sim_starts_only_once_the_restrictor_is_up(spawn, namespace, tmp_pat
 
 
 def test_up_without_a_reachable_router_says_so(tmp_path):
-    result = subprocess.run(arroch("up", "--no-router", "--connect", "tcp/127.0.0.1:9", "--namespace", "t", "--services", "ping",
-                                   "--run-dir", str(tmp_path), "--progress", "off"), capture_output=True, text=True, timeout=60)
+    result = subprocess.run(
+        arroch(
+            "up",
+            "--no-router",
+            "--connect",
+            "tcp/127.0.0.1:9",
+            "--namespace",
+            "t",
+            "--services",
+            "ping",
+            "--run-dir",
+            str(tmp_path),
+            "--progress",
+            "off",
+        ),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert result.returncode == 1, result.stdout
     assert "could not join the Zenoh network (tcp/127.0.0.1:9)" in result.stdout
     assert "started ping" not in result.stdout

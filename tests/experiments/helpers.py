@@ -4,8 +4,8 @@ and Student's t computed without scipy (to check the report's statistics indepen
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 from services.experiments.record import TRIAL_FIELDS
 from services.experiments.store import CsvStore
@@ -14,16 +14,39 @@ from services.experiments.store import CsvStore
 T_975 = {3: 3.182446305284263, 4: 2.7764451051977987, 5: 2.570581835636314}
 
 
-def row(method: str, robots: int, trial: int, *, team: float | None, doors: int | None, p: float = 0.5,
-        task: float = 600.0, cost: float = 0.0, status: str = "ok", human: float | None = None,
-        robot: float | None = None, total: float | None = None, **extra: str) -> dict[str, str]:
+def row(
+    method: str,
+    robots: int,
+    trial: int,
+    *,
+    team: float | None,
+    doors: int | None,
+    p: float = 0.5,
+    task: float = 600.0,
+    cost: float = 0.0,
+    status: str = "ok",
+    human: float | None = None,
+    robot: float | None = None,
+    total: float | None = None,
+    **extra: str,
+) -> dict[str, str]:
     """One trials.csv row with the figures the report reads; everything else empty or neutral.
 
     Unless given, the human finishes at ``team``, every robot 100 s earlier, and the sum of times is
     the human's plus each robot's."""
     cells = {name: "" for name in TRIAL_FIELDS}
-    cells.update(method=method, robots=str(robots), objects="3", door_probability=f"{p:g}", task_mean=f"{task:g}",
-                 interruption_cost=f"{cost:g}", trial=str(trial), site_seed="1", seed="2", status=status)
+    cells.update(
+        method=method,
+        robots=str(robots),
+        objects="3",
+        door_probability=f"{p:g}",
+        task_mean=f"{task:g}",
+        interruption_cost=f"{cost:g}",
+        trial=str(trial),
+        site_seed="1",
+        seed="2",
+        status=status,
+    )
     if team is not None:
         human_time = human if human is not None else team
         robot_time = robot if robot is not None else team - 100.0

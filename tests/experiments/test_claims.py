@@ -16,8 +16,14 @@ from services.experiments.results import load_results
 from tests.experiments.helpers import row, write_trials
 
 
-def _sweep(folder: Path, n: int, shift: dict[tuple[str, int | float], float], *, kind: str = "robots",
-           doors: dict[str, int] | None = None) -> Path:
+def _sweep(
+    folder: Path,
+    n: int,
+    shift: dict[tuple[str, int | float], float],
+    *,
+    kind: str = "robots",
+    doors: dict[str, int] | None = None,
+) -> Path:
     """``n`` paired trials per level: the same base time per trial index in every method (common draws),
     plus the method's shift at that level and a per-trial spread (trial i: i + 1 s) for ARROCH only, so
     every difference is distinct and has the sign of the shift."""
@@ -55,11 +61,18 @@ def test_holm_turns_an_unadjusted_significance_into_not_significant(tmp_path: Pa
 def test_confirmed_when_every_level_survives_holm(tmp_path: Path) -> None:
     # Eight pairs: p = 2/256 each, Holm 4/256 = 0.016 < 0.05 at both levels. Door openings: ARROCH 3, no-comm 5 in
     # every pair (d = -2 always): the permutation test's p is 2/256 too.
-    folder = _sweep(tmp_path, 8, {("arroch", 2): -40, ("no-comm", 2): 0, ("arroch", 3): -40, ("no-comm", 3): 0},
-                    doors={"arroch": 3, "no-comm": 5})
+    folder = _sweep(
+        tmp_path,
+        8,
+        {("arroch", 2): -40, ("no-comm", 2): 0, ("arroch", 3): -40, ("no-comm", 3): 0},
+        doors={"arroch": 3, "no-comm": 5},
+    )
     claims = _claims(folder)
     assert {title: c.verdict for title, c in claims.items()} == {
-        "Fewest door openings": "confirmed", "Lowest team completion time": "confirmed", "Lowest sum of times": "confirmed"}
+        "Fewest door openings": "confirmed",
+        "Lowest team completion time": "confirmed",
+        "Lowest sum of times": "confirmed",
+    }
     doors = claims["Fewest door openings"].tests
     assert [t.primary_p for t in doors] == pytest.approx([2 / 256, 2 / 256])
     assert [t.primary_p_holm for t in doors] == pytest.approx([4 / 256, 4 / 256])
@@ -84,15 +97,37 @@ def test_a_baseline_significantly_faster_is_reported_as_higher(tmp_path: Path) -
 
 def test_laziness_crossover(tmp_path: Path) -> None:
     # Three probabilities x one baseline, eight pairs: p = 2/256 each, Holm 3 x 2/256 = 0.023.
-    yes = _sweep(tmp_path / "yes", 8, {("arroch", 0.05): +60, ("no-comm", 0.05): 0, ("arroch", 0.1): -40,
-                                       ("no-comm", 0.1): 0, ("arroch", 0.5): -80, ("no-comm", 0.5): 0}, kind="laziness")
+    yes = _sweep(
+        tmp_path / "yes",
+        8,
+        {
+            ("arroch", 0.05): +60,
+            ("no-comm", 0.05): 0,
+            ("arroch", 0.1): -40,
+            ("no-comm", 0.1): 0,
+            ("arroch", 0.5): -80,
+            ("no-comm", 0.5): 0,
+        },
+        kind="laziness",
+    )
     claim = _claims(yes)["Laziness crossover"]
     assert claim.verdict == "confirmed"
     assert "no-comm significantly faster" in claim.detail
     assert "stays below no-comm's from p = 0.1 on" in claim.detail
     # ARROCH is fastest even for the laziest human: the paper's exception is not seen.
-    no = _sweep(tmp_path / "no", 8, {("arroch", 0.05): -20, ("no-comm", 0.05): 0, ("arroch", 0.1): -40,
-                                     ("no-comm", 0.1): 0, ("arroch", 0.5): -80, ("no-comm", 0.5): 0}, kind="laziness")
+    no = _sweep(
+        tmp_path / "no",
+        8,
+        {
+            ("arroch", 0.05): -20,
+            ("no-comm", 0.05): 0,
+            ("arroch", 0.1): -40,
+            ("no-comm", 0.1): 0,
+            ("arroch", 0.5): -80,
+            ("no-comm", 0.5): 0,
+        },
+        kind="laziness",
+    )
     claim = _claims(no)["Laziness crossover"]
     assert claim.verdict == "partly confirmed"
     assert "no-comm not significantly faster" in claim.detail

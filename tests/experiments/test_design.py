@@ -10,8 +10,15 @@ from services.experiments.design import SweepSpec, TrialKey, derive_seed
 
 
 def spec(**changes: object) -> SweepSpec:
-    values: dict[str, object] = dict(kind="robots", methods=("arroch", "no-feedback", "no-comm"), robots=(2, 3), objects=3,
-                                     ps=(0.5,), trials=3, seed=0)
+    values: dict[str, object] = dict(
+        kind="robots",
+        methods=("arroch", "no-feedback", "no-comm"),
+        robots=(2, 3),
+        objects=3,
+        ps=(0.5,),
+        trials=3,
+        seed=0,
+    )
     values.update(changes)
     return SweepSpec(**values)  # type: ignore[arg-type]
 
@@ -64,16 +71,19 @@ def test_schedule_runs_every_trial_once_repetition_by_repetition() -> None:
     assert [(k.method, k.robots) for k in s.keys()[:4]] == [("arroch", 2)] * 3 + [("no-feedback", 2)]
 
 
-@pytest.mark.parametrize("changes, message", [
-    ({"methods": ("arroch", "teleport")}, "methods must be among"),
-    ({"robots": (0, 2)}, "robots must be distinct integers >= 1"),
-    ({"ps": (1.5,)}, "door-opening probabilities"),
-    ({"trials": 0}, "trials must be >= 1"),
-    ({"kind": "speed"}, "sweep kind"),
-    ({"tasks": (0.0,)}, "task lengths"),
-    ({"costs": (-1.0,)}, "interruption costs"),
-    ({"focus_reading": "lenient"}, "focus reading"),
-])
+@pytest.mark.parametrize(
+    "changes, message",
+    [
+        ({"methods": ("arroch", "teleport")}, "methods must be among"),
+        ({"robots": (0, 2)}, "robots must be distinct integers >= 1"),
+        ({"ps": (1.5,)}, "door-opening probabilities"),
+        ({"trials": 0}, "trials must be >= 1"),
+        ({"kind": "speed"}, "sweep kind"),
+        ({"tasks": (0.0,)}, "task lengths"),
+        ({"costs": (-1.0,)}, "interruption costs"),
+        ({"focus_reading": "lenient"}, "focus reading"),
+    ],
+)
 def test_bad_specs_are_refused_by_name(changes: dict[str, object], message: str) -> None:
     with pytest.raises(ValueError, match=message):
         spec(**changes)

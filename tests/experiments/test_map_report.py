@@ -23,8 +23,9 @@ def map_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Without an interruption cost ARROCH and No-feedback give the same times (the same draws); with one ARROCH saves
     20-29 s against No-feedback; No-comm is 50 s slower everywhere. Door openings are equal everywhere."""
     folder = tmp_path_factory.mktemp("map")
-    spec = SweepSpec(kind="map", methods=METHODS, robots=(3,), objects=3, ps=(0.5,), trials=TRIALS, seed=0,
-                     tasks=TASKS, costs=COSTS)
+    spec = SweepSpec(
+        kind="map", methods=METHODS, robots=(3,), objects=3, ps=(0.5,), trials=TRIALS, seed=0, tasks=TASKS, costs=COSTS
+    )
     (folder / "sweep.json").write_text(json.dumps(spec.to_json()), encoding="utf-8")
     rows = []
     for task in TASKS:
@@ -55,7 +56,11 @@ def test_map_figures_are_pngs(map_folder: Path) -> None:
 def test_tests_per_cell(map_folder: Path) -> None:
     with open(map_folder / "tests.csv", encoding="utf-8") as handle:
         rows = list(csv.DictReader(handle))
-    team = {(r["task_mean"], r["interruption_cost"], r["baseline"]): r for r in rows if r["metric"] == "team_completion_time"}
+    team = {
+        (r["task_mean"], r["interruption_cost"], r["baseline"]): r
+        for r in rows
+        if r["metric"] == "team_completion_time"
+    }
     assert len(team) == 8
     costly = team[("600", "60", "no-feedback")]
     assert float(costly["mean_diff"]) == pytest.approx(-24.5)  # -(20 + 21 + ... + 29) / 10
@@ -71,8 +76,10 @@ def test_report_reads_the_map_in_numbers(map_folder: Path) -> None:
     report = (map_folder / "REPORT.md").read_text(encoding="utf-8")
     assert "## Map: where feedback pays" in report
     assert "![map_sum_of_times](map_sum_of_times.png)" in report
-    assert ("**Team completion time, ARROCH − No-feedback** (Δ in s): significantly lower in 2 of 4 cells "
-            "(task 300 s / cost 60 s: -24.5 [") in report
+    assert (
+        "**Team completion time, ARROCH − No-feedback** (Δ in s): significantly lower in 2 of 4 cells "
+        "(task 300 s / cost 60 s: -24.5 ["
+    ) in report
     assert "by interruption cost 0/60 s: 0/2, 2/2; significantly higher in 0; equivalent within ±30 s in 2" in report
     assert "**Team completion time, ARROCH − No-comm** (Δ in s): significantly lower in 4 of 4 cells" in report
     assert "**Door openings, ARROCH − No-feedback** (Δ in openings): significantly lower in 0 of 4 cells" in report

@@ -11,14 +11,24 @@ KEY = TrialKey("arroch", 2, 1, 0.5, 600.0, 15.0, 0)
 
 # The shape of the sim's metrics (services/sim/metrics.py), with made-up numbers.
 METRICS = {
-    "completed": True, "time": 642.15, "team_completion_time": 642.1,
+    "completed": True,
+    "time": 642.15,
+    "team_completion_time": 642.1,
     "agent_completion_times": {"r0": 301.25, "r1": 412.0000001, "human": 642.1},
-    "human_door_openings": 3, "door_openings": {"d_storage": {"human": 3}},
+    "human_door_openings": 3,
+    "door_openings": {"d_storage": {"human": 3}},
     "feedback": {"sent": 2, "accepted": 1, "refused": 1, "unanswered": 0},
-    "actions": {"done": 20, "failed": 0}, "world_versions": 27,
+    "actions": {"done": 20, "failed": 0},
+    "world_versions": 27,
     "robots": {"r0": {"wait_time": 12.5}, "r1": {"wait_time": 0.25}},
-    "human": {"door_trips": 4, "time_away": 31.5, "task_duration": 598.25, "interruptions": 2, "time_lost": 30.0,
-              "declarations": 1},
+    "human": {
+        "door_trips": 4,
+        "time_away": 31.5,
+        "task_duration": 598.25,
+        "interruptions": 2,
+        "time_lost": 30.0,
+        "declarations": 1,
+    },
     "run": {"wall_time": 9.87, "realtime_factor": 65.06},
 }
 
@@ -33,7 +43,11 @@ def test_trial_row() -> None:
     assert row["team_completion_time"] == "642.100"
     assert row["sum_of_times"] == "1355.350"  # 301.25 + 412.0000001 + 642.1, rounded once
     assert (row["human_task_time"], row["human_interruptions"], row["human_time_lost"], row["focus_declared"]) == (
-        "598.250", "2", "30.000", "1")
+        "598.250",
+        "2",
+        "30.000",
+        "1",
+    )
     assert row["slowest_robot_time"] == "412.000"
     assert row["agent_completion_times"] == "r0=301.250;r1=412.000;human=642.100"
     assert (row["door_openings"], row["human_door_trips"]) == ("3", "4")
@@ -44,7 +58,12 @@ def test_trial_row() -> None:
     assert "12.346" not in row.values() and "9.870" not in row.values()
     timing = timing_row(outcome)
     assert tuple(timing) == TIMING_FIELDS
-    assert (timing["wall_time"], timing["mission_wall_time"], timing["plans"], timing["code"]) == ("12.346", "", "30", "abc123")
+    assert (timing["wall_time"], timing["mission_wall_time"], timing["plans"], timing["code"]) == (
+        "12.346",
+        "",
+        "30",
+        "abc123",
+    )
 
 
 def test_a_failed_trial_has_no_figures() -> None:

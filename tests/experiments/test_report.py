@@ -36,7 +36,9 @@ def fixed(tmp_path: Path) -> Path:
     rows += [row("no-comm", 2, i, team=v, doors=d) for i, (v, d) in enumerate(zip(B, DOORS_B))]
     # Trial 5 completed for ARROCH only: its pair is dropped from the paired tests (not from ARROCH's mean).
     rows.append(row("arroch", 2, 5, team=700.0, doors=9))
-    rows.append(row("no-comm", 2, 5, team=None, doors=None, status="timeout", reason="no end of mission within 900 s wall"))
+    rows.append(
+        row("no-comm", 2, 5, team=None, doors=None, status="timeout", reason="no end of mission within 900 s wall")
+    )
     write_trials(tmp_path, rows)
     return tmp_path
 
@@ -108,9 +110,18 @@ def test_report_files(fixed: Path) -> None:
     (fixed / "discussion.md").write_text("Written by a person.\n", encoding="utf-8")
     spec = SweepSpec(kind="robots", methods=("arroch", "no-comm"), robots=(2,), objects=3, ps=(0.5,), trials=6, seed=7)
     (fixed / "sweep.json").write_text(json.dumps(spec.to_json()), encoding="utf-8")
-    params = {"source": "fixed", "human": {"focus_reading": "faithful", "interruption_cost": 15.0, "declare_time": 1.0,
-                                            "task_mean": 600.0, "focus_count": 2},
-              "varied_per_trial": {"door_probability": [0.5]}, "mode": "lockstep"}
+    params = {
+        "source": "fixed",
+        "human": {
+            "focus_reading": "faithful",
+            "interruption_cost": 15.0,
+            "declare_time": 1.0,
+            "task_mean": 600.0,
+            "focus_count": 2,
+        },
+        "varied_per_trial": {"door_probability": [0.5]},
+        "mode": "lockstep",
+    }
     (fixed / "params.json").write_text(json.dumps(params), encoding="utf-8")
     written = {p.name for p in build_report(fixed)}
     figures = {"door_openings_vs_robots.png", "team_completion_time_vs_robots.png", "sum_of_times_vs_robots.png"}

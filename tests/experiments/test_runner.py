@@ -14,8 +14,8 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import pytest
 
@@ -73,10 +73,21 @@ def wait_gone(pid: int, timeout: float = 15.0) -> list[int]:
 
 
 def start(args: list[str], human: Path) -> subprocess.Popen[str]:
-    argv = [sys.executable, "-m", "services.cli", "experiment", *args, "--human-config", str(human),
-            "--progress", "line", "--no-report"]
-    return subprocess.Popen(argv, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                            start_new_session=True)
+    argv = [
+        sys.executable,
+        "-m",
+        "services.cli",
+        "experiment",
+        *args,
+        "--human-config",
+        str(human),
+        "--progress",
+        "line",
+        "--no-report",
+    ]
+    return subprocess.Popen(
+        argv, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True
+    )
 
 
 def finish(proc: subprocess.Popen[str], timeout: float) -> tuple[int, str]:
@@ -110,7 +121,8 @@ def reference(tmp_path_factory: pytest.TempPathFactory, human: Path) -> Path:
     assert wait_gone(proc.pid) == [], "processes of the sweep outlived it"
     statuses = [r["status"] for r in rows(out)] if (out / "trials.csv").exists() else []
     assert code == 0 and statuses == ["ok"] * 4, (
-        f"the tiny sweep did not complete every mission (exit {code}, statuses {statuses}):\n{output[-3000:]}")
+        f"the tiny sweep did not complete every mission (exit {code}, statuses {statuses}):\n{output[-3000:]}"
+    )
     return out
 
 
@@ -120,8 +132,26 @@ def test_a_trial_is_bounded_recorded_and_leaves_nothing(tmp_path: Path, human: P
     out = tmp_path / "one"
     mine = "arroch-exp-arroch-n2-o1-p0.5-w90-c0-t00-*"  # this trial's folder (other sweeps may run meanwhile)
     before = set(Path("/tmp").glob(mine))
-    proc = start(["robots", "--robots", "2", "--objects", "1", "--trials", "1", "--methods", "arroch", "--out", str(out),
-                  "--trial-timeout", "15", "--jobs", "1"], human)
+    proc = start(
+        [
+            "robots",
+            "--robots",
+            "2",
+            "--objects",
+            "1",
+            "--trials",
+            "1",
+            "--methods",
+            "arroch",
+            "--out",
+            str(out),
+            "--trial-timeout",
+            "15",
+            "--jobs",
+            "1",
+        ],
+        human,
+    )
     code, output = finish(proc, 90)
     assert wait_gone(proc.pid) == [], f"processes of the sweep outlived it:\n{output}"
     assert set(Path("/tmp").glob(mine)) - before == set(), "a trial folder was left behind"
@@ -141,7 +171,9 @@ def test_a_trial_is_bounded_recorded_and_leaves_nothing(tmp_path: Path, human: P
 
 def test_sigint_stops_a_running_sweep_cleanly(tmp_path: Path, human: Path) -> None:
     out = tmp_path / "stopped"
-    proc = start(["robots", *TINY, "--methods", "arroch", "--out", str(out), "--trial-timeout", "120", "--jobs", "2"], human)
+    proc = start(
+        ["robots", *TINY, "--methods", "arroch", "--out", str(out), "--trial-timeout", "120", "--jobs", "2"], human
+    )
     deadline = time.monotonic() + 30
     while len(sweep_processes(proc.pid)) < 4 and time.monotonic() < deadline:  # routers and services are up
         time.sleep(0.2)
@@ -169,19 +201,25 @@ def cpu_burners(count: int = 2) -> Iterator[None]:
             burner.wait()
 
 
-def test_same_seed_gives_the_same_csv_beside_cpu_burning_processes(reference: Path, tmp_path: Path, human: Path) -> None:
+def test_same_seed_gives_the_same_csv_beside_cpu_burning_processes(
+    reference: Path, tmp_path: Path, human: Path
+) -> None:
     """Lockstep waits for answers in site time, never on the wall clock: a loaded machine runs the
     same missions, byte for byte (the reference ran without the burners)."""
     out = tmp_path / "again"
     with cpu_burners():
-        proc = start(["robots", *TINY, "--methods", "arroch,no-comm", "--out", str(out), "--trial-timeout", "120"], human)
+        proc = start(
+            ["robots", *TINY, "--methods", "arroch,no-comm", "--out", str(out), "--trial-timeout", "120"], human
+        )
         code, output = finish(proc, 400)
     assert code == 0, output
     assert (out / "trials.csv").read_bytes() == (reference / "trials.csv").read_bytes()
     # And the figures are real: the human's task and the robots' deliveries both took sim time.
     for r in rows(out):
         assert float(r["human_completion_time"]) > 60 and float(r["slowest_robot_time"]) > 0
-        assert float(r["team_completion_time"]) == max(float(r["human_completion_time"]), float(r["slowest_robot_time"]))
+        assert float(r["team_completion_time"]) == max(
+            float(r["human_completion_time"]), float(r["slowest_robot_time"])
+        )
     assert {r["method"]: r["feedback_sent"] for r in rows(out) if r["trial"] == "0"}["no-comm"] == "0"
     # Paired: both methods of one trial index met the same site and the same human.
     for i in ("0", "1"):
@@ -195,10 +233,24 @@ def test_a_dask_cluster_gives_the_same_csv(reference: Path, tmp_path: Path, huma
     import distributed  # the test extra installs it (pyproject.toml)
 
     out = tmp_path / "cluster"
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
-                                  host="127.0.0.1") as cluster:
-        proc = start(["robots", *TINY, "--methods", "arroch,no-comm", "--out", str(out), "--trial-timeout", "120",
-                      "--cluster", cluster.scheduler_address], human)
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, host="127.0.0.1"
+    ) as cluster:
+        proc = start(
+            [
+                "robots",
+                *TINY,
+                "--methods",
+                "arroch,no-comm",
+                "--out",
+                str(out),
+                "--trial-timeout",
+                "120",
+                "--cluster",
+                cluster.scheduler_address,
+            ],
+            human,
+        )
         code, output = finish(proc, 400)
     assert code == 0, output
     assert "cluster tcp://127.0.0.1:" in output and "2 worker(s)" in output

@@ -14,7 +14,9 @@ FIELDS = ("trial", "status", "reason")
 def test_append_load_and_sort(tmp_path: Path) -> None:
     store = CsvStore(tmp_path / "t.csv", FIELDS)
     for trial in (2, 0, 1):
-        store.append({"trial": str(trial), "status": "ok", "reason": 'a "quoted", reason\nover two lines' if trial == 1 else ""})
+        store.append(
+            {"trial": str(trial), "status": "ok", "reason": 'a "quoted", reason\nover two lines' if trial == 1 else ""}
+        )
     assert [r["trial"] for r in store.load()] == ["2", "0", "1"]
     assert store.load()[2]["reason"] == 'a "quoted", reason\nover two lines'
     store.sort(lambda r: int(r["trial"]))

@@ -36,7 +36,11 @@ def drawn_fraction(image: np.ndarray, primitives: list[dict]) -> tuple[int, floa
     h, w = image.shape[:2]
     hits = total = 0
     for prim in primitives:
-        if prim["kind"] != "polyline" or prim["style"] != "solid" or not (prim["layer"] == "door" or prim["layer"].startswith("intent:")):
+        if (
+            prim["kind"] != "polyline"
+            or prim["style"] != "solid"
+            or not (prim["layer"] == "door" or prim["layer"].startswith("intent:"))
+        ):
             continue
         rgb = np.array(prim["color"][:3], dtype=float)
         points = np.asarray(prim["points"], dtype=float)
@@ -91,9 +95,15 @@ def test_demo_runs_the_mission_serves_the_tablet_page_and_keeps_overlay_frames(s
         assert image.std() > 20, f"{frame.name} is nearly uniform"
         record = json.loads(frame.with_suffix(".json").read_text())
         layers = {p["layer"] for p in record["primitives"]}
-        assert record["ok"] and any(l.startswith("robot:") for l in layers) and any(l.startswith("intent:") for l in layers), layers
+        assert (
+            record["ok"]
+            and any(l.startswith("robot:") for l in layers)
+            and any(l.startswith("intent:") for l in layers)
+        ), layers
         samples, fraction = drawn_fraction(image, record["primitives"])
-        assert samples >= 20 and fraction >= 0.3, f"{frame.name}: {fraction:.0%} of {samples} points along the drawn lines have their colour"
+        assert samples >= 20 and fraction >= 0.3, (
+            f"{frame.name}: {fraction:.0%} of {samples} points along the drawn lines have their colour"
+        )
         times.append(record["time"])
     # Every one a held frame: drawn at its capture instant, a multiple of the hold interval.
     hold = CameraOptions().hold

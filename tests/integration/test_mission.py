@@ -26,12 +26,25 @@ TIMEOUT = 120.0  # wall s; the mission takes about 3 s in lockstep, 36 s at 20x,
 REPEATS = 20  # the most times one robot may end the same action (same arguments); seen: 6
 
 
-@pytest.mark.parametrize("mode", [["--mode", "lockstep"], ["--mode", "rate", "--rate", "20"]], ids=["lockstep", "rate20"])
+@pytest.mark.parametrize(
+    "mode", [["--mode", "lockstep"], ["--mode", "rate", "--rate", "20"]], ids=["lockstep", "rate20"]
+)
 def test_default_mission_completes(spawn, tmp_path: Path, mode: list[str]):
     run_dir = tmp_path / "runs"
     proc = spawn(
-        arroch("up", "--services", "planner,restrictor,sim", *mode, "--seed", "1", "--until-done",
-               "--run-dir", str(run_dir), "--progress", "off"),
+        arroch(
+            "up",
+            "--services",
+            "planner,restrictor,sim",
+            *mode,
+            "--seed",
+            "1",
+            "--until-done",
+            "--run-dir",
+            str(run_dir),
+            "--progress",
+            "off",
+        ),
         name="up",
     )
     deadline = time.monotonic() + TIMEOUT
@@ -57,9 +70,14 @@ def test_default_mission_completes(spawn, tmp_path: Path, mode: list[str]):
         assert len(failed) <= 3 and all("trajectory starts" in f.get("reason", "") for f in failed), failed
     # about 100 actions for 9 loads; thousands mean robots repeat an action without progress
     assert kinds["action_done"] < 300
-    ended = Counter((e["robot"], e["data"].get("action"), tuple(e["data"].get("args") or ()))
-                    for e in events if e["kind"] == "action_done")
+    ended = Counter(
+        (e["robot"], e["data"].get("action"), tuple(e["data"].get("args") or ()))
+        for e in events
+        if e["kind"] == "action_done"
+    )
     assert max(ended.values()) <= REPEATS, ended.most_common(3)
-    opendoors = Counter((e["robot"], e["stamp"]) for e in events if e["kind"] == "action_done" and e["data"].get("action") == "opendoor")
+    opendoors = Counter(
+        (e["robot"], e["stamp"]) for e in events if e["kind"] == "action_done" and e["data"].get("action") == "opendoor"
+    )
     assert all(n == 1 for n in opendoors.values())
     assert "lockstep stalled" not in proc.output

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 import pytest
@@ -13,7 +13,7 @@ from services.planner.planner import PlannerSettings, TaskPlanner
 SITES = Path(__file__).resolve().parent / "sites"
 
 
-@lru_cache(maxsize=None)
+@cache
 def site_named(name: str) -> Site:
     """``office`` (packaged), ``gen<N>`` (generated, N robots, seed 0) or a file in tests/planner/sites."""
     if name == "office":
@@ -23,7 +23,7 @@ def site_named(name: str) -> Site:
     return load_site(SITES / f"{name}.toml")
 
 
-@lru_cache(maxsize=None)
+@cache
 def planner_for(name: str) -> TaskPlanner:
     return TaskPlanner(site_named(name), PlannerSettings(time_limit=60.0, joint_time_limit=60.0))
 

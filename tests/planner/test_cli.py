@@ -31,7 +31,18 @@ def test_plan_json_shape_and_content():
 def test_plan_with_unavailable_door_and_constraints_file(tmp_path):
     lp = tmp_path / "late.lp"
     lp.write_text("% no robot through the storage door before 80\n:- goes_through(R, d_storage, T), T < 80.\n")
-    out = run("plan", "--site", str(SITES / "pair.toml"), "--unavailable", "d_storage:0:60", "--constraints", str(lp), "--json", "--method", "joint")
+    out = run(
+        "plan",
+        "--site",
+        str(SITES / "pair.toml"),
+        "--unavailable",
+        "d_storage:0:60",
+        "--constraints",
+        str(lp),
+        "--json",
+        "--method",
+        "joint",
+    )
     assert out.returncode == 0, out.stderr
     data = json.loads(out.stdout)
     assert data["method"] == "joint"
@@ -62,5 +73,7 @@ def test_bad_arguments_exit_2():
 def test_planner_help():
     out = run("planner", "--help")
     assert out.returncode == 0 and "--site" in out.stdout and "--method" in out.stdout
-    out = subprocess.run([sys.executable, "-m", "services.planner", "--help"], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        [sys.executable, "-m", "services.planner", "--help"], cwd=ROOT, capture_output=True, text=True, timeout=60
+    )
     assert out.returncode == 0 and "planner" in out.stdout

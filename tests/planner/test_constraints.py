@@ -22,7 +22,9 @@ def program(*items: ConstraintText) -> ConstraintProgram:
 
 
 def forbid_room(room: str, t0: int, t1: int, cid: str) -> ConstraintText:
-    return ConstraintText(cid, f"room_forbidden({room}, {t0}, {t1}).\n:- robot_in(R, {room}, S, E), S < {t1}, E > {t0}.\n")
+    return ConstraintText(
+        cid, f"room_forbidden({room}, {t0}, {t1}).\n:- robot_in(R, {room}, S, E), S < {t1}, E > {t0}.\n"
+    )
 
 
 def storage_openings(result) -> list[int]:
@@ -65,7 +67,9 @@ def test_while_the_door_is_unavailable_the_robot_does_other_work_first():
     assert [s.args[0] for s in plan.steps if s.action == "unload"] == ["o_office", "o_store"]
     assert validate_result(site, world, result, Windows.from_asp([c.asp])) == []
     # the office delivery fills the wait: the robot is done soon after the door may open again
-    door_part = free.makespan - next(s.start for s in free.plans["r0"].steps if s.action == "approach" and s.args == ("d_storage",))
+    door_part = free.makespan - next(
+        s.start for s in free.plans["r0"].steps if s.action == "approach" and s.args == ("d_storage",)
+    )
     assert result.makespan <= 150 + door_part + 5
     waited = sum(s.end - s.start for s in plan.steps if s.action == "opendoor")
     assert waited < 150 - 60, "most of the window was spent working, not waiting at the door"

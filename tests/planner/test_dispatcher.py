@@ -23,7 +23,9 @@ def beside_storage(office, open_doors: dict[str, float]) -> World:
     storage = office.opening("d_storage")
     outside = next(r for r in storage.rooms if r != office.objects["o0"].room)
     x, y = planner.builder.beside("d_storage", outside)
-    return World(now=50.0, robots={"r0": RobotState(id="r0", pose=(x, y, 0.0), beside="d_storage")}, open_doors=open_doors)
+    return World(
+        now=50.0, robots={"r0": RobotState(id="r0", pose=(x, y, 0.0), beside="d_storage")}, open_doors=open_doors
+    )
 
 
 def test_opendoor_of_a_closed_door_is_sent(office):

@@ -94,7 +94,9 @@ def test_spans_join_and_cut():
 
 
 def _robot(legs: tuple[Leg, ...]) -> RobotProblem:
-    return RobotProblem(robot="r0", room="a", ready=0, point=(0.0, 0.0), beside="", carrying=(), stops={}, legs=legs, capacity=1)
+    return RobotProblem(
+        robot="r0", room="a", ready=0, point=(0.0, 0.0), beside="", carrying=(), stops={}, legs=legs, capacity=1
+    )
 
 
 def test_a_door_closed_for_good_is_where_no_window_can_hold_the_gothrough():

@@ -7,7 +7,17 @@ import time
 
 import pytest
 
-from protocol.messages import Clock, Constraint, ConstraintSet, DoorState, Event, RobotCommand, RobotPose, RobotStatus, TeamPlan
+from protocol.messages import (
+    Clock,
+    Constraint,
+    ConstraintSet,
+    DoorState,
+    Event,
+    RobotCommand,
+    RobotPose,
+    RobotStatus,
+    TeamPlan,
+)
 from protocol.site import load_site
 from tests.conftest import TestClient, wait_for_message
 from tests.procs import arroch
@@ -20,7 +30,15 @@ UNAVAILABLE = (40, 200)  # the human cannot open d_storage in this window
 
 def unavailable_set(version: int, t0: int, t1: int) -> ConstraintSet:
     asp = f"human_unavailable(d_storage, {t0}, {t1}).\n:- human_opens(d_storage, T), T >= {t0}, T < {t1}.\n"
-    c = Constraint(id="c1", kind="door_unavailable", params={"door": "d_storage", "minutes": 3}, start=t0, end=t1, asp=asp, origin="test")
+    c = Constraint(
+        id="c1",
+        kind="door_unavailable",
+        params={"door": "d_storage", "minutes": 3},
+        start=t0,
+        end=t1,
+        asp=asp,
+        origin="test",
+    )
     return ConstraintSet(version=version, constraints=[c], asp=asp)
 
 
@@ -91,7 +109,9 @@ def test_planner_answers_world_versions_and_new_constraints(spawn, router, names
     for steps in third.robots.values():
         for s in steps:
             if s.action == "gothrough" and s.args == ["d_storage"]:
-                assert not (UNAVAILABLE[0] + 20 <= s.start < UNAVAILABLE[1]), "nobody goes through a door the human cannot open"
+                assert not (UNAVAILABLE[0] + 20 <= s.start < UNAVAILABLE[1]), (
+                    "nobody goes through a door the human cannot open"
+                )
 
     # late joiners get the current plan from the queryable
     replies = client.query(client.keys.plan(), TeamPlan, timeout=5)
@@ -108,13 +128,19 @@ def test_unsatisfiable_constraints_give_a_conflict_event_and_the_planner_keeps_g
 
     # r1 starts in the lab: keeping every robot out of the lab from now on cannot be satisfied
     asp = "room_forbidden(lab, 0, 600).\n:- robot_in(R, lab, S, E), S < 600, E > 0.\n"
-    bad = ConstraintSet(version=5, constraints=[Constraint(id="keep_out_lab", kind="forbid_room", params={}, start=0, end=600, asp=asp)], asp=asp)
+    bad = ConstraintSet(
+        version=5,
+        constraints=[Constraint(id="keep_out_lab", kind="forbid_room", params={}, start=0, end=600, asp=asp)],
+        asp=asp,
+    )
     client.publish(client.keys.constraints(), bad)
     event = wait_for_message(events, lambda e: e.kind == "plan_conflict", timeout=30)
     assert event.data["constraints"] == ["keep_out_lab"]
     after = wait_for_message(plans, lambda p: p.constraints_version == 5, timeout=30)
     assert "keep_out_lab" in after.diagnostic
-    assert {r: [(s.action, s.args) for s in v] for r, v in after.robots.items()} == {r: [(s.action, s.args) for s in v] for r, v in before.robots.items()}
+    assert {r: [(s.action, s.args) for s in v] for r, v in after.robots.items()} == {
+        r: [(s.action, s.args) for s in v] for r, v in before.robots.items()
+    }
 
     # garbage on its inputs does not kill it, and it still answers the next world version
     client.session.put(client.keys.robot_status("r0"), b"\x93\x01\x02")
@@ -137,7 +163,11 @@ def test_a_finished_action_gets_the_next_one_and_a_new_action_id(spawn, router, 
     assert nxt.action_id > cmd.action_id
     # the new trajectory starts now, where the robot stands (the other robots have not moved, so the
     # plan may change, but the robot never repeats what it has just done)
-    assert abs(nxt.trajectory[0][0] - t) < 1.5 and abs(nxt.trajectory[0][1] - x) < 1e-6 and abs(nxt.trajectory[0][2] - y) < 1e-6
+    assert (
+        abs(nxt.trajectory[0][0] - t) < 1.5
+        and abs(nxt.trajectory[0][1] - x) < 1e-6
+        and abs(nxt.trajectory[0][2] - y) < 1e-6
+    )
     assert (nxt.action, nxt.args) != (cmd.action, cmd.args)
     later = wait_for_message(plans, lambda p: p.world_version >= 2, timeout=30)
     front = later.robots["r0"][0]
@@ -168,14 +198,34 @@ def finish_front_action(client: TestClient, cmd: RobotCommand, at: float, versio
     """What the simulator publishes when r0 ends ``cmd`` at site time ``at``: pose, status, event, clock."""
     _, x, y, th = cmd.trajectory[-1]
     client.publish(client.keys.robot_pose("r0"), RobotPose(robot="r0", x=x, y=y, theta=th))
-    client.publish(client.keys.robot_status("r0"), RobotStatus(robot="r0", state="done", plan_id=cmd.plan_id, action_id=cmd.action_id, action=cmd.action, args=cmd.args, progress=1.0, world_version=version))
-    data = {"plan_id": cmd.plan_id, "action_id": cmd.action_id, "action": cmd.action, "args": cmd.args, "pose": [x, y, th]}
+    client.publish(
+        client.keys.robot_status("r0"),
+        RobotStatus(
+            robot="r0",
+            state="done",
+            plan_id=cmd.plan_id,
+            action_id=cmd.action_id,
+            action=cmd.action,
+            args=cmd.args,
+            progress=1.0,
+            world_version=version,
+        ),
+    )
+    data = {
+        "plan_id": cmd.plan_id,
+        "action_id": cmd.action_id,
+        "action": cmd.action,
+        "args": cmd.args,
+        "pose": [x, y, th],
+    }
     client.publish(client.keys.event(), Event(kind="action_done", robot="r0", data=data))
     client.publish(client.keys.clock(), Clock(time=at, mode="lockstep", world_version=version))
 
 
 @pytest.mark.parametrize("late", [0.0, -0.5, 30.0], ids=["on-time", "early", "30-s-late"])
-def test_an_action_ending_on_time_or_early_keeps_the_plan_and_a_late_one_is_solved_anew(spawn, router, namespace, client, late: float):
+def test_an_action_ending_on_time_or_early_keeps_the_plan_and_a_late_one_is_solved_anew(
+    spawn, router, namespace, client, late: float
+):
     plans, commands, first, cmd = start_and_first_command(spawn, router, namespace, client)
     planned = first.robots["r0"]
     before = planner_counters(client)
@@ -192,7 +242,9 @@ def test_an_action_ending_on_time_or_early_keeps_the_plan_and_a_late_one_is_solv
         assert continued == 1, "an action ending when planned, or before, keeps the plan without solving"
         assert (nxt.action, nxt.args) == (planned[1].action, planned[1].args)
         # the kept plan is the same sequence, moved on by one action, with the same times
-        assert [(s.action, s.args, s.start, s.end) for s in later.robots["r0"]] == [(s.action, s.args, s.start, s.end) for s in planned[1:]]
+        assert [(s.action, s.args, s.start, s.end) for s in later.robots["r0"]] == [
+            (s.action, s.args, s.start, s.end) for s in planned[1:]
+        ]
 
 
 def test_off_track_robots_and_door_changes_trigger_replans(spawn, router, namespace, client):
@@ -207,7 +259,18 @@ def test_off_track_robots_and_door_changes_trigger_replans(spawn, router, namesp
     # in lockstep: that news waits for the next world version (a plan made in between would reach
     # the simulator at a moment that depends on the machine's load).
     x, y, _ = SITE.robots["r2"].start
-    client.publish(client.keys.robot_status("r2"), RobotStatus(robot="r2", state="moving", plan_id=cmd.plan_id, action_id=cmd.action_id, action=cmd.action, args=cmd.args, world_version=1))
+    client.publish(
+        client.keys.robot_status("r2"),
+        RobotStatus(
+            robot="r2",
+            state="moving",
+            plan_id=cmd.plan_id,
+            action_id=cmd.action_id,
+            action=cmd.action,
+            args=cmd.args,
+            world_version=1,
+        ),
+    )
     time.sleep(0.3)
     client.publish(client.keys.robot_pose("r2"), RobotPose(robot="r2", x=x - 3.0, y=y, theta=0.0))
     off_track = lambda c: abs(c.trajectory[0][1] - (x - 3.0)) < 1e-6  # noqa: E731
@@ -222,9 +285,15 @@ def test_off_track_robots_and_door_changes_trigger_replans(spawn, router, namesp
     # door that is open now is skipped (it would be done at once, answered by the same plan, ...)
     client.publish(client.keys.clock(), Clock(time=30.0, mode="lockstep", world_version=3))
     client.publish(client.keys.robot_pose("r0"), RobotPose(robot="r0", x=6.45, y=4.6, theta=-1.5708))
-    client.publish(client.keys.robot_status("r0"), RobotStatus(robot="r0", state="waiting_at_door", waiting_door="d_storage", carrying=["o0"], world_version=3))
+    client.publish(
+        client.keys.robot_status("r0"),
+        RobotStatus(robot="r0", state="waiting_at_door", waiting_door="d_storage", carrying=["o0"], world_version=3),
+    )
     time.sleep(0.5)
-    client.publish(client.keys.door_state("d_storage"), DoorState(door="d_storage", open=True, by="human", until=50.0, world_version=4))
+    client.publish(
+        client.keys.door_state("d_storage"),
+        DoorState(door="d_storage", open=True, by="human", until=50.0, world_version=4),
+    )
     # the clock comes after everything of its version, as the simulator sends it: in lockstep the
     # planner plans a version only once its clock is in (a part of a version is not the version)
     client.publish(client.keys.clock(), Clock(time=30.0, mode="lockstep", world_version=4))
@@ -259,16 +328,34 @@ def test_a_command_the_robot_never_got_is_sent_again(spawn, router, namespace, c
         if not commands.empty():
             again, _ = commands.get()
     assert again is not None, "the lost command was not sent again"
-    assert (again.action_id, again.action, again.args, again.trajectory) == (cmd.action_id, cmd.action, cmd.args, cmd.trajectory)
+    assert (again.action_id, again.action, again.args, again.trajectory) == (
+        cmd.action_id,
+        cmd.action,
+        cmd.args,
+        cmd.trajectory,
+    )
     # once the robot reports it, nothing is sent again
-    client.publish(client.keys.robot_status("r0"), RobotStatus(robot="r0", state="moving", plan_id=cmd.plan_id, action_id=cmd.action_id, action=cmd.action, args=cmd.args, world_version=1))
+    client.publish(
+        client.keys.robot_status("r0"),
+        RobotStatus(
+            robot="r0",
+            state="moving",
+            plan_id=cmd.plan_id,
+            action_id=cmd.action_id,
+            action=cmd.action,
+            args=cmd.args,
+            world_version=1,
+        ),
+    )
     time.sleep(1.5)
     while not commands.empty():
         extra, _ = commands.get()
         assert extra.action_id != cmd.action_id, "a command the robot reports was sent again"
 
 
-def test_in_lockstep_the_plan_waits_for_the_feedback_ack_and_answers_the_constraints_it_brought(spawn, router, namespace, client):
+def test_in_lockstep_the_plan_waits_for_the_feedback_ack_and_answers_the_constraints_it_brought(
+    spawn, router, namespace, client
+):
     """A paused lockstep simulator says what it waits for. While it waits for the ack of the human's
     feedback, the planner holds (a new ConstraintSet follows): the world version is answered by one
     plan, made with that ConstraintSet, the moment the simulator says it waits for that plan."""
@@ -281,14 +368,19 @@ def test_in_lockstep_the_plan_waits_for_the_feedback_ack_and_answers_the_constra
     # version 2: the simulator has sent a feedback and waits for its ack
     for rid in SITE.robots:
         client.publish(client.keys.robot_status(rid), RobotStatus(robot=rid, state="idle", world_version=2))
-    client.publish(client.keys.clock(), Clock(time=10.0, mode="lockstep", world_version=2, paused=True, awaiting="feedback"))
+    client.publish(
+        client.keys.clock(), Clock(time=10.0, mode="lockstep", world_version=2, paused=True, awaiting="feedback")
+    )
     time.sleep(0.6)  # SETTLE and more: without the hold, version 2 would have been planned by now
     early = [p for p, _ in iter(lambda: None if every_plan.empty() else every_plan.get(), None)]
     assert not [p for p in early if p.world_version >= 2], "planned while the simulator waited for the feedback's ack"
 
     # the ack came: the restrictor's new set, then the simulator waits for a plan answering it
     client.publish(client.keys.constraints(), unavailable_set(1, *UNAVAILABLE))
-    client.publish(client.keys.clock(), Clock(time=10.0, mode="lockstep", world_version=2, paused=True, awaiting="plan", constraints_version=1))
+    client.publish(
+        client.keys.clock(),
+        Clock(time=10.0, mode="lockstep", world_version=2, paused=True, awaiting="plan", constraints_version=1),
+    )
     answer = wait_for_message(every_plan, lambda p: p.world_version >= 2, timeout=30)
     assert (answer.world_version, answer.constraints_version) == (2, 1)
     time.sleep(0.5)

@@ -17,7 +17,10 @@ WORLD = initial_world(SITE)
 @pytest.fixture(scope="module")
 def plan():
     result = planner_for("office").plan(WORLD)
-    robots = {rid: [StepView(s.action, s.args, result.absolute(s.start), result.absolute(s.end)) for s in p.steps] for rid, p in result.plans.items()}
+    robots = {
+        rid: [StepView(s.action, s.args, result.absolute(s.start), result.absolute(s.end)) for s in p.steps]
+        for rid, p in result.plans.items()
+    }
     openings = [(o.door, float(result.absolute(o.start)), float(result.absolute(o.end))) for o in result.openings]
     assert validate(SITE, WORLD, robots, openings, Windows()) == []
     return robots, openings
@@ -106,7 +109,9 @@ def test_overlapping_openings_and_unavailability(plan):
 
 def test_forbidden_room_and_time_travel(plan):
     robots, openings = plan
-    assert any("forbidden room storage" in e for e in check(robots, openings, Windows(forbidden=[("storage", 0, 10_000)])))
+    assert any(
+        "forbidden room storage" in e for e in check(robots, openings, Windows(forbidden=[("storage", 0, 10_000)]))
+    )
     steps = list(robots["r0"])
     steps[1] = replace(steps[1], start=steps[0].start - 1)
     assert any("starts before the previous step ends" in e for e in check({**robots, "r0": steps}, openings))

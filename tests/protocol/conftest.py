@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Callable, Iterator
+from collections.abc import Callable, Iterator
 
 import pytest
 
@@ -42,7 +42,7 @@ class Running:
         self.service = service
         self.thread: threading.Thread | None = None
 
-    def start(self) -> "Running":
+    def start(self) -> Running:
         self.thread = threading.Thread(target=self.service.run, name=f"run-{self.service.name}", daemon=True)
         self.thread.start()
         return self
@@ -62,7 +62,9 @@ def make_service(module_router: str, namespace: str) -> Iterator[Callable[..., R
     made: list[Running] = []
 
     def _make(cls: type[Service], *args, **kwargs) -> Running:
-        service = cls(*args, namespace=namespace, zenoh_options=ZenohOptions(mode="client", connect=[module_router]), **kwargs)
+        service = cls(
+            *args, namespace=namespace, zenoh_options=ZenohOptions(mode="client", connect=[module_router]), **kwargs
+        )
         service.open()
         made.append(Running(service))
         return made[-1]

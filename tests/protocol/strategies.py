@@ -48,7 +48,13 @@ def _optional_inner(hint: Any) -> Any | None:
 
 
 def _json(depth: int) -> st.SearchStrategy:
-    base = st.none() | st.booleans() | st.integers(INT_MIN, INT_MAX) | st.floats(allow_nan=False, allow_infinity=False) | st.text(max_size=DRAW_STR)
+    base = (
+        st.none()
+        | st.booleans()
+        | st.integers(INT_MIN, INT_MAX)
+        | st.floats(allow_nan=False, allow_infinity=False)
+        | st.text(max_size=DRAW_STR)
+    )
     if depth == 0:
         return base
     inner = _json(depth - 1)
@@ -72,7 +78,9 @@ def value_strategy(hint: Any, meta: typing.Mapping[str, Any]) -> st.SearchStrate
         if meta.get("choices"):
             return st.sampled_from(meta["choices"])
         if meta.get("ident"):
-            return st.just("") | st.from_regex(ID_PATTERN, fullmatch=True).filter(lambda s: len(s) <= (max_len or MAX_STR))
+            return st.just("") | st.from_regex(ID_PATTERN, fullmatch=True).filter(
+                lambda s: len(s) <= (max_len or MAX_STR)
+            )
         return st.text(max_size=min(max_len or MAX_STR, DRAW_STR))
     if hint is bytes:
         return st.binary(max_size=min(max_len or MAX_BYTES, DRAW_BYTES))
@@ -92,7 +100,9 @@ def value_strategy(hint: Any, meta: typing.Mapping[str, Any]) -> st.SearchStrate
             return st.sampled_from(meta["lengths"]).flatmap(lambda n: st.lists(item, min_size=n, max_size=n))
         return st.lists(item, max_size=min(max_len or MAX_LIST, DRAW_LIST))
     if origin is dict:
-        return st.dictionaries(st.text(max_size=8), value_strategy(args[1], {}), max_size=min(max_len or 4096, DRAW_MAP))
+        return st.dictionaries(
+            st.text(max_size=8), value_strategy(args[1], {}), max_size=min(max_len or 4096, DRAW_MAP)
+        )
     raise TypeError(f"no strategy for {hint!r}")
 
 
@@ -187,7 +197,11 @@ def oversized_value(hint: Any, meta: typing.Mapping[str, Any]) -> Any | None:
     if origin is list:
         limit = meta.get("max_len") or MAX_LIST
         item_meta = {k: meta.get(k) for k in ("lo", "hi", "choices", "ident")}
-        item = [sample_value(float, item_meta)] * meta["row_len"] if meta.get("row_len") else sample_value(args[0], item_meta)
+        item = (
+            [sample_value(float, item_meta)] * meta["row_len"]
+            if meta.get("row_len")
+            else sample_value(args[0], item_meta)
+        )
         return [item] * (limit + 1)
     if origin is dict:
         limit = meta.get("max_len") or 4096

@@ -16,8 +16,13 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 
 def test_protocol_benchmark_prints_its_json():
-    result = subprocess.run([sys.executable, "benchmarks/protocol.py", "--quick", "--runs", "2", "--pings", "200", "--batch", "20"],
-                            cwd=ROOT, capture_output=True, text=True, timeout=120)
+    result = subprocess.run(
+        [sys.executable, "benchmarks/protocol.py", "--quick", "--runs", "2", "--pings", "200", "--batch", "20"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)  # stdout is the JSON alone; progress went to stderr
     assert "[protocol bench]" in result.stderr
@@ -32,7 +37,9 @@ def test_protocol_benchmark_prints_its_json():
         figures = latency[variant]
         assert figures["received"] == figures["sent"] == 200
         assert 0 < figures["p50_us"] <= figures["p99_us"]
-    assert latency["protocol_over_raw_p50"] == pytest.approx(latency["protocol"]["p50_us"] / latency["raw"]["p50_us"], rel=0.01)
+    assert latency["protocol_over_raw_p50"] == pytest.approx(
+        latency["protocol"]["p50_us"] / latency["raw"]["p50_us"], rel=0.01
+    )
     # Two runs, each with its own echo processes; the floor is checked on the median of their ratios.
     assert latency["runs"] == len(latency["per_run"]) == 2
     for name in ("protocol", "protocol_worker"):

@@ -28,8 +28,16 @@ def mono(monkeypatch) -> FakeMonotonic:
     return fake
 
 
-def tick(time_: float, *, mode: str = "realtime", rate: float = 1.0, src: str = "sim-1", seq: int = 1,
-         paused: bool = False, world_version: int = 0) -> Clock:
+def tick(
+    time_: float,
+    *,
+    mode: str = "realtime",
+    rate: float = 1.0,
+    src: str = "sim-1",
+    seq: int = 1,
+    paused: bool = False,
+    world_version: int = 0,
+) -> Clock:
     return Clock(time=time_, mode=mode, rate=rate, src=src, seq=seq, paused=paused, world_version=world_version)
 
 

@@ -12,14 +12,23 @@ import math
 import re
 import struct
 import threading
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import msgpack
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from protocol.codec import _decode_checked, _float_pattern, _value_pattern, canonical_pattern, decoder_for, encode, validator_for
+from protocol.codec import (
+    _decode_checked,
+    _float_pattern,
+    _value_pattern,
+    canonical_pattern,
+    decoder_for,
+    encode,
+    validator_for,
+)
 from protocol.errors import ProtocolError
 from protocol.messages import ALL_MESSAGES, Clock, DoorState, FeedbackAck, RobotPose
 from tests.protocol.strategies import minimal_wire, pack, sample_message, strategy_for
@@ -41,9 +50,12 @@ def mutated(payload: bytes) -> st.SearchStrategy[bytes]:
     n = len(payload)
     index = st.integers(0, n - 1)
     flips = st.lists(st.tuples(index, st.integers(0, 255)), min_size=1, max_size=3).map(
-        lambda edits: bytes(_apply(bytearray(payload), edits)))
-    cut = st.tuples(index, st.integers(1, 4)).map(lambda c: payload[:c[0]] + payload[c[0] + c[1]:])
-    added = st.tuples(st.integers(0, n), st.binary(min_size=1, max_size=4)).map(lambda a: payload[:a[0]] + a[1] + payload[a[0]:])
+        lambda edits: bytes(_apply(bytearray(payload), edits))
+    )
+    cut = st.tuples(index, st.integers(1, 4)).map(lambda c: payload[: c[0]] + payload[c[0] + c[1] :])
+    added = st.tuples(st.integers(0, n), st.binary(min_size=1, max_size=4)).map(
+        lambda a: payload[: a[0]] + a[1] + payload[a[0] :]
+    )
     short = index.map(lambda i: payload[:i])
     return st.one_of(flips, cut, added, short)
 
@@ -83,8 +95,14 @@ def test_fast_paths_agree_on_values_in_other_msgpack_formats(cls, data):
     ints where floats are expected, floats where ints are, None, a bin for a str, longer strings."""
     wire = msgpack.unpackb(encode(data.draw(strategy_for(cls))))
     name = data.draw(st.sampled_from(sorted(wire)))
-    wire[name] = data.draw(st.none() | st.booleans() | st.integers(-(2**63), 2**64 - 1) | st.floats()
-                           | st.text(max_size=40) | st.binary(max_size=8))
+    wire[name] = data.draw(
+        st.none()
+        | st.booleans()
+        | st.integers(-(2**63), 2**64 - 1)
+        | st.floats()
+        | st.text(max_size=40)
+        | st.binary(max_size=8)
+    )
     assert_agree(cls, pack(wire))
 
 
@@ -105,36 +123,40 @@ def _pose(**fields: Any) -> dict[str, Any]:
     return minimal_wire(RobotPose) | {"x": 1.5, "y": 2.0, "theta": 0.5, "vel": 0.25, "omega": 0.0} | fields
 
 
-@pytest.mark.parametrize("wire,matches,valid", [
-    (_pose(), True, True),
-    (_pose(x=8191.999), True, True),  # |x| < 2**13 <= 10 000: the pattern's interval
-    (_pose(x=-8191.999), True, True),
-    (_pose(x=8192.0), False, True),  # within the bounds, beyond the interval: checked in full
-    (_pose(x=10_000.0), False, True),
-    (_pose(x=10_000.5), False, False),
-    (_pose(x=-0.0), True, True),
-    (_pose(x=math.nan), False, False),
-    (_pose(x=math.inf), False, False),
-    (_pose(x=5e-324), True, True),
-    (_pose(x=2), False, True),  # an int in a float field: converted by the full path
-    (_pose(src="s" * 31), True, True),
-    (_pose(src="s" * 32), False, True),  # longer than one-byte-header strings
-    (_pose(src="s" * 129), False, False),
-    (_pose(src="é"), False, True),  # not ASCII
-    (_pose(robot=""), True, True),  # an empty identifier is allowed
-    (_pose(robot="r-0_b"), True, True),
-    (_pose(robot="0r"), False, False),
-    (_pose(robot="r 0"), False, False),
-    (_pose(robot=b"r0"), False, False),  # bin, not str
-    (_pose(seq=0), True, True),
-    (_pose(seq=2**63 - 1), True, True),
-    (_pose(seq=2**63), False, False),
-    (_pose(seq=-1), False, False),
-    (_pose(seq=True), False, False),
-    (_pose(v=2), False, False),
-    (_pose(vel=None), False, False),
-    (_pose(type="Intent"), False, False),
-], ids=lambda v: repr(v)[:40] if not isinstance(v, dict) else None)
+@pytest.mark.parametrize(
+    "wire,matches,valid",
+    [
+        (_pose(), True, True),
+        (_pose(x=8191.999), True, True),  # |x| < 2**13 <= 10 000: the pattern's interval
+        (_pose(x=-8191.999), True, True),
+        (_pose(x=8192.0), False, True),  # within the bounds, beyond the interval: checked in full
+        (_pose(x=10_000.0), False, True),
+        (_pose(x=10_000.5), False, False),
+        (_pose(x=-0.0), True, True),
+        (_pose(x=math.nan), False, False),
+        (_pose(x=math.inf), False, False),
+        (_pose(x=5e-324), True, True),
+        (_pose(x=2), False, True),  # an int in a float field: converted by the full path
+        (_pose(src="s" * 31), True, True),
+        (_pose(src="s" * 32), False, True),  # longer than one-byte-header strings
+        (_pose(src="s" * 129), False, False),
+        (_pose(src="é"), False, True),  # not ASCII
+        (_pose(robot=""), True, True),  # an empty identifier is allowed
+        (_pose(robot="r-0_b"), True, True),
+        (_pose(robot="0r"), False, False),
+        (_pose(robot="r 0"), False, False),
+        (_pose(robot=b"r0"), False, False),  # bin, not str
+        (_pose(seq=0), True, True),
+        (_pose(seq=2**63 - 1), True, True),
+        (_pose(seq=2**63), False, False),
+        (_pose(seq=-1), False, False),
+        (_pose(seq=True), False, False),
+        (_pose(v=2), False, False),
+        (_pose(vel=None), False, False),
+        (_pose(type="Intent"), False, False),
+    ],
+    ids=lambda v: repr(v)[:40] if not isinstance(v, dict) else None,
+)
 def test_pattern_edges(wire, matches, valid):
     payload = pack(wire)
     assert bool(canonical_pattern(RobotPose).fullmatch(payload)) == matches
@@ -159,8 +181,16 @@ def test_non_minimal_int_formats_agree():
     assert_agree(RobotPose, payload)
 
 
-BOUNDS = [(None, None), (-1e4, 1e4), (0.0, 1.0), (0.0, 0.5), (-3.0, 0.0), (-1e-300, 1e-300), (0.0, 2.0**-1022),
-          (-2.0**1023, 1.0)]
+BOUNDS = [
+    (None, None),
+    (-1e4, 1e4),
+    (0.0, 1.0),
+    (0.0, 0.5),
+    (-3.0, 0.0),
+    (-1e-300, 1e-300),
+    (0.0, 2.0**-1022),
+    (-(2.0**1023), 1.0),
+]
 
 
 @pytest.mark.parametrize("lo,hi", BOUNDS)
@@ -181,9 +211,18 @@ def test_float_pattern_covers_the_everyday_range():
 
 
 # Every msgpack integer format: (first byte, struct format of what follows, lowest, highest).
-INT_ENCODINGS = [(None, ">B", 0, 127), (None, ">b", -32, -1), (b"\xcc", ">B", 0, 2**8 - 1), (b"\xcd", ">H", 0, 2**16 - 1),
-                 (b"\xce", ">I", 0, 2**32 - 1), (b"\xcf", ">Q", 0, 2**64 - 1), (b"\xd0", ">b", -(2**7), 2**7 - 1),
-                 (b"\xd1", ">h", -(2**15), 2**15 - 1), (b"\xd2", ">i", -(2**31), 2**31 - 1), (b"\xd3", ">q", -(2**63), 2**63 - 1)]
+INT_ENCODINGS = [
+    (None, ">B", 0, 127),
+    (None, ">b", -32, -1),
+    (b"\xcc", ">B", 0, 2**8 - 1),
+    (b"\xcd", ">H", 0, 2**16 - 1),
+    (b"\xce", ">I", 0, 2**32 - 1),
+    (b"\xcf", ">Q", 0, 2**64 - 1),
+    (b"\xd0", ">b", -(2**7), 2**7 - 1),
+    (b"\xd1", ">h", -(2**15), 2**15 - 1),
+    (b"\xd2", ">i", -(2**31), 2**31 - 1),
+    (b"\xd3", ">q", -(2**63), 2**63 - 1),
+]
 
 
 @pytest.mark.parametrize("lo,hi", [(None, None), (0, 2**63 - 1), (0, 2**31), (-5, 5), (-(2**63), -1)])

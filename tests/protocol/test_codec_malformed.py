@@ -92,14 +92,17 @@ def test_wrong_type_for_each_field(cls, name, hint, meta):
     assert err.msg_type == cls.TYPE
 
 
-@pytest.mark.parametrize("name,value,problem", [
-    ("seq", 1.5, "expected int, got float"),
-    ("seq", True, "expected int, got bool"),
-    ("x", True, "expected float, got bool"),
-    ("x", None, "expected float, got NoneType"),
-    ("robot", b"r0", "expected str, got bytes"),
-    ("src", ["a"], "expected str, got list"),
-])
+@pytest.mark.parametrize(
+    "name,value,problem",
+    [
+        ("seq", 1.5, "expected int, got float"),
+        ("seq", True, "expected int, got bool"),
+        ("x", True, "expected float, got bool"),
+        ("x", None, "expected float, got NoneType"),
+        ("robot", b"r0", "expected str, got bytes"),
+        ("src", ["a"], "expected str, got list"),
+    ],
+)
 def test_wrong_type_message_says_what_was_expected(name, value, problem):
     data = minimal_wire(RobotPose) | {name: value}
     assert refused(pack(data), RobotPose).problem == problem
@@ -137,14 +140,17 @@ def test_non_finite_values_inside_rows_and_json_refused():
     assert refused(pack(data), CameraTruth).field == "quaternion[3]"
 
 
-@pytest.mark.parametrize("name,value,problem", [
-    ("x", 1e5, "above the maximum"),
-    ("y", -1e5, "below the minimum"),
-    ("seq", -1, "below the minimum"),
-    ("robot", "0r", "not an identifier"),
-    ("robot", "r 0", "not an identifier"),
-    ("robot", "r" * 65, "not an identifier"),
-])
+@pytest.mark.parametrize(
+    "name,value,problem",
+    [
+        ("x", 1e5, "above the maximum"),
+        ("y", -1e5, "below the minimum"),
+        ("seq", -1, "below the minimum"),
+        ("robot", "0r", "not an identifier"),
+        ("robot", "r 0", "not an identifier"),
+        ("robot", "r" * 65, "not an identifier"),
+    ],
+)
 def test_out_of_range_values(name, value, problem):
     err = refused(pack(minimal_wire(RobotPose) | {name: value}), RobotPose)
     assert err.field == name and problem in err.problem
@@ -197,16 +203,19 @@ def test_oversized_map_key_and_json_nesting():
 # ---------------------------------------------------------------------------- version and type
 
 
-@pytest.mark.parametrize("v,problem", [
-    (2, "schema version 2 is newer than the supported 1"),
-    (99, "newer"),
-    (0, "schema version 0 is not valid"),
-    (-1, "not valid"),
-    ("1", "missing or not an integer"),
-    (1.0, "missing or not an integer"),
-    (True, "missing or not an integer"),
-    (None, "missing or not an integer"),
-])
+@pytest.mark.parametrize(
+    "v,problem",
+    [
+        (2, "schema version 2 is newer than the supported 1"),
+        (99, "newer"),
+        (0, "schema version 0 is not valid"),
+        (-1, "not valid"),
+        ("1", "missing or not an integer"),
+        (1.0, "missing or not an integer"),
+        (True, "missing or not an integer"),
+        (None, "missing or not an integer"),
+    ],
+)
 def test_wrong_or_newer_version(v, problem):
     for cls in (RobotPose, TeamPlan):
         err = refused(pack(minimal_wire(cls) | {"v": v}), cls)
@@ -243,14 +252,17 @@ def test_non_map_payloads(value):
     assert err.field == "" and "must be a map" in err.problem
 
 
-@pytest.mark.parametrize("payload,problem", [
-    (b"", "empty payload"),
-    (pack(minimal_wire(RobotPose)) + b"\x00", "not a valid msgpack"),  # trailing bytes
-    (b"\xc1", "not a valid msgpack"),  # a byte msgpack never uses
-    (msgpack.packb({1: 2}), "not a valid msgpack"),  # non-string map key
-    (msgpack.packb(msgpack.ExtType(5, b"x")), "not a valid msgpack"),  # extension types
-    (b"\x91" * 5000 + b"\x00", "not a valid msgpack"),  # nesting deep enough to blow a stack
-])
+@pytest.mark.parametrize(
+    "payload,problem",
+    [
+        (b"", "empty payload"),
+        (pack(minimal_wire(RobotPose)) + b"\x00", "not a valid msgpack"),  # trailing bytes
+        (b"\xc1", "not a valid msgpack"),  # a byte msgpack never uses
+        (msgpack.packb({1: 2}), "not a valid msgpack"),  # non-string map key
+        (msgpack.packb(msgpack.ExtType(5, b"x")), "not a valid msgpack"),  # extension types
+        (b"\x91" * 5000 + b"\x00", "not a valid msgpack"),  # nesting deep enough to blow a stack
+    ],
+)
 def test_broken_msgpack(payload, problem):
     err = refused(payload, RobotPose)
     assert err.field == "" and problem in err.problem
@@ -278,14 +290,26 @@ def test_random_bytes_never_crash_the_decoder(payload):
 
 
 _msgpack_values = st.recursive(
-    st.none() | st.booleans() | st.integers(-(2**63), 2**64 - 1) | st.floats() | st.text(max_size=10) | st.binary(max_size=10),
+    st.none()
+    | st.booleans()
+    | st.integers(-(2**63), 2**64 - 1)
+    | st.floats()
+    | st.text(max_size=10)
+    | st.binary(max_size=10),
     lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner, max_size=4),
     max_leaves=12,
 )
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.sampled_from(ALL_MESSAGES), st.dictionaries(st.sampled_from(["x", "robot", "trajectory", "data", "args", "src", "seq", "stamp", "kind", "state"]), _msgpack_values, max_size=6))
+@given(
+    st.sampled_from(ALL_MESSAGES),
+    st.dictionaries(
+        st.sampled_from(["x", "robot", "trajectory", "data", "args", "src", "seq", "stamp", "kind", "state"]),
+        _msgpack_values,
+        max_size=6,
+    ),
+)
 def test_random_field_values_are_refused_or_valid(cls, overrides):
     """Random msgpack data in real field names of a well-formed envelope: only ProtocolError, or a message."""
     data = minimal_wire(cls) | overrides

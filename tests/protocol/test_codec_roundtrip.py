@@ -62,7 +62,9 @@ def test_whole_record_fast_path_and_field_by_field_path_agree():
     fast = decode(pack(base), RobotPose)
     assert (fast.x, fast.vel, fast.omega) == (1.5, 0.5, -0.25)
     assert decode(pack(base | {"x": 2}), RobotPose) == dataclasses.replace(fast, x=2.0)
-    assert decode(pack({k: v for k, v in base.items() if k != "omega"}), RobotPose) == dataclasses.replace(fast, omega=0.0)
+    assert decode(pack({k: v for k, v in base.items() if k != "omega"}), RobotPose) == dataclasses.replace(
+        fast, omega=0.0
+    )
     assert decode(pack(base | {"unknown": [1, 2]}), RobotPose) == fast
 
 
@@ -80,8 +82,17 @@ def test_missing_optional_fields_take_their_defaults():
 
 
 def test_extreme_valid_values_round_trip():
-    pose = RobotPose(robot="r" * 64, x=-10_000.0, y=10_000.0, theta=-1000.0, vel=100.0, omega=-100.0,
-                     src="s" * 128, seq=2**63 - 1, stamp=-1e10)
+    pose = RobotPose(
+        robot="r" * 64,
+        x=-10_000.0,
+        y=10_000.0,
+        theta=-1000.0,
+        vel=100.0,
+        omega=-100.0,
+        src="s" * 128,
+        seq=2**63 - 1,
+        stamp=-1e10,
+    )
     assert decode(encode(pose), RobotPose) == pose
     tiny = RobotPose(robot="r0", x=5e-324, y=-0.0, theta=0.0, src="", seq=0, stamp=0.0)
     back = decode(encode(tiny), RobotPose)
@@ -90,8 +101,17 @@ def test_extreme_valid_values_round_trip():
 
 def test_a_200_point_intent_round_trips():
     trajectory = [[100.0 + 0.1 * i, 1.0 + 0.05 * i, 5.0, 0.001 * i] for i in range(200)]
-    intent = Intent(robot="r0", plan_id=3, action_id=4, action="approach", args=["d1"], trajectory=trajectory,
-                    src="planner-1", seq=9, stamp=100.0)
+    intent = Intent(
+        robot="r0",
+        plan_id=3,
+        action_id=4,
+        action="approach",
+        args=["d1"],
+        trajectory=trajectory,
+        src="planner-1",
+        seq=9,
+        stamp=100.0,
+    )
     assert decode(encode(intent), Intent) == intent
 
 
@@ -120,12 +140,31 @@ def test_encode_with_extra_fields_is_decoded_as_without():
 def test_camera_frame_gravity_is_optional_and_old_frames_still_decode():
     from protocol.messages import CameraFrame
 
-    old = msgpack.packb({"v": CameraFrame.VERSION, "type": "CameraFrame", "src": "sim", "seq": 3, "stamp": 1.0, "camera": "tablet",
-                         "jpeg": b"\xff\xd8", "width": 640, "height": 480, "intrinsics": [500.0, 500.0, 320.0, 240.0],
-                         "distortion": [0.0] * 5})
+    old = msgpack.packb(
+        {
+            "v": CameraFrame.VERSION,
+            "type": "CameraFrame",
+            "src": "sim",
+            "seq": 3,
+            "stamp": 1.0,
+            "camera": "tablet",
+            "jpeg": b"\xff\xd8",
+            "width": 640,
+            "height": 480,
+            "intrinsics": [500.0, 500.0, 320.0, 240.0],
+            "distortion": [0.0] * 5,
+        }
+    )
     frame = decode(old, CameraFrame)
     assert frame.gravity == [] and frame.width == 640
-    new = CameraFrame(camera="tablet", jpeg=b"\xff\xd8", width=640, height=480, intrinsics=[500.0, 500.0, 320.0, 240.0], gravity=[0.1, 9.8, 0.2])
+    new = CameraFrame(
+        camera="tablet",
+        jpeg=b"\xff\xd8",
+        width=640,
+        height=480,
+        intrinsics=[500.0, 500.0, 320.0, 240.0],
+        gravity=[0.1, 9.8, 0.2],
+    )
     assert decode(encode(new), CameraFrame).gravity == [0.1, 9.8, 0.2]
     bad = dataclasses.replace(new, gravity=[0.0, 9.8])
     with pytest.raises(Exception, match="gravity"):

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import sys
 import threading
-from typing import Callable
+from collections.abc import Callable
 
 from protocol.messages import RobotPose
 from protocol.service import Service, _Tally
@@ -78,7 +78,9 @@ def test_counters_fold_tallies_and_locked_counts_together():
 def test_stamps_number_each_message_once_across_threads():
     service = Service("stamping", "ns", ZenohOptions())
     seqs: list[list[int]] = [[] for _ in range(THREADS)]
-    in_threads(lambda k: seqs[k].extend(service.stamp(RobotPose(robot="r0", x=0.0, y=0.0, theta=0.0)).seq for _ in range(EACH)))
+    in_threads(
+        lambda k: seqs[k].extend(service.stamp(RobotPose(robot="r0", x=0.0, y=0.0, theta=0.0)).seq for _ in range(EACH))
+    )
     together = sorted(s for part in seqs for s in part)
     assert together == list(range(1, THREADS * EACH + 1))
     assert all(part == sorted(part) for part in seqs)  # each thread sees its own in order

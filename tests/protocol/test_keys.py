@@ -73,8 +73,17 @@ def test_liveliness_tokens_are_outside_the_namespace_wildcard():
 @pytest.mark.parametrize("bad", ["", "a/b", "a*", "**", "r 0", "r0$", "ü", "a?b", "#"])
 def test_invalid_chunks_refused(bad):
     keys = Keys("office")
-    for build in (keys.robot_pose, keys.robot_status, keys.robot_command, keys.door_state, keys.intent,
-                  keys.feedback_ack, keys.camera_frame, keys.camera_truth, keys.overlay):
+    for build in (
+        keys.robot_pose,
+        keys.robot_status,
+        keys.robot_command,
+        keys.door_state,
+        keys.intent,
+        keys.feedback_ack,
+        keys.camera_frame,
+        keys.camera_truth,
+        keys.overlay,
+    ):
         with pytest.raises(ValueError, match="cannot be used in a key expression"):
             build(bad)
     with pytest.raises(ValueError):

@@ -24,8 +24,13 @@ SEND_TIMEOUT = 60
 
 
 def run_send(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(arroch("ping", "send", "--json", "--log-level", "WARNING", *args), cwd=ROOT,
-                          capture_output=True, text=True, timeout=SEND_TIMEOUT)
+    return subprocess.run(
+        arroch("ping", "send", "--json", "--log-level", "WARNING", *args),
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=SEND_TIMEOUT,
+    )
 
 
 def start_serve(spawn, *args: str) -> Proc:
@@ -46,16 +51,30 @@ def test_ping_peer_to_peer(spawn, namespace):
     """One process listens (peer), the other connects to it (peer): no router anywhere."""
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     start_serve(spawn, "--mode", "peer", "--listen", endpoint, "--namespace", namespace)
-    summary = check_summary(run_send("--mode", "peer", "--connect", endpoint, "--namespace", namespace,
-                                     "--count", "50", "--rate", "0"), 50)
+    summary = check_summary(
+        run_send("--mode", "peer", "--connect", endpoint, "--namespace", namespace, "--count", "50", "--rate", "0"), 50
+    )
     assert summary["namespace"] == namespace
 
 
 def test_ping_through_the_router(spawn, module_router, namespace):
     """Both processes are clients of `arroch router` (the default deployment)."""
     start_serve(spawn, "--connect", module_router, "--namespace", namespace)
-    summary = check_summary(run_send("--connect", module_router, "--namespace", namespace,
-                                     "--count", "30", "--rate", "200", "--payload-bytes", "600"), 30)
+    summary = check_summary(
+        run_send(
+            "--connect",
+            module_router,
+            "--namespace",
+            namespace,
+            "--count",
+            "30",
+            "--rate",
+            "200",
+            "--payload-bytes",
+            "600",
+        ),
+        30,
+    )
     assert 590 <= summary["payload_bytes"] <= 600  # padded with a field the server ignores
 
 
@@ -139,8 +158,22 @@ def test_service_stops_within_2s_and_leaves_nothing(spawn, module_router, namesp
 
 def test_ping_send_stops_on_sigint_with_what_it_measured(spawn, module_router, namespace):
     start_serve(spawn, "--connect", module_router, "--namespace", namespace)
-    send = spawn(arroch("ping", "send", "--json", "--connect", module_router, "--namespace", namespace,
-                        "--count", "100000", "--rate", "50"), name="ping-send")
+    send = spawn(
+        arroch(
+            "ping",
+            "send",
+            "--json",
+            "--connect",
+            module_router,
+            "--namespace",
+            namespace,
+            "--count",
+            "100000",
+            "--rate",
+            "50",
+        ),
+        name="ping-send",
+    )
     send.wait_for("pingsend", timeout=20)  # its start-up log line
     time.sleep(1.5)
     started = time.monotonic()
@@ -174,6 +207,7 @@ def signal_storm(pid: int, senders: int = 2) -> None:
     """SIGTERMs from ``senders`` threads, back to back until ``pid`` is gone: the worst case of what
     a process tied to its parent with PR_SET_PDEATHSIG gets when that parent, with many threads, is
     killed (one signal per exiting thread)."""
+
     def send() -> None:
         deadline = time.monotonic() + 10
         while time.monotonic() < deadline:

@@ -24,7 +24,9 @@ pytestmark = pytest.mark.integration
 class Probe(Service):
     """A service whose subscriptions are given by the test; every handled message is recorded."""
 
-    def __init__(self, *, namespace: str, zenoh_options, subscriptions: list[dict] | None = None, name: str = "probe", **kwargs) -> None:
+    def __init__(
+        self, *, namespace: str, zenoh_options, subscriptions: list[dict] | None = None, name: str = "probe", **kwargs
+    ) -> None:
         self.subscriptions = subscriptions or []
         self.seen: list[tuple[Any, str, int]] = []  # (message, key, thread ident)
         super().__init__(name, namespace, zenoh_options, **kwargs)
@@ -50,8 +52,19 @@ def publisher_for(peer, key: str) -> zenoh.Publisher:
 
 def bad_pose(src: str) -> bytes:
     """A well-formed envelope from ``src`` with a bad field."""
-    return msgpack.packb({"v": 1, "type": "RobotPose", "src": src, "seq": 1, "stamp": 0.0, "robot": "r0",
-                          "x": "not a number", "y": 0.0, "theta": 0.0})
+    return msgpack.packb(
+        {
+            "v": 1,
+            "type": "RobotPose",
+            "src": src,
+            "seq": 1,
+            "stamp": 0.0,
+            "robot": "r0",
+            "x": "not a number",
+            "y": 0.0,
+            "theta": 0.0,
+        }
+    )
 
 
 def good_pose(robot: str = "r0", seq: int = 1, x: float = 1.0) -> bytes:
@@ -106,7 +119,17 @@ def test_bad_message_log_interval_and_memory_bound(make_service, monkeypatch, ca
 
 
 def test_delete_samples_are_not_bad_messages(make_service, peer):
-    probe = make_service(Probe, subscriptions=[{"key": peer.keys.robot_pose("*")}, {"key": peer.keys.robot_status("*"), "type": RobotStatus, "inline": True}]).start().service
+    probe = (
+        make_service(
+            Probe,
+            subscriptions=[
+                {"key": peer.keys.robot_pose("*")},
+                {"key": peer.keys.robot_status("*"), "type": RobotStatus, "inline": True},
+            ],
+        )
+        .start()
+        .service
+    )
     pose_pub = publisher_for(peer, peer.keys.robot_pose("r0"))
     status_pub = publisher_for(peer, peer.keys.robot_status("r0"))
     pose_pub.delete()
@@ -123,10 +146,13 @@ def test_delete_samples_are_not_bad_messages(make_service, peer):
 def test_latest_keeps_only_the_newest_payload_per_key(make_service, peer):
     only_r0: list[RobotPose] = []
     # Two latest-subscriptions overlapping on r0: each keeps its own newest payload.
-    probe = make_service(Probe, subscriptions=[
-        {"key": peer.keys.robot_pose("*"), "latest": True},
-        {"key": peer.keys.robot_pose("r0"), "latest": True, "handler": lambda msg, key: only_r0.append(msg)},
-    ]).service
+    probe = make_service(
+        Probe,
+        subscriptions=[
+            {"key": peer.keys.robot_pose("*"), "latest": True},
+            {"key": peer.keys.robot_pose("r0"), "latest": True, "handler": lambda msg, key: only_r0.append(msg)},
+        ],
+    ).service
     pubs = {rid: publisher_for(peer, peer.keys.robot_pose(rid)) for rid in ("r0", "r1")}
     # The worker is not running yet: everything waits, and newer payloads replace older ones.
     for seq in range(1, 51):
@@ -189,7 +215,9 @@ def test_relay_passes_valid_payloads_on_byte_for_byte(make_service, peer):
 
     relay = make_service(Relay, "relay").service
     got: list[bytes] = []
-    peer._declared.append(peer.session.declare_subscriber(peer.keys.ping_reply(), lambda s: got.append(s.payload.to_bytes())))
+    peer._declared.append(
+        peer.session.declare_subscriber(peer.keys.ping_reply(), lambda s: got.append(s.payload.to_bytes()))
+    )
     eventually(lambda: relay._publishers[relay.keys.ping_reply()].matching_status.matching, what="the listener")
     pub = publisher_for(peer, peer.keys.robot_pose("r0"))
     padded = encode(RobotPose(robot="r0", x=1.0, y=2.0, theta=0.0, src="peer-1", seq=9, stamp=3.0), {"pad": b"\0" * 40})
@@ -206,7 +234,11 @@ def test_publishers_use_the_shared_options(make_service, peer):
     publisher = probe.advertise(probe.keys.robot_pose("r0"))
     options = publisher_options()
     assert (publisher.congestion_control, publisher.priority, publisher.reliability, str(publisher.encoding)) == (
-        options["congestion_control"], options["priority"], options["reliability"], str(options["encoding"]))
+        options["congestion_control"],
+        options["priority"],
+        options["reliability"],
+        str(options["encoding"]),
+    )
     assert publisher_options(express=False)["express"] is False
 
 
@@ -226,7 +258,9 @@ def test_handler_exceptions_do_not_kill_the_service(make_service, peer, inline, 
             raise RuntimeError(f"odd seq {msg.seq}")
         seen.append(msg.seq)
 
-    running = make_service(Probe, subscriptions=[{"key": peer.keys.robot_pose("*"), "handler": fragile, "inline": inline}]).start()
+    running = make_service(
+        Probe, subscriptions=[{"key": peer.keys.robot_pose("*"), "handler": fragile, "inline": inline}]
+    ).start()
     pub = publisher_for(peer, peer.keys.robot_pose("r0"))
     for seq in range(1, 11):
         pub.put(good_pose(seq=seq))
@@ -297,20 +331,28 @@ def test_a_prepared_sender_publishes_like_publish(make_service, peer):
     q = peer.collect(peer.keys.robot_pose("*"), RobotPose)
     send = probe.sender(probe.keys.robot_pose("r0"), RobotPose)
     keep = probe.sender(probe.keys.robot_pose("r1"), RobotPose, stamp=False)
-    eventually(lambda: all(probe._publishers[probe.keys.robot_pose(r)].matching_status.matching for r in ("r0", "r1")),
-               what="the collector")
+    eventually(
+        lambda: all(probe._publishers[probe.keys.robot_pose(r)].matching_status.matching for r in ("r0", "r1")),
+        what="the collector",
+    )
     for _ in range(2):
         send(RobotPose(robot="r0", x=1.0, y=1.0, theta=0.0))
     keep(RobotPose(robot="r1", x=2.0, y=1.0, theta=0.0, src="elsewhere-1", seq=41, stamp=5.0))
     got = sorted((q.get(timeout=10)[0] for _ in range(3)), key=lambda m: m.robot)
-    assert [(m.robot, m.src, m.seq) for m in got] == [("r0", probe.src, 1), ("r0", probe.src, 2), ("r1", "elsewhere-1", 41)]
+    assert [(m.robot, m.src, m.seq) for m in got] == [
+        ("r0", probe.src, 1),
+        ("r0", probe.src, 2),
+        ("r1", "elsewhere-1", 41),
+    ]
     assert probe.counters["published"] == 3
 
 
 def test_serve_and_query(make_service, peer):
     probe = make_service(Probe).service
     probe.serve(probe.keys.plan(), lambda query: Event(kind="plan_reply"))
-    probe.serve(probe.keys.door_state("*"), lambda query: Event(kind="door_reply", door=str(query.key_expr).split("/")[3]))
+    probe.serve(
+        probe.keys.door_state("*"), lambda query: Event(kind="door_reply", door=str(query.key_expr).split("/")[3])
+    )
     probe.serve(probe.keys.constraints(), lambda query: None)  # nothing to say
 
     def ask(key: str) -> list[Event]:

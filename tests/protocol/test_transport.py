@@ -60,7 +60,13 @@ def json5_file(tmp_path):
 def test_defaults():
     opts = options_from(parse(), env={})
     assert (opts.mode, opts.connect, opts.listen, opts.multicast, opts.shared_memory, opts.config_file) == (
-        "client", [], [], False, None, None)
+        "client",
+        [],
+        [],
+        False,
+        None,
+        None,
+    )
     config = build_config(opts)
     assert get(config, "mode") == "client"
     assert get(config, "connect/endpoints") == [DEFAULT_ROUTER]  # client mode needs somewhere to go
@@ -68,11 +74,21 @@ def test_defaults():
 
 
 def test_environment_overrides_defaults():
-    env = {"ARROCH_ZENOH_MODE": "peer", "ARROCH_ZENOH_CONNECT": "tcp/127.0.0.1:1, tcp/127.0.0.1:2",
-           "ARROCH_ZENOH_LISTEN": "tcp/127.0.0.1:3", "ARROCH_ZENOH_MULTICAST": "1", "ARROCH_ZENOH_SHM": "0"}
+    env = {
+        "ARROCH_ZENOH_MODE": "peer",
+        "ARROCH_ZENOH_CONNECT": "tcp/127.0.0.1:1, tcp/127.0.0.1:2",
+        "ARROCH_ZENOH_LISTEN": "tcp/127.0.0.1:3",
+        "ARROCH_ZENOH_MULTICAST": "1",
+        "ARROCH_ZENOH_SHM": "0",
+    }
     opts = options_from(parse(), env=env)
     assert (opts.mode, opts.connect, opts.listen, opts.multicast, opts.shared_memory) == (
-        "peer", ["tcp/127.0.0.1:1", "tcp/127.0.0.1:2"], ["tcp/127.0.0.1:3"], True, False)
+        "peer",
+        ["tcp/127.0.0.1:1", "tcp/127.0.0.1:2"],
+        ["tcp/127.0.0.1:3"],
+        True,
+        False,
+    )
     config = build_config(opts)
     assert get(config, "mode") == "peer"
     assert get(config, "connect/endpoints") == ["tcp/127.0.0.1:1", "tcp/127.0.0.1:2"]
@@ -82,8 +98,14 @@ def test_environment_overrides_defaults():
 
 
 def test_options_override_environment():
-    env = {"ARROCH_ZENOH_MODE": "peer", "ARROCH_ZENOH_CONNECT": "tcp/127.0.0.1:1", "ARROCH_ZENOH_LISTEN": "tcp/127.0.0.1:3"}
-    opts = options_from(parse("--mode", "client", "--connect", "tcp/127.0.0.1:9", "--listen", "tcp/127.0.0.1:8"), env=env)
+    env = {
+        "ARROCH_ZENOH_MODE": "peer",
+        "ARROCH_ZENOH_CONNECT": "tcp/127.0.0.1:1",
+        "ARROCH_ZENOH_LISTEN": "tcp/127.0.0.1:3",
+    }
+    opts = options_from(
+        parse("--mode", "client", "--connect", "tcp/127.0.0.1:9", "--listen", "tcp/127.0.0.1:8"), env=env
+    )
     assert (opts.mode, opts.connect, opts.listen) == ("client", ["tcp/127.0.0.1:9"], ["tcp/127.0.0.1:8"])
     assert get(build_config(opts), "connect/endpoints") == ["tcp/127.0.0.1:9"]
 
@@ -103,8 +125,12 @@ def test_json5_file_is_taken_as_it_is(json5_file):
 
 
 def test_environment_overrides_the_file(json5_file):
-    env = {"ARROCH_ZENOH_CONFIG": json5_file(7448), "ARROCH_ZENOH_MODE": "client", "ARROCH_ZENOH_LISTEN": "tcp/127.0.0.1:5",
-           "ARROCH_ZENOH_MULTICAST": "0"}
+    env = {
+        "ARROCH_ZENOH_CONFIG": json5_file(7448),
+        "ARROCH_ZENOH_MODE": "client",
+        "ARROCH_ZENOH_LISTEN": "tcp/127.0.0.1:5",
+        "ARROCH_ZENOH_MULTICAST": "0",
+    }
     config = build_config(options_from(parse(), env=env))
     assert get(config, "mode") == "client"  # an explicit "client" counts, though it is the default
     assert get(config, "listen/endpoints") == ["tcp/127.0.0.1:5"]
@@ -115,7 +141,9 @@ def test_options_override_environment_and_file(json5_file, tmp_path):
     other = tmp_path / "other.json5"
     other.write_text("{ mode: 'router' }")
     env = {"ARROCH_ZENOH_CONFIG": str(other), "ARROCH_ZENOH_MODE": "router"}
-    opts = options_from(parse("--zenoh-config", json5_file(7448), "--mode", "client", "--listen", "tcp/127.0.0.1:6"), env=env)
+    opts = options_from(
+        parse("--zenoh-config", json5_file(7448), "--mode", "client", "--listen", "tcp/127.0.0.1:6"), env=env
+    )
     config = build_config(opts)
     assert opts.config_file == json5_file(7448)  # the option's file, not the environment's
     assert get(config, "mode") == "client"

@@ -5,9 +5,9 @@ restrictor, sim with the tablet camera, AR client) under ``arroch up``, which re
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
 
 import pytest
 
@@ -33,12 +33,31 @@ def mission(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Mission]:
     base = tmp_path_factory.mktemp("mission")
     ros2 = base / "ros2"
     namespace = f"rec{free_tcp_port()}"
-    proc = Proc(arroch(
-        "up", "--services", "planner,restrictor,sim,ar", "--camera", "tablet", "--mode", "lockstep", "--seed", "1",
-        "--until-done", "--timeout", str(MISSION_TIMEOUT), "--run-dir", str(base / "runs"), "--progress", "line",
-        "--namespace", namespace,
-        "--child", f"ros2rec={{python}} -m services.cli record --profile ros2 --out {ros2} --namespace {{namespace}} --log-level WARNING",
-    ), name="up")
+    proc = Proc(
+        arroch(
+            "up",
+            "--services",
+            "planner,restrictor,sim,ar",
+            "--camera",
+            "tablet",
+            "--mode",
+            "lockstep",
+            "--seed",
+            "1",
+            "--until-done",
+            "--timeout",
+            str(MISSION_TIMEOUT),
+            "--run-dir",
+            str(base / "runs"),
+            "--progress",
+            "line",
+            "--namespace",
+            namespace,
+            "--child",
+            f"ros2rec={{python}} -m services.cli record --profile ros2 --out {ros2} --namespace {{namespace}} --log-level WARNING",
+        ),
+        name="up",
+    )
     try:
         deadline = time.monotonic() + MISSION_TIMEOUT + 20
         while proc.alive() and time.monotonic() < deadline:

@@ -19,21 +19,48 @@ def spec() -> SweepSpec:
 
 
 def test_a_recording_trial_runs_a_recorder_writing_into_the_trial_folder(tmp_path):
-    commands = service_commands(spec(), KEY, namespace="exp1n1", site=tmp_path / "site.toml", folder=tmp_path,
-                                connect="tcp/127.0.0.1:1", log_level="WARNING", human_config=None, record=True)
+    commands = service_commands(
+        spec(),
+        KEY,
+        namespace="exp1n1",
+        site=tmp_path / "site.toml",
+        folder=tmp_path,
+        connect="tcp/127.0.0.1:1",
+        log_level="WARNING",
+        human_config=None,
+        record=True,
+    )
     argv = commands["recorder"]
-    assert argv[argv.index("record") - 1:argv.index("record") + 1] == ["services.cli", "record"]
+    assert argv[argv.index("record") - 1 : argv.index("record") + 1] == ["services.cli", "record"]
     assert argv[argv.index("--out") + 1] == str(tmp_path / "run.mcap")
-    assert argv[argv.index("--namespace") + 1] == "exp1n1" and argv[argv.index("--site") + 1] == str(tmp_path / "site.toml")
-    plain = service_commands(spec(), KEY, namespace="exp1n1", site=tmp_path / "site.toml", folder=tmp_path,
-                             connect="tcp/127.0.0.1:1", log_level="WARNING", human_config=None)
+    assert argv[argv.index("--namespace") + 1] == "exp1n1" and argv[argv.index("--site") + 1] == str(
+        tmp_path / "site.toml"
+    )
+    plain = service_commands(
+        spec(),
+        KEY,
+        namespace="exp1n1",
+        site=tmp_path / "site.toml",
+        folder=tmp_path,
+        connect="tcp/127.0.0.1:1",
+        log_level="WARNING",
+        human_config=None,
+    )
     assert set(plain) == {"planner", "restrictor", "sim"}
 
 
-@pytest.mark.parametrize("record, status, kept", [
-    ("failed", "error", True), ("failed", "timeout", True), ("failed", "ok", False), ("failed", "unfinished", False),
-    ("all", "ok", True), ("all", "cancelled", False), ("none", "error", False),
-])
+@pytest.mark.parametrize(
+    "record, status, kept",
+    [
+        ("failed", "error", True),
+        ("failed", "timeout", True),
+        ("failed", "ok", False),
+        ("failed", "unfinished", False),
+        ("all", "ok", True),
+        ("all", "cancelled", False),
+        ("none", "error", False),
+    ],
+)
 def test_which_recordings_are_kept(tmp_path: Path, record: str, status: str, kept: bool):
     folder = tmp_path / "trial"
     folder.mkdir()

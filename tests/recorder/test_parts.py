@@ -19,11 +19,11 @@ from protocol.keys import Keys
 from protocol.messages import CameraFrame, Overlay, Primitive, TeamPlan
 from protocol.site import load_site
 from services.cli import main
+from services.recorder.jsonschema import record_schema
 from services.recorder.layout import layout_json
+from services.recorder.logtail import LogFollower, parse
 from services.recorder.profile import FoxgloveProfile
 from services.recorder.reading import messages
-from services.recorder.jsonschema import record_schema
-from services.recorder.logtail import LogFollower, parse
 from services.recorder.scene import DOOR_CLOSED, DOOR_OPEN, SiteScene
 from services.recorder.sink import FoxgloveSink
 from services.supervisor.catalog import RECORDER_NAME, SERVICES, Launch, MissionOptions, service_argv
@@ -38,13 +38,16 @@ def up_config(tmp_path: Path, *args: str):
     return config
 
 
-@pytest.mark.parametrize("args, recorder", [
-    ((), "record"),  # the default services include the sim: recorded
-    (("--services", "planner,sim", "--no-record"), None),
-    (("--services", "ping"), None),  # no mission, nothing recorded unless asked
-    (("--services", "ping", "--record"), "record"),
-    (("--services", "sim", "--no-record", "--view"), "view"),
-])
+@pytest.mark.parametrize(
+    "args, recorder",
+    [
+        ((), "record"),  # the default services include the sim: recorded
+        (("--services", "planner,sim", "--no-record"), None),
+        (("--services", "ping"), None),  # no mission, nothing recorded unless asked
+        (("--services", "ping", "--record"), "record"),
+        (("--services", "sim", "--no-record", "--view"), "view"),
+    ],
+)
 def test_up_records_runs_with_a_sim_unless_told_otherwise(tmp_path, args, recorder):
     config = up_config(tmp_path, *args)
     specs = [s for s in config.services if s.name == RECORDER_NAME]
@@ -107,17 +110,26 @@ def test_the_layout_in_the_repository_is_the_one_the_code_builds(tmp_path):
     assert main(["view", "--write-layout", str(tmp_path / "layout.json")]) == 0
     layout = json.loads((tmp_path / "layout.json").read_text())
     panels = json.dumps(layout)
-    for needed in ('"panelType": "ThreeDee"', '"panelType": "Image"', '"panelType": "Plot"', "/camera/tablet/overlay",
-                   "/progress.door_openings", "/camera/tablet/calibration"):
+    for needed in (
+        '"panelType": "ThreeDee"',
+        '"panelType": "Image"',
+        '"panelType": "Plot"',
+        "/camera/tablet/overlay",
+        "/progress.door_openings",
+        "/camera/tablet/calibration",
+    ):
         assert needed in panels, needed
 
 
-@pytest.mark.parametrize("args, problem", [
-    (["--out", "x.txt"], "a recording is an .mcap file"),
-    (["--out", "{existing}"], "the file exists already"),
-    (["--out", "new.mcap", "--image-scale", "0"], "--image-scale must be in (0, 1]"),
-    (["--out", "new.mcap", "--view", "--view-port", "{busy}"], "cannot serve the live view on 127.0.0.1:"),
-])
+@pytest.mark.parametrize(
+    "args, problem",
+    [
+        (["--out", "x.txt"], "a recording is an .mcap file"),
+        (["--out", "{existing}"], "the file exists already"),
+        (["--out", "new.mcap", "--image-scale", "0"], "--image-scale must be in (0, 1]"),
+        (["--out", "new.mcap", "--view", "--view-port", "{busy}"], "cannot serve the live view on 127.0.0.1:"),
+    ],
+)
 def test_record_refuses_bad_output_paths_clearly(tmp_path, args, problem):
     existing = tmp_path / "old.mcap"
     existing.write_bytes(b"kept")
@@ -125,8 +137,13 @@ def test_record_refuses_bad_output_paths_clearly(tmp_path, args, problem):
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         filled = [a.replace("{existing}", str(existing)).replace("{busy}", str(busy.getsockname()[1])) for a in args]
-        result = subprocess.run(arroch("record", *filled, "--connect", "tcp/127.0.0.1:9"), cwd=tmp_path,
-                                capture_output=True, text=True, timeout=60)
+        result = subprocess.run(
+            arroch("record", *filled, "--connect", "tcp/127.0.0.1:9"),
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
     assert result.returncode == 2 and problem in result.stderr, result.stderr
     assert existing.read_bytes() == b"kept" and not (tmp_path / "new.mcap").exists()
 
@@ -135,10 +152,26 @@ def test_frames_kept_smaller_keep_their_pixels_calibration_and_overlay_in_step(t
     image = np.zeros((480, 640, 3), np.uint8)
     cv2.circle(image, (401, 201), 6, (255, 255, 255), -1)  # a bright disc centred on pixel (401, 201)
     jpeg = cv2.imencode(".jpg", image)[1].tobytes()
-    frame = CameraFrame(src="sim-1", seq=7, stamp=12.0, camera="tablet", jpeg=jpeg, width=640, height=480,
-                        intrinsics=[500.0, 500.0, 319.5, 239.5])
-    overlay = Overlay(src="ar-1", seq=1, stamp=12.0, camera="tablet", frame_seq=7, width=640, height=480,
-                      primitives=[Primitive(kind="circle", points=[[401.0, 201.0]], radius=6.0, width=0.0, layer="robot:r0")])
+    frame = CameraFrame(
+        src="sim-1",
+        seq=7,
+        stamp=12.0,
+        camera="tablet",
+        jpeg=jpeg,
+        width=640,
+        height=480,
+        intrinsics=[500.0, 500.0, 319.5, 239.5],
+    )
+    overlay = Overlay(
+        src="ar-1",
+        seq=1,
+        stamp=12.0,
+        camera="tablet",
+        frame_seq=7,
+        width=640,
+        height=480,
+        primitives=[Primitive(kind="circle", points=[[401.0, 201.0]], radius=6.0, width=0.0, layer="robot:r0")],
+    )
     keys = Keys("t")
     path = tmp_path / "small.mcap"
     profile = FoxgloveProfile(FoxgloveSink(path), keys, load_site(), image_scale=0.5)
@@ -154,8 +187,12 @@ def test_frames_kept_smaller_keep_their_pixels_calibration_and_overlay_in_step(t
     assert abs(u - 200.25) <= 1 and abs(v - 100.25) <= 1  # (401 + 0.5) * 0.5 - 0.5
     assert kept_overlay.primitives[0].points == [[200.25, 100.25]] and kept_overlay.primitives[0].radius == 3.0
     with open(path, "rb") as f:
-        decoded = {c.topic: m for _s, c, _r, m in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages(
-            topics=["/camera/tablet/calibration", "/camera/tablet/overlay"])}
+        decoded = {
+            c.topic: m
+            for _s, c, _r, m in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages(
+                topics=["/camera/tablet/calibration", "/camera/tablet/overlay"]
+            )
+        }
     assert decoded["/camera/tablet/calibration"].width == 320 and decoded["/camera/tablet/calibration"].K[0] == 250.0
     circle = decoded["/camera/tablet/overlay"].circles[0]
     assert (circle.position.x, circle.position.y, circle.diameter) == (200.25, 100.25, 6.0)

@@ -17,10 +17,17 @@ from tests.procs import ROOT, arroch
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 VIEW_CHANNELS = {
-    "/site": "foxglove.SceneUpdate", "/tf": "foxglove.FrameTransforms", "/paths": "foxglove.SceneUpdate",
-    "/plan": "arroch.TeamPlan", "/constraints": "arroch.ConstraintSet", "/events": "arroch.Event",
-    "/progress": "arroch.Progress", "/metrics": "arroch.Metrics", "/log": "foxglove.Log",
-    "/camera/tablet/image": "foxglove.CompressedImage", "/camera/tablet/calibration": "foxglove.CameraCalibration",
+    "/site": "foxglove.SceneUpdate",
+    "/tf": "foxglove.FrameTransforms",
+    "/paths": "foxglove.SceneUpdate",
+    "/plan": "arroch.TeamPlan",
+    "/constraints": "arroch.ConstraintSet",
+    "/events": "arroch.Event",
+    "/progress": "arroch.Progress",
+    "/metrics": "arroch.Metrics",
+    "/log": "foxglove.Log",
+    "/camera/tablet/image": "foxglove.CompressedImage",
+    "/camera/tablet/calibration": "foxglove.CameraCalibration",
     "/camera/tablet/overlay": "foxglove.ImageAnnotations",
 }
 
@@ -32,7 +39,9 @@ def test_the_mission_recording_has_every_channel_with_schemas(mission):
         schemas = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
         counts = {summary.channels[cid].topic: n for cid, n in summary.statistics.channel_message_counts.items()}
         decoded = {}
-        for _schema, channel, _message, proto in reader.iter_decoded_messages(topics=["/tf", "/site", "/camera/tablet/overlay", "/log"]):
+        for _schema, channel, _message, proto in reader.iter_decoded_messages(
+            topics=["/tf", "/site", "/camera/tablet/overlay", "/log"]
+        ):
             decoded.setdefault(channel.topic, []).append(proto)
     for topic, schema in VIEW_CHANNELS.items():
         assert schemas.get(topic) == schema, (topic, schemas.get(topic))
@@ -47,7 +56,9 @@ def test_the_mission_recording_has_every_channel_with_schemas(mission):
     frames = {t.child_frame_id for msg in decoded["/tf"] for t in msg.transforms}
     assert {"robot/r0", "robot/r1", "robot/r2", "camera/tablet"} <= frames
     first_scene = {e.id for e in decoded["/site"][0].entities}
-    assert {"walls", "door/d_storage", "object/o0", "robot/r0"} <= first_scene and any(i.startswith("tag/") for i in first_scene)
+    assert {"walls", "door/d_storage", "object/o0", "robot/r0"} <= first_scene and any(
+        i.startswith("tag/") for i in first_scene
+    )
     # Door updates follow the sim's door states (closed, then opened by the human at least once).
     door_updates = [e for msg in decoded["/site"][1:] for e in msg.entities if e.id == "door/d_storage"]
     assert len(door_updates) >= 2
@@ -64,8 +75,13 @@ def test_the_mission_recording_has_every_channel_with_schemas(mission):
 
 def test_runs_show_prints_the_summary_every_channel_and_draws_the_timeline(mission, tmp_path):
     png = tmp_path / "timeline.png"
-    result = subprocess.run(arroch("runs", "show", str(mission.run), "--png", str(png)), cwd=ROOT,
-                            capture_output=True, text=True, timeout=60)
+    result = subprocess.run(
+        arroch("runs", "show", str(mission.run), "--png", str(png)),
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert result.returncode == 0, result.stderr
     out = result.stdout
     metrics = json.loads((mission.run / "metrics.json").read_text())
@@ -80,7 +96,12 @@ def test_runs_show_prints_the_summary_every_channel_and_draws_the_timeline(missi
 def test_runs_show_refuses_a_file_that_is_not_a_recording(tmp_path):
     bad = tmp_path / "bad.mcap"
     bad.write_bytes(b"not an mcap file at all")
-    result = subprocess.run([sys.executable, "-m", "services.cli", "runs", "show", str(bad)], cwd=ROOT,
-                            capture_output=True, text=True, timeout=60)
+    result = subprocess.run(
+        [sys.executable, "-m", "services.cli", "runs", "show", str(bad)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert result.returncode == 2
     assert str(bad) in result.stderr and "not a readable MCAP file" in result.stderr

@@ -31,9 +31,26 @@ def test_replaying_the_mission_into_a_fresh_ar_client_draws_the_same_robots(miss
     overlays = client.collect(client.keys.overlay("tablet"), Overlay)
     ar = spawn(arroch("ar", "--namespace", namespace, "--connect", router, "--log-level", "INFO"), name="ar")
     ar.wait_for("up on namespace", timeout=60)
-    result = subprocess.run(arroch("replay", str(mission.recording), "--fast", "--hold-camera", "--skip", "ar/*",
-                                   "--namespace", namespace, "--connect", router, "--log-level", "WARNING"),
-                            cwd=ROOT, capture_output=True, text=True, timeout=120)
+    result = subprocess.run(
+        arroch(
+            "replay",
+            str(mission.recording),
+            "--fast",
+            "--hold-camera",
+            "--skip",
+            "ar/*",
+            "--namespace",
+            namespace,
+            "--connect",
+            router,
+            "--log-level",
+            "WARNING",
+        ),
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert result.returncode == 0, result.stderr
     assert "0 camera hold(s) timed out" in result.stderr, result.stderr
     replayed: dict[int, Overlay] = {}
@@ -74,17 +91,38 @@ def test_replay_selects_keys_and_paces_on_the_site_clock():
 
 
 def test_replay_of_a_missing_file_says_so(tmp_path):
-    result = subprocess.run(arroch("replay", str(tmp_path / "none.mcap")), cwd=ROOT, capture_output=True, text=True, timeout=60)
+    result = subprocess.run(
+        arroch("replay", str(tmp_path / "none.mcap")), cwd=ROOT, capture_output=True, text=True, timeout=60
+    )
     assert result.returncode == 2 and "none.mcap: cannot open" in result.stderr
 
 
-def test_a_fast_replay_recorded_again_gives_back_every_message_byte_for_byte(mission, spawn, router, namespace, tmp_path):
+def test_a_fast_replay_recorded_again_gives_back_every_message_byte_for_byte(
+    mission, spawn, router, namespace, tmp_path
+):
     again = tmp_path / "again.mcap"
-    recorder = spawn(arroch("record", "--out", str(again), "--namespace", namespace, "--connect", router), name="record")
+    recorder = spawn(
+        arroch("record", "--out", str(again), "--namespace", namespace, "--connect", router), name="record"
+    )
     recorder.wait_for("up on namespace", timeout=60)
     time.sleep(0.5)  # its subscriptions reach the router
-    result = subprocess.run(arroch("replay", str(mission.recording), "--fast", "--namespace", namespace, "--connect", router,
-                                   "--log-level", "WARNING"), cwd=ROOT, capture_output=True, text=True, timeout=120)
+    result = subprocess.run(
+        arroch(
+            "replay",
+            str(mission.recording),
+            "--fast",
+            "--namespace",
+            namespace,
+            "--connect",
+            router,
+            "--log-level",
+            "WARNING",
+        ),
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert result.returncode == 0, result.stderr
     time.sleep(1.0)
     assert recorder.stop() == 0  # SIGTERM: the file is closed whole

@@ -17,9 +17,13 @@ from services.recorder.reading import messages
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 TYPES = {
-    "/tf": "tf2_msgs/msg/TFMessage", "/robot/r0/pose": "geometry_msgs/msg/PoseStamped", "/robot/r0/path": "nav_msgs/msg/Path",
-    "/camera/tablet/image/compressed": "sensor_msgs/msg/CompressedImage", "/camera/tablet/camera_info": "sensor_msgs/msg/CameraInfo",
-    "/site": "visualization_msgs/msg/MarkerArray", "/rosout": "rcl_interfaces/msg/Log",
+    "/tf": "tf2_msgs/msg/TFMessage",
+    "/robot/r0/pose": "geometry_msgs/msg/PoseStamped",
+    "/robot/r0/path": "nav_msgs/msg/Path",
+    "/camera/tablet/image/compressed": "sensor_msgs/msg/CompressedImage",
+    "/camera/tablet/camera_info": "sensor_msgs/msg/CameraInfo",
+    "/site": "visualization_msgs/msg/MarkerArray",
+    "/rosout": "rcl_interfaces/msg/Log",
 }
 
 
@@ -38,7 +42,8 @@ def test_the_ros2_bag_reads_back_with_rosbags_and_its_poses_match_the_run(missio
                 q = msg.pose.orientation
                 stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
                 poses.setdefault(connection.topic.split("/")[2], []).append(
-                    (stamp, msg.pose.position.x, msg.pose.position.y, 2 * math.atan2(q.z, q.w)))
+                    (stamp, msg.pose.position.x, msg.pose.position.y, 2 * math.atan2(q.z, q.w))
+                )
             elif connection.topic == "/camera/tablet/image/compressed":
                 assert bytes(reader.deserialize(raw, connection.msgtype).data[:2]) == b"\xff\xd8"
     assert counts["/site"] >= 2  # the whole scene, then door changes

@@ -45,7 +45,7 @@ async def watch(url: str, replay_argv: list[str]) -> tuple[dict[str, list], dict
                 deadline = min(deadline, loop.time() + 10.0)  # what the viewer still has on its way
             try:
                 frame = await ws.receive(timeout=0.5)
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 continue
             if frame.type == aiohttp.WSMsgType.TEXT:
                 op = json.loads(frame.data)
@@ -56,20 +56,31 @@ async def watch(url: str, replay_argv: list[str]) -> tuple[dict[str, list], dict
                         channels[channel["id"]] = channel
                         subscriptions[sid] = channel
                         if channel["encoding"] == "protobuf":
-                            schema = Schema(id=channel["id"], name=channel["schemaName"], encoding="protobuf",
-                                            data=base64.b64decode(channel["schema"]))
+                            schema = Schema(
+                                id=channel["id"],
+                                name=channel["schemaName"],
+                                encoding="protobuf",
+                                data=base64.b64decode(channel["schema"]),
+                            )
                             channel["decode"] = factory.decoder_for("protobuf", schema)
                         subs.append({"id": sid, "channelId": channel["id"]})
                     await ws.send_str(json.dumps({"op": "subscribe", "subscriptions": subs}))
                     if replay is None:  # the fixed channels are advertised from the start: now the mission
                         await asyncio.sleep(0.5)
-                        replay = await asyncio.create_subprocess_exec(*replay_argv, cwd=ROOT, stdout=asyncio.subprocess.DEVNULL,
-                                                                      stderr=asyncio.subprocess.DEVNULL)
+                        replay = await asyncio.create_subprocess_exec(
+                            *replay_argv, cwd=ROOT, stdout=asyncio.subprocess.DEVNULL, stderr=asyncio.subprocess.DEVNULL
+                        )
             elif frame.type == aiohttp.WSMsgType.BINARY and frame.data[0] == MESSAGE_DATA:
                 sid, _log_time = struct.unpack_from("<IQ", frame.data, 1)
                 channel = subscriptions[sid]
                 payload = frame.data[13:]
-                decoded = channel["decode"](payload) if "decode" in channel else json.loads(payload) if channel["encoding"] == "json" else payload
+                decoded = (
+                    channel["decode"](payload)
+                    if "decode" in channel
+                    else json.loads(payload)
+                    if channel["encoding"] == "json"
+                    else payload
+                )
                 received.setdefault(channel["topic"], []).append(decoded)
             elif frame.type in (aiohttp.WSMsgType.CLOSED, aiohttp.WSMsgType.ERROR):
                 break
@@ -81,8 +92,21 @@ def test_the_live_view_serves_decodable_channels_to_a_websocket_client(mission, 
     port = free_tcp_port()
     view = spawn(arroch("view", "--port", str(port), "--namespace", namespace, "--connect", router), name="view")
     view.wait_for("Foxglove WebSocket server", timeout=60)
-    replay = [sys.executable, "-m", "services.cli", "replay", str(mission.recording), "--rate", "100", "--namespace", namespace,
-              "--connect", router, "--delay", "1.0"]
+    replay = [
+        sys.executable,
+        "-m",
+        "services.cli",
+        "replay",
+        str(mission.recording),
+        "--rate",
+        "100",
+        "--namespace",
+        namespace,
+        "--connect",
+        router,
+        "--delay",
+        "1.0",
+    ]
     received, channels, code = asyncio.run(watch(f"ws://127.0.0.1:{port}", replay))
     assert code == 0, code
     assert "/site" in channels, (sorted(channels), {k: len(v) for k, v in received.items()})
@@ -92,7 +116,9 @@ def test_the_live_view_serves_decodable_channels_to_a_websocket_client(mission, 
     frames = {t.child_frame_id for msg in received["/tf"] for t in msg.transforms}
     assert {"robot/r0", "robot/r1", "robot/r2", "camera/tablet"} <= frames
     plans = next(c.messages for c in channel_stats(mission.recording) if c.topic == "/plan")
-    assert all("plan_id" in plan for plan in received["/plan"]) and len(received["/plan"]) == plans  # every plan of the run
+    assert (
+        all("plan_id" in plan for plan in received["/plan"]) and len(received["/plan"]) == plans
+    )  # every plan of the run
     assert any(len(msg.entities) and len(msg.entities[0].lines) for msg in received["/paths"])
     images = received["/camera/tablet/image"]
     assert images and all(img.format == "jpeg" and img.data[:2] == b"\xff\xd8" for img in images)

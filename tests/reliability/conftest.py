@@ -7,5 +7,7 @@ import pytest
 
 def pytest_configure(config: pytest.Config) -> None:
     # Also registered by tests/deploy/conftest.py; repeated here so this folder runs on its own.
-    config.addinivalue_line("markers", "netns: builds Linux network namespaces (root, iproute2); "
-                                       "ARROCH_SKIP_NETNS=1 or -m 'not netns' deselects")
+    config.addinivalue_line(
+        "markers",
+        "netns: builds Linux network namespaces (root, iproute2); ARROCH_SKIP_NETNS=1 or -m 'not netns' deselects",
+    )

@@ -27,8 +27,9 @@ import random
 import signal
 import uuid
 from collections import Counter
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 import msgpack
 import zenoh
@@ -37,8 +38,21 @@ from hypothesis import strategies as st
 from protocol.clock import WallClock
 from protocol.codec import decode
 from protocol.errors import ProtocolError
-from protocol.messages import (ALL_MESSAGES, CameraFrame, Clock, ConstraintSet, DoorState, Event, Feedback, Intent, Message,
-                               RobotCommand, RobotPose, RobotStatus, TeamPlan)
+from protocol.messages import (
+    ALL_MESSAGES,
+    CameraFrame,
+    Clock,
+    ConstraintSet,
+    DoorState,
+    Event,
+    Feedback,
+    Intent,
+    Message,
+    RobotCommand,
+    RobotPose,
+    RobotStatus,
+    TeamPlan,
+)
 from protocol.service import Service
 from protocol.transport import ZenohOptions
 from services.restrictor.library import Library
@@ -123,8 +137,21 @@ _MAX_OVERSIZED_FIELD = 256 * 1024  # bigger oversized fields are left to the who
 class Mutator:
     """Seeded bad payloads for message types (the same seed gives the same payloads)."""
 
-    KINDS = ("random_bytes", "truncated", "bit_flips", "wrong_field_type", "non_finite", "out_of_range",
-             "oversized_field", "wrong_v", "wrong_type", "missing_field", "not_a_map", "other_message", "deep_nesting")
+    KINDS = (
+        "random_bytes",
+        "truncated",
+        "bit_flips",
+        "wrong_field_type",
+        "non_finite",
+        "out_of_range",
+        "oversized_field",
+        "wrong_v",
+        "wrong_type",
+        "missing_field",
+        "not_a_map",
+        "other_message",
+        "deep_nesting",
+    )
 
     def __init__(self, seed: int) -> None:
         self.rng = random.Random(seed)
@@ -195,7 +222,10 @@ class Mutator:
         return pack(data)
 
     def _out_of_range(self, cls: type[Message]) -> bytes | None:
-        f, hint = self._field(cls, lambda f, h: h in (int, float) and (f.metadata.get("lo") is not None or f.metadata.get("hi") is not None))
+        f, hint = self._field(
+            cls,
+            lambda f, h: h in (int, float) and (f.metadata.get("lo") is not None or f.metadata.get("hi") is not None),
+        )
         if f is None:
             return None
         lo, hi = f.metadata.get("lo"), f.metadata.get("hi")
@@ -268,8 +298,9 @@ def bad_frames(rng: random.Random, valid_jpeg: bytes) -> Iterator[tuple[str, dic
 # ---------------------------------------------------------------------------- smuggled ASP
 
 
-def hostile_feedback(library: Library, site: Any, injections: list[str], numbers: list[Any],
-                     names: list[str]) -> list[tuple[str, dict[str, Any]]]:
+def hostile_feedback(
+    library: Library, site: Any, injections: list[str], numbers: list[Any], names: list[str]
+) -> list[tuple[str, dict[str, Any]]]:
     """(kind, params) pairs, each an entry's valid choice with one thing replaced by an injection: every
     parameter of every entry (numbers for integer ones), the kind, and extra parameter names.
     ``cancel`` names a constraint that is never active, so not one of them can be accepted."""
@@ -301,8 +332,14 @@ class FuzzClient(TestClient):
 
     def __init__(self, namespace: str, endpoint: str, *, instance: str | None = None) -> None:
         # TestClient's constructor would give it a sim clock, i.e. a subscription to `clock`.
-        Service.__init__(self, "fuzzer", namespace, ZenohOptions(mode="client", connect=[endpoint]),
-                         instance=instance or f"fuzzer-{uuid.uuid4().hex[:6]}", clock=WallClock())
+        Service.__init__(
+            self,
+            "fuzzer",
+            namespace,
+            ZenohOptions(mode="client", connect=[endpoint]),
+            instance=instance or f"fuzzer-{uuid.uuid4().hex[:6]}",
+            clock=WallClock(),
+        )
         self.queues = {}
         self.sent: Counter[str] = Counter()  # relative key -> payloads put
         self._raw: dict[str, zenoh.Publisher] = {}
@@ -314,12 +351,15 @@ class FuzzClient(TestClient):
         publisher = self._raw.get(key)
         if publisher is None and len(self._raw) < MAX_PUBLISHERS:
             publisher = self._raw[key] = self.session.declare_publisher(
-                f"{self.keys.prefix}/{key}", congestion_control=zenoh.CongestionControl.BLOCK, express=False)
+                f"{self.keys.prefix}/{key}", congestion_control=zenoh.CongestionControl.BLOCK, express=False
+            )
             self._declared.append(publisher)
         if publisher is not None:
             publisher.put(payload)
         else:
-            self.session.put(f"{self.keys.prefix}/{key}", payload, congestion_control=zenoh.CongestionControl.BLOCK, express=False)
+            self.session.put(
+                f"{self.keys.prefix}/{key}", payload, congestion_control=zenoh.CongestionControl.BLOCK, express=False
+            )
         self.sent[key] += 1
 
     def stats(self, timeout: float = 3.0) -> dict[str, dict[str, Any]]:
@@ -379,16 +419,25 @@ def node_paths(node: Any, path: tuple = ()) -> list[tuple]:
 
 
 def scalar_values() -> Any:
-    return st.one_of(st.integers(-(2**63), 2**63 - 1), st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=20),
-                     st.booleans(), st.sampled_from(["", "x", "storage", "d_storage", "r0", "door", "int", "${door}", "-1"]))
+    return st.one_of(
+        st.integers(-(2**63), 2**63 - 1),
+        st.floats(allow_nan=True, allow_infinity=True),
+        st.text(max_size=20),
+        st.booleans(),
+        st.sampled_from(["", "x", "storage", "d_storage", "r0", "door", "int", "${door}", "-1"]),
+    )
 
 
 def toml_values() -> Any:
     """Values a mutation may put anywhere in a document."""
     scalars = scalar_values()
-    return st.one_of(scalars, st.lists(scalars, max_size=4),
-                     st.dictionaries(st.text("abcdefghijklmnopqrstuvwxyz_", min_size=1, max_size=8), scalars, max_size=3),
-                     st.just([]), st.just({}))
+    return st.one_of(
+        scalars,
+        st.lists(scalars, max_size=4),
+        st.dictionaries(st.text("abcdefghijklmnopqrstuvwxyz_", min_size=1, max_size=8), scalars, max_size=3),
+        st.just([]),
+        st.just({}),
+    )
 
 
 MUTATIONS = ("replace", "delete", "duplicate", "add_key", "negate")
@@ -396,7 +445,9 @@ MUTATIONS = ("replace", "delete", "duplicate", "add_key", "negate")
 
 def mutations() -> Any:
     """(operation, which node, value) triples for :func:`mutate`."""
-    return st.lists(st.tuples(st.sampled_from(MUTATIONS), st.integers(0, 10_000), toml_values()), min_size=1, max_size=4)
+    return st.lists(
+        st.tuples(st.sampled_from(MUTATIONS), st.integers(0, 10_000), toml_values()), min_size=1, max_size=4
+    )
 
 
 def mutate(doc: dict[str, Any], ops: list[tuple[str, int, Any]]) -> dict[str, Any]:
@@ -427,8 +478,15 @@ def mutate(doc: dict[str, Any], ops: list[tuple[str, int, Any]]) -> dict[str, An
 
 def byte_mutations() -> Any:
     """(operation, position, bytes) triples for :func:`mutate_bytes`."""
-    return st.lists(st.tuples(st.sampled_from(("flip", "insert", "delete", "truncate")), st.integers(0, 1_000_000),
-                              st.binary(min_size=1, max_size=8)), min_size=1, max_size=5)
+    return st.lists(
+        st.tuples(
+            st.sampled_from(("flip", "insert", "delete", "truncate")),
+            st.integers(0, 1_000_000),
+            st.binary(min_size=1, max_size=8),
+        ),
+        min_size=1,
+        max_size=5,
+    )
 
 
 def mutate_bytes(data: bytes, ops: list[tuple[str, int, bytes]]) -> bytes:
@@ -442,7 +500,7 @@ def mutate_bytes(data: bytes, ops: list[tuple[str, int, bytes]]) -> bytes:
         elif op == "insert":
             buf[at:at] = chunk
         elif op == "delete":
-            del buf[at:at + len(chunk)]
+            del buf[at : at + len(chunk)]
         else:
             del buf[at:]
     return bytes(buf)

@@ -16,9 +16,10 @@ import os
 import re
 import signal
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from protocol.site import load_site
 from tests.procs import Proc, arroch
@@ -57,14 +58,44 @@ class Outcome:
 class UpMission:
     """``arroch up --until-done`` of the default lockstep mission; see the module docstring."""
 
-    def __init__(self, spawn: Callable[..., Proc], tmp_path: Path, namespace: str, *, services: str = "planner,restrictor,sim",
-                 seed: int = 1, timeout: float = 180.0, extra: tuple[str, ...] = ()) -> None:
+    def __init__(
+        self,
+        spawn: Callable[..., Proc],
+        tmp_path: Path,
+        namespace: str,
+        *,
+        services: str = "planner,restrictor,sim",
+        seed: int = 1,
+        timeout: float = 180.0,
+        extra: tuple[str, ...] = (),
+    ) -> None:
         self.namespace = namespace
         self.run_base = tmp_path / "runs"
         self.timeout = timeout
-        self.proc = spawn(arroch("up", "--services", services, "--mode", "lockstep", "--rate", str(PACE), "--seed", str(seed), "--until-done",
-                                 "--namespace", namespace, "--run-dir", str(self.run_base), "--progress", "off",
-                                 "--timeout", f"{timeout:g}", *extra), name="up")
+        self.proc = spawn(
+            arroch(
+                "up",
+                "--services",
+                services,
+                "--mode",
+                "lockstep",
+                "--rate",
+                str(PACE),
+                "--seed",
+                str(seed),
+                "--until-done",
+                "--namespace",
+                namespace,
+                "--run-dir",
+                str(self.run_base),
+                "--progress",
+                "off",
+                "--timeout",
+                f"{timeout:g}",
+                *extra,
+            ),
+            name="up",
+        )
         self.started = time.monotonic()
 
     # ------------------------------------------------------------------ what the supervisor says
@@ -139,8 +170,11 @@ class UpMission:
 
     def wait_restart(self, kill: Kill, timeout: float = 30.0) -> int:
         """The new pid once the supervisor reports it restarted the killed child."""
-        self.wait(lambda: len(self.lines(f"restarted {kill.service} (pid")) >= 1 and self.pid(kill.service) != kill.pid,
-                  f"restart of {kill.service}", timeout)
+        self.wait(
+            lambda: len(self.lines(f"restarted {kill.service} (pid")) >= 1 and self.pid(kill.service) != kill.pid,
+            f"restart of {kill.service}",
+            timeout,
+        )
         return self.pid(kill.service)
 
     def finish(self) -> Outcome:
@@ -151,7 +185,9 @@ class UpMission:
         except Exception:
             raise AssertionError(f"arroch up did not end within its --timeout:\n{self.tail()}") from None
         run = self.run_dir
-        assert run is not None and (run / "run.json").is_file(), f"no run folder with run.json under {self.run_base}:\n{self.tail()}"
+        assert run is not None and (run / "run.json").is_file(), (
+            f"no run folder with run.json under {self.run_base}:\n{self.tail()}"
+        )
         metrics_file = run / "metrics.json"
         return Outcome(
             exit_code=code,

@@ -51,14 +51,19 @@ def world_version(events: list[dict]) -> int:
     return max((int(e["data"].get("world_version", 0)) for e in events if isinstance(e.get("data"), dict)), default=0)
 
 
-def test_planner_killed_mid_mission_replans_from_the_live_world_and_the_active_constraints(spawn, tmp_path: Path, namespace: str):
+def test_planner_killed_mid_mission_replans_from_the_live_world_and_the_active_constraints(
+    spawn, tmp_path: Path, namespace: str
+):
     mission = UpMission(spawn, tmp_path, namespace)
     with observing(mission) as client:
         plans = Watch(client, client.keys.plan(), TeamPlan)
         sets = Watch(client, client.keys.constraints(), ConstraintSet)
         # Mid-mission, while one of the human's constraints is active: the new planner must find it.
-        mission.wait(lambda: len(mission.delivered()) >= MID_DELIVERIES and active(sets.latest(), mission.site_time(), MARGIN),
-                     f"{MID_DELIVERIES} deliveries with a constraint active", timeout=120)
+        mission.wait(
+            lambda: len(mission.delivered()) >= MID_DELIVERIES and active(sets.latest(), mission.site_time(), MARGIN),
+            f"{MID_DELIVERIES} deliveries with a constraint active",
+            timeout=120,
+        )
         kill = mission.kill("planner")
         new_pid = mission.wait_restart(kill)
         t_first, first = plans.first(lambda p: p.src == f"planner-{new_pid}", "plan from the restarted planner")
@@ -90,17 +95,23 @@ def test_planner_killed_mid_mission_replans_from_the_live_world_and_the_active_c
     assert_mission_completed(outcome)
     assert outcome.starts("planner") == 2 and outcome.starts("sim") == outcome.starts("restrictor") == 1
     assert mission.lines("planner was killed by SIGKILL") and mission.lines(f"restarted planner (pid {new_pid}")
-    table_line("planner SIGKILL (after %d deliveries, site t=%.0f s)" % (len(kill.delivered), kill.site_time),
-               "restart reported; first plan: live world version, nothing delivered replanned, ids go on, "
-               "active door_unavailable respected", t_first - kill.at)
+    table_line(
+        "planner SIGKILL (after %d deliveries, site t=%.0f s)" % (len(kill.delivered), kill.site_time),
+        "restart reported; first plan: live world version, nothing delivered replanned, ids go on, "
+        "active door_unavailable respected",
+        t_first - kill.at,
+    )
 
 
 def test_restrictor_killed_mid_mission_restores_its_constraint_set(spawn, tmp_path: Path, namespace: str):
     mission = UpMission(spawn, tmp_path, namespace)
     with observing(mission) as client:
         sets = Watch(client, client.keys.constraints(), ConstraintSet)
-        mission.wait(lambda: len(mission.delivered()) >= MID_DELIVERIES and active(sets.latest(), mission.site_time(), MARGIN),
-                     f"{MID_DELIVERIES} deliveries with a constraint active", timeout=120)
+        mission.wait(
+            lambda: len(mission.delivered()) >= MID_DELIVERIES and active(sets.latest(), mission.site_time(), MARGIN),
+            f"{MID_DELIVERIES} deliveries with a constraint active",
+            timeout=120,
+        )
         kill = mission.kill("restrictor")
         new_pid = mission.wait_restart(kill)
         t_first, restored = sets.first(lambda s: s.src == f"restrictor-{new_pid}", "set from the restarted restrictor")
@@ -114,8 +125,9 @@ def test_restrictor_killed_mid_mission_restores_its_constraint_set(spawn, tmp_pa
     assert active(last, kill.site_time), "the restrictor died holding an active constraint"
     # What it publishes first is what it had: the persisted set, version and constraints.
     assert restored.version >= last.version
-    assert [(c.id, c.kind, c.params, c.start, c.end, c.asp) for c in restored.constraints] == \
-           [(c.id, c.kind, c.params, c.start, c.end, c.asp) for c in last.constraints]
+    assert [(c.id, c.kind, c.params, c.start, c.end, c.asp) for c in restored.constraints] == [
+        (c.id, c.kind, c.params, c.start, c.end, c.asp) for c in last.constraints
+    ]
     assert restored.asp == last.asp
     # From then on versions only grow, and a constraint id is never given twice.
     versions = [s.version for s in new]
@@ -126,19 +138,27 @@ def test_restrictor_killed_mid_mission_restores_its_constraint_set(spawn, tmp_pa
             assert c.id not in seen_before or any(c == b for b in last.constraints), c
     assert ack is not None and ack.accepted and ack.src == f"restrictor-{new_pid}", ack
     number = int(ack.constraint_id[1:])
-    assert ack.constraint_id not in seen_before and number > max(int(c[1:]) for c in seen_before), (ack.constraint_id, seen_before)
+    assert ack.constraint_id not in seen_before and number > max(int(c[1:]) for c in seen_before), (
+        ack.constraint_id,
+        seen_before,
+    )
     assert ack.constraints_version > restored.version
     assert_mission_completed(outcome)
     fb = outcome.metrics["feedback"]
     assert fb["sent"] >= 2 and fb["accepted"] == fb["sent"] and fb["unanswered"] == 0, fb
     assert outcome.starts("restrictor") == 2 and outcome.starts("planner") == 1
-    table_line("restrictor SIGKILL (site t=%.0f s, %d constraint(s) active, version %d)" % (kill.site_time, len(last.constraints), last.version),
-               "restart reported; first set after restart = the persisted one; versions grow, ids not reused; "
-               "the human's feedback all accepted", t_first - kill.at)
+    table_line(
+        "restrictor SIGKILL (site t=%.0f s, %d constraint(s) active, version %d)"
+        % (kill.site_time, len(last.constraints), last.version),
+        "restart reported; first set after restart = the persisted one; versions grow, ids not reused; "
+        "the human's feedback all accepted",
+        t_first - kill.at,
+    )
 
 
 def test_feedback_sent_while_the_restrictor_is_down_is_acknowledged_after_its_restart_and_applied_once(
-        spawn, tmp_path: Path, namespace: str, caplog: pytest.LogCaptureFixture):
+    spawn, tmp_path: Path, namespace: str, caplog: pytest.LogCaptureFixture
+):
     mission = UpMission(spawn, tmp_path, namespace)
     with observing(mission) as client:
         sets = Watch(client, client.keys.constraints(), ConstraintSet)
@@ -158,16 +178,21 @@ def test_feedback_sent_while_the_restrictor_is_down_is_acknowledged_after_its_re
     assert ack.src == f"restrictor-{new_pid}", "acknowledged by the restarted restrictor"
     mine = {c.id: c for s in sets.messages() for c in s.constraints if c.origin == client.src}
     assert len(mine) == 1, mine  # applied once, however many times it was sent
-    (cid, constraint), = mine.items()
+    ((cid, constraint),) = mine.items()
     assert cid == ack.constraint_id and constraint.params == {"door": "d_storage", "minutes": 1}
     new = sets.messages(lambda s: s.src == f"restrictor-{new_pid}")
     with_it = [s for s in new if cid in {c.id for c in s.constraints}]
     assert with_it and with_it[0].version == ack.constraints_version
     index = new.index(with_it[0])
-    assert index > 0 and with_it[0].version == new[index - 1].version + 1, [(s.version, [c.id for c in s.constraints]) for s in new]
+    assert index > 0 and with_it[0].version == new[index - 1].version + 1, [
+        (s.version, [c.id for c in s.constraints]) for s in new
+    ]
     assert_mission_completed(outcome)
-    table_line("feedback sent while the restrictor is down",
-               "re-sent until acked by the restarted restrictor; one constraint, version +1 once", acked_at - kill.at)
+    table_line(
+        "feedback sent while the restrictor is down",
+        "re-sent until acked by the restarted restrictor; one constraint, version +1 once",
+        acked_at - kill.at,
+    )
 
 
 def test_ar_client_killed_mid_mission_comes_back_with_overlays_of_the_live_world(spawn, tmp_path: Path, namespace: str):
@@ -180,23 +205,38 @@ def test_ar_client_killed_mid_mission_comes_back_with_overlays_of_the_live_world
         src = f"ar-{new_pid}"
         t_first, _ = overlays.first(lambda o: o.src == src, "overlay from the restarted AR client")
         # Localised again, with every door's state known (leaves drawn open or closed, not grey)...
-        t_ok, good = overlays.first(lambda o: o.src == src and o.ok and any(p.layer == "door" for p in o.primitives)
-                                    and all(p.color != [160, 160, 160, 255] for p in o.primitives if p.layer == "door"),
-                                    "localised overlay with known door states", timeout=60)
+        t_ok, good = overlays.first(
+            lambda o: (
+                o.src == src
+                and o.ok
+                and any(p.layer == "door" for p in o.primitives)
+                and all(p.color != [160, 160, 160, 255] for p in o.primitives if p.layer == "door")
+            ),
+            "localised overlay with known door states",
+            timeout=60,
+        )
         # ...and the robots drawn where the world says they are (their poses and statuses came again).
-        overlays.first(lambda o: o.src == src and any(p.layer.startswith("robot:") for p in o.primitives),
-                       "overlay showing a robot", timeout=60)
+        overlays.first(
+            lambda o: o.src == src and any(p.layer.startswith("robot:") for p in o.primitives),
+            "overlay showing a robot",
+            timeout=60,
+        )
         outcome = mission.finish()
 
     assert_mission_completed(outcome)
     before = overlays.messages(lambda o: o.src == f"ar-{kill.pid}")
     assert any(o.ok for o in before), "the AR client localised before the kill too"
     assert outcome.starts("ar") == 2 and outcome.starts("sim") == outcome.starts("planner") == 1
-    table_line("AR client SIGKILL (after %d deliveries)" % len(kill.delivered),
-               "restart reported; overlays again: localised, door states known, robots drawn", t_ok - kill.at)
+    table_line(
+        "AR client SIGKILL (after %d deliveries)" % len(kill.delivered),
+        "restart reported; overlays again: localised, door states known, robots drawn",
+        t_ok - kill.at,
+    )
 
 
-def test_router_killed_mid_mission_is_restarted_on_its_endpoint_and_every_service_reconnects(spawn, tmp_path: Path, namespace: str):
+def test_router_killed_mid_mission_is_restarted_on_its_endpoint_and_every_service_reconnects(
+    spawn, tmp_path: Path, namespace: str
+):
     mission = UpMission(spawn, tmp_path, namespace)
     mission.wait(lambda: len(mission.delivered()) >= MID_DELIVERIES, f"{MID_DELIVERIES} deliveries", timeout=120)
     endpoint = mission.router_endpoints()[0]
@@ -207,9 +247,12 @@ def test_router_killed_mid_mission_is_restarted_on_its_endpoint_and_every_servic
     def reconnected() -> set[str]:
         """Services whose liveliness the supervisor saw again after the restart."""
         out = mission.proc.output
-        after = out[out.index("restarted router (pid"):]
-        return {m.group(1) for m in SERVICE_IDS.finditer("\n".join(l for l in after.splitlines() if " is up (" in l))
-                if int(m.group(2)) == pids.get(m.group(1))}
+        after = out[out.index("restarted router (pid") :]
+        return {
+            m.group(1)
+            for m in SERVICE_IDS.finditer("\n".join(l for l in after.splitlines() if " is up (" in l))
+            if int(m.group(2)) == pids.get(m.group(1))
+        }
 
     mission.wait(lambda: reconnected() == set(pids), "every service back on the restarted router", timeout=60)
     recovered = time.monotonic() - kill.at
@@ -219,5 +262,8 @@ def test_router_killed_mid_mission_is_restarted_on_its_endpoint_and_every_servic
     assert_mission_completed(outcome)
     assert outcome.starts("router") == 2
     assert all(outcome.starts(name) == 1 for name in pids), "the services reconnected: none was restarted"
-    table_line("router SIGKILL (after %d deliveries)" % len(kill.delivered),
-               "restarted on the same endpoint; planner, restrictor, sim reconnected (not restarted)", recovered)
+    table_line(
+        "router SIGKILL (after %d deliveries)" % len(kill.delivered),
+        "restarted on the same endpoint; planner, restrictor, sim reconnected (not restarted)",
+        recovered,
+    )

@@ -41,8 +41,18 @@ from protocol.transport import free_tcp_port
 from services.restrictor.library import load_library
 from services.restrictor.vocabulary import check_program
 from tests.procs import Proc, arroch
-from tests.reliability.fuzzing import (KEY_TYPES, SUBSCRIPTIONS, FuzzClient, Mutator, bad_frames, counted, hostile_feedback,
-                                       is_valid, pattern_of, receivers)
+from tests.reliability.fuzzing import (
+    KEY_TYPES,
+    SUBSCRIPTIONS,
+    FuzzClient,
+    Mutator,
+    bad_frames,
+    counted,
+    hostile_feedback,
+    is_valid,
+    pattern_of,
+    receivers,
+)
 from tests.reliability.missions import PACE
 from tests.restrictor.test_validate import INJECTIONS, NUMERIC_INJECTIONS
 
@@ -106,7 +116,10 @@ def make_plan(client_src: str) -> Plan:
     for pattern in patterns:
         if KEY_TYPES[pattern] is not CameraFrame:
             for _ in range(OVERSIZED):
-                plan.puts.insert(rng.randrange(len(plan.puts)), (concrete_key(pattern, rng), mutator.oversized_payload(KEY_TYPES[pattern])))
+                plan.puts.insert(
+                    rng.randrange(len(plan.puts)),
+                    (concrete_key(pattern, rng), mutator.oversized_payload(KEY_TYPES[pattern])),
+                )
                 plan.kinds["oversized_payload"] += 1
     for key, payload in plan.puts:
         assert not is_valid(payload, KEY_TYPES[pattern_of(key)])
@@ -116,7 +129,9 @@ def make_plan(client_src: str) -> Plan:
         plan.queries.append(mutator.invalid(Feedback)[1])
         plan.expected["restrictor"]["feedback"] += 1
     library = load_library()
-    for seq, (kind, params) in enumerate(hostile_feedback(library, SITE, MISSION_INJECTIONS, MISSION_NUMBERS, INJECTED_NAMES), start=1):
+    for seq, (kind, params) in enumerate(
+        hostile_feedback(library, SITE, MISSION_INJECTIONS, MISSION_NUMBERS, INJECTED_NAMES), start=1
+    ):
         try:
             payload = encode(Feedback(kind=kind, params=params, src=client_src, seq=seq, stamp=0.0))
         except (TypeError, ValueError, OverflowError):
@@ -130,8 +145,16 @@ def make_plan(client_src: str) -> Plan:
     cases = bad_frames(rng, jpeg)
     for seq in range(1, BAD_FRAMES + 1):
         _, fields = next(cases)
-        frame = CameraFrame(camera="tablet", jpeg=jpeg, width=640, height=480, intrinsics=[500.0, 500.0, 320.0, 240.0],
-                            src=client_src, seq=seq, stamp=0.0)
+        frame = CameraFrame(
+            camera="tablet",
+            jpeg=jpeg,
+            width=640,
+            height=480,
+            intrinsics=[500.0, 500.0, 320.0, 240.0],
+            src=client_src,
+            seq=seq,
+            stamp=0.0,
+        )
         for name, value in fields.items():
             setattr(frame, name, value)
         plan.frames.append(encode(frame))
@@ -140,9 +163,32 @@ def make_plan(client_src: str) -> Plan:
 
 def start_mission(spawn, run_dir: Path, endpoint: str, namespace: str) -> Proc:
     # --no-record: the fuzz counts what the mission's services drop; a recorder hears every key.
-    proc = spawn(arroch("up", "--services", SERVICES, "--mode", "lockstep", "--rate", str(PACE), "--seed", str(MISSION_SEED), "--until-done", "--no-record",
-                        "--run-dir", str(run_dir), "--progress", "off", "--router-listen", endpoint, "--namespace", namespace,
-                        "--timeout", str(MISSION_TIMEOUT)), name="up")
+    proc = spawn(
+        arroch(
+            "up",
+            "--services",
+            SERVICES,
+            "--mode",
+            "lockstep",
+            "--rate",
+            str(PACE),
+            "--seed",
+            str(MISSION_SEED),
+            "--until-done",
+            "--no-record",
+            "--run-dir",
+            str(run_dir),
+            "--progress",
+            "off",
+            "--router-listen",
+            endpoint,
+            "--namespace",
+            namespace,
+            "--timeout",
+            str(MISSION_TIMEOUT),
+        ),
+        name="up",
+    )
     proc.wait_for("router ready", timeout=30)
     return proc
 
@@ -214,8 +260,11 @@ def wait_for_services(client: FuzzClient, timeout: float = 40.0) -> dict[str, di
 def send(client: FuzzClient, plan: Plan, watch: Watch) -> list[Any]:
     """Everything in ``plan``, in step with the mission (FUZZ_BY); returns the pending replies of the
     Feedback queries."""
-    extras: list[tuple[str, bytes]] = [("query", q) for q in plan.queries] + [("feedback", h) for h in plan.hostile] + \
-        [("camera/tablet/frame", f) for f in plan.frames]
+    extras: list[tuple[str, bytes]] = (
+        [("query", q) for q in plan.queries]
+        + [("feedback", h) for h in plan.hostile]
+        + [("camera/tablet/frame", f) for f in plan.frames]
+    )
     every = max(1, len(plan.puts) // max(1, len(extras)))
     replies: list[Any] = []
     feedback_key = client.keys.feedback()
@@ -239,7 +288,9 @@ def send(client: FuzzClient, plan: Plan, watch: Watch) -> list[Any]:
     return replies
 
 
-def mismatches(stats: dict[str, dict[str, Any]], before: dict[str, dict[str, Any]], plan: Plan, prefix: str) -> list[str]:
+def mismatches(
+    stats: dict[str, dict[str, Any]], before: dict[str, dict[str, Any]], plan: Plan, prefix: str
+) -> list[str]:
     """Every (service, key expression) whose bad-message count is not what was sent to it, every
     payload dropped for want of room on the way, and smuggling feedback not (yet) refused."""
     problems = []
@@ -248,17 +299,23 @@ def mismatches(stats: dict[str, dict[str, Any]], before: dict[str, dict[str, Any
         problems.append(f"restrictor refused {refused} feedbacks, sent {len(plan.hostile)} smuggling ASP")
     for service, patterns in SUBSCRIPTIONS.items():
         for pattern in dict.fromkeys(patterns):
-            got = counted(stats[service], "bad_messages", prefix, pattern) - counted(before[service], "bad_messages", prefix, pattern)
+            got = counted(stats[service], "bad_messages", prefix, pattern) - counted(
+                before[service], "bad_messages", prefix, pattern
+            )
             if got != plan.expected[service][pattern]:
-                problems.append(f"{service} counted {got} bad messages on {pattern}, sent {plan.expected[service][pattern]}")
+                problems.append(
+                    f"{service} counted {got} bad messages on {pattern}, sent {plan.expected[service][pattern]}"
+                )
         dropped = stats[service].get("dropped_inbox_full", 0)
         if dropped:
             problems.append(f"{service} dropped {dropped} payloads with a full inbox")
     ar = stats["ar"]
     frames = ar.get("bad_frames", 0) + counted(ar, "superseded", prefix, "camera/tablet/frame")
     if frames != len(plan.frames) or ar.get("frames", 0):
-        problems.append(f"ar: {ar.get('bad_frames', 0)} bad frames + {frames - ar.get('bad_frames', 0)} superseded, "
-                        f"{ar.get('frames', 0)} processed; sent {len(plan.frames)} frames without a picture")
+        problems.append(
+            f"ar: {ar.get('bad_frames', 0)} bad frames + {frames - ar.get('bad_frames', 0)} superseded, "
+            f"{ar.get('frames', 0)} processed; sent {len(plan.frames)} frames without a picture"
+        )
     return problems
 
 
@@ -290,7 +347,11 @@ def test_a_mission_survives_100k_bad_payloads_and_counts_every_one(spawn, tmp_pa
         deadline = time.monotonic() + SETTLE
         while True:
             stats = client.stats()
-            problems = mismatches(stats, before, plan, prefix) if set(SUBSCRIPTIONS) <= set(stats) else ["a service is missing"]
+            problems = (
+                mismatches(stats, before, plan, prefix)
+                if set(SUBSCRIPTIONS) <= set(stats)
+                else ["a service is missing"]
+            )
             if not problems or time.monotonic() > deadline:
                 break
             time.sleep(0.5)
@@ -307,7 +368,9 @@ def test_a_mission_survives_100k_bad_payloads_and_counts_every_one(spawn, tmp_pa
     for name, child in run["children"].items():
         assert child["starts"] == 1 and child["last_exit"] == 0, (name, child)
     assert metrics["completed"] is True and metrics["actions"]["failed"] == 0
-    assert metrics["actions"]["done"] < 300  # about 100 for 9 loads: thousands would mean actions repeated without progress
+    assert (
+        metrics["actions"]["done"] < 300
+    )  # about 100 for 9 loads: thousands would mean actions repeated without progress
     for rid, robot in metrics["robots"].items():
         assert sorted(robot["delivered"]) == sorted(o.id for o in SITE.objects.values() if o.robot == rid)
     human = metrics["feedback"]
@@ -316,13 +379,20 @@ def test_a_mission_survives_100k_bad_payloads_and_counts_every_one(spawn, tmp_pa
     # Smuggled ASP: every attempt refused; every constraint the planner was sent is the human model's.
     refused = restrictor.get("feedback_refused", 0) - before["restrictor"].get("feedback_refused", 0)
     assert refused == len(plan.hostile)
-    assert restrictor.get("feedback_accepted", 0) <= human["accepted"]  # read before the mission's end: maybe not all yet
+    assert (
+        restrictor.get("feedback_accepted", 0) <= human["accepted"]
+    )  # read before the mission's end: maybe not all yet
     assert watch.sets, "no constraint set seen"
     for constraint_set in watch.sets:
         for constraint in constraint_set.constraints:
-            assert constraint.origin.startswith("sim-") and constraint.kind in ("door_unavailable", "forbid_room", "door_available_now"), \
-                constraint
+            assert constraint.origin.startswith("sim-") and constraint.kind in (
+                "door_unavailable",
+                "forbid_room",
+                "door_available_now",
+            ), constraint
             check_program(constraint.asp)
-    print(f"\nfuzz: {len(plan.puts)} bad puts, {len(plan.queries)} bad queries, {len(plan.hostile)} smuggling feedbacks, "
-          f"{len(plan.frames)} bad frames in {sent_for:.1f} s (site time {started_at_site_time:.0f} to {sent_at_site_time:.0f} s); "
-          f"mission time {metrics['team_completion_time']:.1f} s, actions {metrics['actions']}; kinds {dict(plan.kinds)}")
+    print(
+        f"\nfuzz: {len(plan.puts)} bad puts, {len(plan.queries)} bad queries, {len(plan.hostile)} smuggling feedbacks, "
+        f"{len(plan.frames)} bad frames in {sent_for:.1f} s (site time {started_at_site_time:.0f} to {sent_at_site_time:.0f} s); "
+        f"mission time {metrics['team_completion_time']:.1f} s, actions {metrics['actions']}; kinds {dict(plan.kinds)}"
+    )

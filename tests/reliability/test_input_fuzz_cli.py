@@ -61,16 +61,74 @@ SERVICES: dict[tuple[str, ...], tuple[list[str], set[str]]] = {
 BOUNDED = {("plan",): ["--method", "iidp", "--time-limit", "2"], ("tags", "sheet"): ["--out", "sheet.pdf"]}
 EXIT_3 = {("feedback", "send"), ("constraints", "show")}  # documented: 3 when nothing answers
 # Fewer examples where a run that gets through its checks does real work (solving, rendering).
-EXAMPLES = {("plan",): 15, ("sim", "snapshot"): 20, ("tags", "sheet"): 3, ("site", "show"): 12, ("ar", "render"): 20,
-            ("ar", "localize"): 20}
+EXAMPLES = {
+    ("plan",): 15,
+    ("sim", "snapshot"): 20,
+    ("tags", "sheet"): 3,
+    ("site", "show"): 12,
+    ("ar", "render"): 20,
+    ("ar", "localize"): 20,
+}
 DEFAULT_EXAMPLES = 30
 
-NUMBERS = ["0", "1", "-1", "3", "2.5", "-0.0", "nan", "inf", "-inf", "1e309", "99999999999999999999", "0x10", "1_000", "4096"]
-TEXT = ["", " ", "x", "office", "d_storage", "planner,sim", "a b", "\u00e9\u00e8", "\U0001f4a5", "--", "-", "%s", "${door}",
-        "1,2,3", "1,2,3,4,5,6", "8.5,3.2,1.3,-94,-9", "500,500,320,240,640,480", "64x48", "0x0", "d_storage:0:10", "ar=x",
-        "tcp/127.0.0.1:1", "{\"kind\": \"forbid_room\", \"room\": \"lab\", \"minutes\": 4}", "{", "[]", "chessboard:9x6:0.025"]
-FILES = ["missing.toml", "garbage.bin", "empty.txt", "adir", "office.toml", "library.toml", "image.png", "sub/out.png",
-         "out.png", "out.json", "out.pdf", "out.mp4"]
+NUMBERS = [
+    "0",
+    "1",
+    "-1",
+    "3",
+    "2.5",
+    "-0.0",
+    "nan",
+    "inf",
+    "-inf",
+    "1e309",
+    "99999999999999999999",
+    "0x10",
+    "1_000",
+    "4096",
+]
+TEXT = [
+    "",
+    " ",
+    "x",
+    "office",
+    "d_storage",
+    "planner,sim",
+    "a b",
+    "\u00e9\u00e8",
+    "\U0001f4a5",
+    "--",
+    "-",
+    "%s",
+    "${door}",
+    "1,2,3",
+    "1,2,3,4,5,6",
+    "8.5,3.2,1.3,-94,-9",
+    "500,500,320,240,640,480",
+    "64x48",
+    "0x0",
+    "d_storage:0:10",
+    "ar=x",
+    "tcp/127.0.0.1:1",
+    '{"kind": "forbid_room", "room": "lab", "minutes": 4}',
+    "{",
+    "[]",
+    "chessboard:9x6:0.025",
+]
+FILES = [
+    "missing.toml",
+    "garbage.bin",
+    "empty.txt",
+    "adir",
+    "office.toml",
+    "library.toml",
+    "image.png",
+    "sub/out.png",
+    "out.png",
+    "out.json",
+    "out.pdf",
+    "out.mp4",
+]
 
 
 def leaf_commands() -> list[tuple[str, ...]]:
@@ -98,10 +156,22 @@ def parser_of(path: tuple[str, ...]) -> argparse.ArgumentParser:
 
 
 # What an option's name says it wants (the dest or metavar containing the word): the good values.
-HINTS = (("site", ["office.toml"]), ("config", ["office.toml"]), ("library", ["library.toml"]), ("file", ["office.toml"]),
-         ("image", ["image.png"]), ("png", ["out.png"]), ("truth", ["out.json"]), ("out", ["out.png", "out.json", "newdir"]),
-         ("dir", ["adir", "newdir"]), ("intrinsics", ["500,500,320,240,640,480"]), ("camera", ["8.5,3.2,1.3,-94,-9", "tablet"]),
-         ("size", ["64x48"]), ("feedback", ['{"kind": "forbid_room", "room": "lab", "minutes": 4}']), ("hosts", ["planner,sim"]))
+HINTS = (
+    ("site", ["office.toml"]),
+    ("config", ["office.toml"]),
+    ("library", ["library.toml"]),
+    ("file", ["office.toml"]),
+    ("image", ["image.png"]),
+    ("png", ["out.png"]),
+    ("truth", ["out.json"]),
+    ("out", ["out.png", "out.json", "newdir"]),
+    ("dir", ["adir", "newdir"]),
+    ("intrinsics", ["500,500,320,240,640,480"]),
+    ("camera", ["8.5,3.2,1.3,-94,-9", "tablet"]),
+    ("size", ["64x48"]),
+    ("feedback", ['{"kind": "forbid_room", "room": "lab", "minutes": 4}']),
+    ("hosts", ["planner,sim"]),
+)
 
 
 def good_values(action: argparse.Action) -> list[str]:
@@ -129,8 +199,11 @@ def argv_for(draw: Any, path: tuple[str, ...]) -> list[str]:
     """A random command line for ``path``: some of its options (and positionals), odd values, stray tokens."""
     parser = parser_of(path)
     left_out = SERVICES[path][1] if path in SERVICES else set()
-    options = [a for a in parser._actions if a.option_strings and not isinstance(a, argparse._HelpAction)
-               and not set(a.option_strings) & left_out]
+    options = [
+        a
+        for a in parser._actions
+        if a.option_strings and not isinstance(a, argparse._HelpAction) and not set(a.option_strings) & left_out
+    ]
     positionals = [a for a in parser._actions if not a.option_strings and not isinstance(a, argparse._SubParsersAction)]
     argv = list(path)
     required = [a for a in options if a.required and draw(st.integers(0, 9))]  # now and then one is missing
@@ -138,13 +211,21 @@ def argv_for(draw: Any, path: tuple[str, ...]) -> list[str]:
         argv.append(draw(st.sampled_from(action.option_strings)))
         if action.nargs == 0:
             continue
-        count = draw(st.integers(1, 3)) if action.nargs in ("+", "*") else action.nargs if isinstance(action.nargs, int) else 1
+        count = (
+            draw(st.integers(1, 3))
+            if action.nargs in ("+", "*")
+            else action.nargs
+            if isinstance(action.nargs, int)
+            else 1
+        )
         argv += [value_for(draw, action) for _ in range(count)]
     for action in positionals:
         if draw(st.integers(0, 9)):  # now and then one is missing
             argv.append(value_for(draw, action))
     if draw(st.integers(0, 9)) == 0:
-        argv.insert(draw(st.integers(len(path), len(argv))), draw(st.sampled_from(["--no-such-option", "stray", "-x", "--"])))
+        argv.insert(
+            draw(st.integers(len(path), len(argv))), draw(st.sampled_from(["--no-such-option", "stray", "-x", "--"]))
+        )
     if path in SERVICES:
         argv += [*SERVICES[path][0], "--connect", DEAD_ROUTER]
     return argv + BOUNDED.get(path, [])
@@ -193,13 +274,20 @@ def test_every_sub_command_is_fuzzed() -> None:
 def test_random_argv_ends_with_a_code_and_a_message(path: tuple[str, ...], scratch: Path) -> None:
     allowed = {0, 1, 2, 3} if path in EXIT_3 else {0, 1, 2}
 
-    @settings(max_examples=EXAMPLES.get(path, DEFAULT_EXAMPLES), derandomize=True, database=None, deadline=None,
-              suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
+    @settings(
+        max_examples=EXAMPLES.get(path, DEFAULT_EXAMPLES),
+        derandomize=True,
+        database=None,
+        deadline=None,
+        suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
+    )
     @given(argv=argv_for(path))
     def check(argv: list[str]) -> None:
         code, printed = run(path, argv, scratch)
         assert code in allowed, f"arroch {argv!r} exited {code}:\n{printed[-2000:]}"
-        assert "Traceback (most recent call last)" not in printed, f"arroch {argv!r} printed a traceback:\n{printed[-3000:]}"
+        assert "Traceback (most recent call last)" not in printed, (
+            f"arroch {argv!r} printed a traceback:\n{printed[-3000:]}"
+        )
         if code != 0:
             assert printed.strip(), f"arroch {argv!r} exited {code} without a word"
 

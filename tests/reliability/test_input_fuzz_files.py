@@ -22,8 +22,13 @@ from protocol.site.load import default_site_path
 from services.restrictor.library import LibraryError, library_for_site, load_library
 from tests.reliability.fuzzing import byte_mutations, dump_toml, mutate, mutate_bytes, mutations
 
-FUZZ = settings(max_examples=400, derandomize=True, database=None, deadline=None,
-                suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+FUZZ = settings(
+    max_examples=400,
+    derandomize=True,
+    database=None,
+    deadline=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
 
 SITE_TEXT = default_site_path().read_bytes()
 SITE_DOC = tomllib.loads(SITE_TEXT.decode())

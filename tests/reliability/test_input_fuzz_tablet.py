@@ -38,17 +38,29 @@ PROBE = 424242  # the closing ping's value
 SHORT_INJECTIONS = [i for i in INJECTIONS if 0 < len(i) <= wire.MAX_STRING]
 JPEG = encode_jpeg(snapshots(1).frames[0])
 
-json_values = st.recursive(st.none() | st.booleans() | st.integers(-(2**60), 2**60) | st.floats() | st.text(max_size=20),
-                           lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=4),
-                           max_leaves=12)
-params = st.dictionaries(st.sampled_from(["door", "room", "minutes", "constraint_id", "x", "t0", ""]),
-                         st.one_of(st.sampled_from(SHORT_INJECTIONS), st.sampled_from(["d_storage", "lab", "storage", "c1"]),
-                                   st.integers(-5, 10**6), st.floats(allow_nan=False, allow_infinity=False)),
-                         max_size=3)
-feedback = st.fixed_dictionaries({"type": st.just("feedback"), "id": st.integers(0, 2**53 - 1),
-                                  "kind": st.sampled_from(["door_unavailable", "forbid_room", "door_available_now", "cancel",
-                                                           *SHORT_INJECTIONS]),
-                                  "params": params})
+json_values = st.recursive(
+    st.none() | st.booleans() | st.integers(-(2**60), 2**60) | st.floats() | st.text(max_size=20),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=8), inner, max_size=4),
+    max_leaves=12,
+)
+params = st.dictionaries(
+    st.sampled_from(["door", "room", "minutes", "constraint_id", "x", "t0", ""]),
+    st.one_of(
+        st.sampled_from(SHORT_INJECTIONS),
+        st.sampled_from(["d_storage", "lab", "storage", "c1"]),
+        st.integers(-5, 10**6),
+        st.floats(allow_nan=False, allow_infinity=False),
+    ),
+    max_size=3,
+)
+feedback = st.fixed_dictionaries(
+    {
+        "type": st.just("feedback"),
+        "id": st.integers(0, 2**53 - 1),
+        "kind": st.sampled_from(["door_unavailable", "forbid_room", "door_available_now", "cancel", *SHORT_INJECTIONS]),
+        "params": params,
+    }
+)
 
 
 @st.composite
@@ -63,7 +75,7 @@ def frames(draw: Any) -> bytes:
             jpeg[draw(st.integers(0, len(jpeg) - 1))] ^= 0xFF
     elif how == "header":
         at = draw(st.integers(0, 40))
-        jpeg[at:at + 4] = draw(st.binary(min_size=4, max_size=4))
+        jpeg[at : at + 4] = draw(st.binary(min_size=4, max_size=4))
     elif how == "empty":
         jpeg = bytearray()
     magic = draw(st.sampled_from([wire.FRAME_MAGIC, wire.FRAME_MAGIC, wire.VIEWER_MAGIC, b"ARF2"]))
@@ -72,20 +84,25 @@ def frames(draw: Any) -> bytes:
 
 messages = st.one_of(
     json_values.map(json.dumps),
-    st.fixed_dictionaries({"type": st.sampled_from(["ping", "feedback", "frame", "hello", "ack", ""])},
-                          optional={"t": json_values, "id": json_values, "kind": json_values, "params": json_values}).map(json.dumps),
+    st.fixed_dictionaries(
+        {"type": st.sampled_from(["ping", "feedback", "frame", "hello", "ack", ""])},
+        optional={"t": json_values, "id": json_values, "kind": json_values, "params": json_values},
+    ).map(json.dumps),
     feedback.map(json.dumps),
     st.text(max_size=60),
     st.binary(max_size=64),
     frames(),
     st.sampled_from(["x" * (wire.MAX_TEXT_BYTES + 1), json.dumps({"type": "ping", "t": "x" * wire.MAX_TEXT_BYTES})]),
 )
-connections = st.fixed_dictionaries({
-    "token": st.sampled_from(["right"] * 8 + ["wrong", ""]),
-    "mode": st.sampled_from(["ar", "ar", "viewer", "", "bogus"]),
-    # Anything at all, or feedback only (which the server passes on to the restrictor).
-    "messages": st.lists(messages, min_size=1, max_size=5) | st.lists(feedback.map(json.dumps), min_size=1, max_size=3),
-})
+connections = st.fixed_dictionaries(
+    {
+        "token": st.sampled_from(["right"] * 8 + ["wrong", ""]),
+        "mode": st.sampled_from(["ar", "ar", "viewer", "", "bogus"]),
+        # Anything at all, or feedback only (which the server passes on to the restrictor).
+        "messages": st.lists(messages, min_size=1, max_size=5)
+        | st.lists(feedback.map(json.dumps), min_size=1, max_size=3),
+    }
+)
 
 
 def injected(feedback: dict) -> bool:
@@ -104,7 +121,10 @@ async def exchange(base: str, token: str, connection: dict) -> list[str]:
             ws = await http.ws_connect(f"{base}/ws?{query}", headers={"Origin": base}, max_msg_size=0)
         except aiohttp.WSServerHandshakeError as exc:
             expected = 403 if use != token else 400
-            assert exc.status == expected and (use != token or connection["mode"] not in ("", "ar", "viewer")), (connection, exc.status)
+            assert exc.status == expected and (use != token or connection["mode"] not in ("", "ar", "viewer")), (
+                connection,
+                exc.status,
+            )
             return [f"refused {exc.status}"]
         assert use == token and connection["mode"] in ("", "ar", "viewer"), connection
         hello = await ws.receive_json(timeout=ANSWER)
@@ -128,7 +148,12 @@ async def exchange(base: str, token: str, connection: dict) -> list[str]:
         pong = False
         while not (pong and not feedback_ids):
             msg = await asyncio.wait_for(ws.receive(), ANSWER)
-            if msg.type in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSING, aiohttp.WSMsgType.CLOSED, aiohttp.WSMsgType.ERROR):
+            if msg.type in (
+                aiohttp.WSMsgType.CLOSE,
+                aiohttp.WSMsgType.CLOSING,
+                aiohttp.WSMsgType.CLOSED,
+                aiohttp.WSMsgType.ERROR,
+            ):
                 assert ws.close_code in CLOSE_CODES, (connection, ws.close_code)
                 answers.append(f"closed {ws.close_code}")
                 return answers
@@ -148,7 +173,12 @@ def _feedback_of(message: str) -> dict | None:
         data = json.loads(message)
     except ValueError:
         return None
-    ok = isinstance(data, dict) and data.get("type") == "feedback" and isinstance(data.get("id"), int) and not isinstance(data["id"], bool)
+    ok = (
+        isinstance(data, dict)
+        and data.get("type") == "feedback"
+        and isinstance(data.get("id"), int)
+        and not isinstance(data["id"], bool)
+    )
     return data if ok else None
 
 
@@ -171,16 +201,35 @@ async def good_frame(base: str, token: str) -> dict:
                 return data
 
 
-def test_the_tablet_socket_answers_or_closes_and_keeps_serving(router, namespace, client, spawn, tmp_path: Path) -> None:
-    restrictor = spawn(arroch("restrictor", "--namespace", namespace, "--connect", router, "--clock", "wall",
-                              "--state-dir", str(tmp_path / "restrictor")), name="restrictor")
+def test_the_tablet_socket_answers_or_closes_and_keeps_serving(
+    router, namespace, client, spawn, tmp_path: Path
+) -> None:
+    restrictor = spawn(
+        arroch(
+            "restrictor",
+            "--namespace",
+            namespace,
+            "--connect",
+            router,
+            "--clock",
+            "wall",
+            "--state-dir",
+            str(tmp_path / "restrictor"),
+        ),
+        name="restrictor",
+    )
     calibration = write_calibration(tmp_path / "intrinsics.json", snapshots(1))
     server = start_tablet(spawn, router, namespace, tmp_path / "state", "--no-qr", "--intrinsics", str(calibration))
     restrictor.wait_for("up on namespace", timeout=30)
     outcomes: list[str] = []
 
-    @settings(max_examples=150, derandomize=True, database=None, deadline=None,
-              suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+    @settings(
+        max_examples=150,
+        derandomize=True,
+        database=None,
+        deadline=None,
+        suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+    )
     @given(connection=connections)
     def check(connection: dict) -> None:
         outcomes.extend(asyncio.run(exchange(server.base, server.token, connection)))

@@ -13,8 +13,8 @@ Fails (does not skip) when namespaces cannot be made; ``ARROCH_SKIP_NETNS=1`` de
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import pytest
 
@@ -37,12 +37,25 @@ def lan() -> Iterator[Lan]:
 
 def test_the_mission_completes_after_the_sim_hosts_link_is_cut_for_10_s(lan: Lan, namespace: str, tmp_path: Path):
     router = f"tcp/{lan.hub.address}:{PORT}"
-    planning = UpMission(lambda argv, name="": lan.spawn("planning", argv, name="planning"), tmp_path / "planning", namespace,
-                         services="planner,restrictor", extra=("--router-listen", router))
-    planning.wait(lambda: bool(planning.lines("planner is up")) and bool(planning.lines("restrictor is up")),
-                  "planner and restrictor up", timeout=60)
-    sim = UpMission(lambda argv, name="": lan.spawn("sim", argv, name="sim"), tmp_path / "sim", namespace,
-                    services="sim", extra=("--no-router", "--connect", router))
+    planning = UpMission(
+        lambda argv, name="": lan.spawn("planning", argv, name="planning"),
+        tmp_path / "planning",
+        namespace,
+        services="planner,restrictor",
+        extra=("--router-listen", router),
+    )
+    planning.wait(
+        lambda: bool(planning.lines("planner is up")) and bool(planning.lines("restrictor is up")),
+        "planner and restrictor up",
+        timeout=60,
+    )
+    sim = UpMission(
+        lambda argv, name="": lan.spawn("sim", argv, name="sim"),
+        tmp_path / "sim",
+        namespace,
+        services="sim",
+        extra=("--no-router", "--connect", router),
+    )
     planning.wait(lambda: len(planning.delivered()) >= MID_DELIVERIES, f"{MID_DELIVERIES} deliveries", timeout=120)
 
     lan.cut("sim")
@@ -64,7 +77,14 @@ def test_the_mission_completes_after_the_sim_hosts_link_is_cut_for_10_s(lan: Lan
         assert_mission_completed(outcome)
     assert planning_outcome.metrics == sim_outcome.metrics  # one mission, seen from both hosts
     # Nothing crashed: the link came back, the processes did not restart.
-    assert planning_outcome.starts("planner") == planning_outcome.starts("restrictor") == planning_outcome.starts("router") == 1
+    assert (
+        planning_outcome.starts("planner")
+        == planning_outcome.starts("restrictor")
+        == planning_outcome.starts("router")
+        == 1
+    )
     assert sim_outcome.starts("sim") == 1
-    print(f"\nfault table | sim host's link cut for {CUT:.0f} s (after {MID_DELIVERIES}+ deliveries) | planning host hears "
-          f"nothing while cut; progress resumes after heal; no restarts | mission completed | {recovered:.2f} s after heal")
+    print(
+        f"\nfault table | sim host's link cut for {CUT:.0f} s (after {MID_DELIVERIES}+ deliveries) | planning host hears "
+        f"nothing while cut; progress resumes after heal; no restarts | mission completed | {recovered:.2f} s after heal"
+    )

@@ -27,8 +27,22 @@ MEMORY_GROWTH_MB = 40.0  # the AR client's resident memory growth allowed over t
 
 
 def test_queues_stay_bounded_and_nothing_is_lost_under_load() -> None:
-    result = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "load.py"), "--seconds", str(SECONDS), "--warmup", "2",
-                             "--robots", str(ROBOTS)], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    result = subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "benchmarks" / "load.py"),
+            "--seconds",
+            str(SECONDS),
+            "--warmup",
+            "2",
+            "--robots",
+            str(ROBOTS),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert result.returncode == 0, result.stderr[-3000:]
     figures = json.loads(result.stdout)
     keys = ROBOTS + 1  # one pose key per robot, one camera key
@@ -36,7 +50,9 @@ def test_queues_stay_bounded_and_nothing_is_lost_under_load() -> None:
     queues = figures["queues"]
     assert queues["samples"] >= SECONDS * 2
     assert 0 < queues["inbox_depth_max"] <= keys and queues["latest_waiting_max"] <= keys, queues
-    assert all(depth <= keys for depth in queues["inbox_depth_max_per_third"] + queues["latest_waiting_max_per_third"]), queues
+    assert all(
+        depth <= keys for depth in queues["inbox_depth_max_per_third"] + queues["latest_waiting_max_per_third"]
+    ), queues
     assert queues["ar_rss_mb"]["end"] - queues["ar_rss_mb"]["start"] < MEMORY_GROWTH_MB, queues
 
     stages = figures["stages"]
@@ -48,4 +64,6 @@ def test_queues_stay_bounded_and_nothing_is_lost_under_load() -> None:
 
     assert figures["overlays_per_s"] >= 3.0, figures
     assert figures["robots_per_overlay"]["p50"] == ROBOTS == figures["robots_per_overlay"]["max"]
-    assert figures["pose_to_overlay_ms"]["n"] > 0 and figures["pose_to_overlay_ms"]["p99"] < FRESH_MS, figures["pose_to_overlay_ms"]
+    assert figures["pose_to_overlay_ms"]["n"] > 0 and figures["pose_to_overlay_ms"]["p99"] < FRESH_MS, figures[
+        "pose_to_overlay_ms"
+    ]

@@ -29,7 +29,9 @@ def paused_clock(client: TestClient, version: int, at: float, paused: bool = Tru
     client.publish(client.keys.clock(), Clock(time=at, mode="lockstep", world_version=version, paused=paused))
 
 
-def test_a_planner_started_mid_mission_plans_from_the_robots_state_once_it_has_all_of_it(spawn, router, namespace, client):
+def test_a_planner_started_mid_mission_plans_from_the_robots_state_once_it_has_all_of_it(
+    spawn, router, namespace, client
+):
     plans = Watch(client, client.keys.plan(), TeamPlan)
     commands = Watch(client, client.keys.robot_command("*"), RobotCommand)
     start_planner(spawn, router, namespace)
@@ -42,14 +44,44 @@ def test_a_planner_started_mid_mission_plans_from_the_robots_state_once_it_has_a
     o3 = SITE.objects["o3"]
     states = {
         # r0 has loaded o0 and ended that action (id 4): it must carry o0 to storage next.
-        "r0": ((1.5, 8.1, 1.57), RobotStatus(robot="r0", state="done", action_id=4, action="load", args=["o0"], carrying=["o0"],
-                                             world_version=VERSION)),
+        "r0": (
+            (1.5, 8.1, 1.57),
+            RobotStatus(
+                robot="r0",
+                state="done",
+                action_id=4,
+                action="load",
+                args=["o0"],
+                carrying=["o0"],
+                world_version=VERSION,
+            ),
+        ),
         # r1 is loading o3 (action 7 of a plan of the planner that died): it must be left to finish.
-        "r1": ((o3.position[0], o3.position[1] - 0.5, 1.57), RobotStatus(robot="r1", state="loading", action_id=7, action="load",
-                                                                            args=["o3"], progress=0.5, world_version=VERSION)),
+        "r1": (
+            (o3.position[0], o3.position[1] - 0.5, 1.57),
+            RobotStatus(
+                robot="r1",
+                state="loading",
+                action_id=7,
+                action="load",
+                args=["o3"],
+                progress=0.5,
+                world_version=VERSION,
+            ),
+        ),
         # r2 has delivered o6 and stands at its start.
-        "r2": (SITE.robots["r2"].start, RobotStatus(robot="r2", state="idle", action_id=12, action="unload", args=["o6"],
-                                                    delivered=["o6"], world_version=VERSION)),
+        "r2": (
+            SITE.robots["r2"].start,
+            RobotStatus(
+                robot="r2",
+                state="idle",
+                action_id=12,
+                action="unload",
+                args=["o6"],
+                delivered=["o6"],
+                world_version=VERSION,
+            ),
+        ),
     }
     assert SITE.room_at(*states["r1"][0][:2]).id == o3.room
     for rid, (pose, status) in states.items():
@@ -70,7 +102,9 @@ def test_a_planner_started_mid_mission_plans_from_the_robots_state_once_it_has_a
     assert plan.robots["r0"][0].action_id == r0[-1].action_id
 
 
-def test_a_plan_is_published_again_while_the_simulator_stays_paused_at_the_version_it_answers(spawn, router, namespace, client):
+def test_a_plan_is_published_again_while_the_simulator_stays_paused_at_the_version_it_answers(
+    spawn, router, namespace, client
+):
     plans = Watch(client, client.keys.plan(), TeamPlan)
     start_planner(spawn, router, namespace)
     publish_world(client, 1, 0.0)

@@ -39,15 +39,28 @@ def test_a_refusal_for_want_of_a_clock_is_not_the_answer_to_the_retry():
 
 
 @pytest.mark.integration
-def test_feedback_waits_for_the_first_clock_message_instead_of_being_refused(spawn, router, namespace, client, tmp_path: Path):
+def test_feedback_waits_for_the_first_clock_message_instead_of_being_refused(
+    spawn, router, namespace, client, tmp_path: Path
+):
     sets = Watch(client, client.keys.constraints(), ConstraintSet)
-    proc = spawn(arroch("restrictor", "--connect", router, "--namespace", namespace, "--state-dir", str(tmp_path)), name="restrictor")
+    proc = spawn(
+        arroch("restrictor", "--connect", router, "--namespace", namespace, "--state-dir", str(tmp_path)),
+        name="restrictor",
+    )
     proc.wait_for("up on namespace", timeout=30)
     sets.first(lambda s: s.version == 0, "the restored (empty) set")
 
     answers: list[list[FeedbackAck]] = []
-    ask = threading.Thread(target=lambda: answers.append(client.query(
-        client.keys.feedback(), FeedbackAck, payload=Feedback(kind="forbid_room", params={"room": "lab", "minutes": 2}), timeout=10.0)))
+    ask = threading.Thread(
+        target=lambda: answers.append(
+            client.query(
+                client.keys.feedback(),
+                FeedbackAck,
+                payload=Feedback(kind="forbid_room", params={"room": "lab", "minutes": 2}),
+                timeout=10.0,
+            )
+        )
+    )
     asked = time.monotonic()
     ask.start()
     time.sleep(CLOCK_WAIT / 2)  # the simulator's first clock message comes while the feedback waits

@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Callable, Iterator
 
 import pytest
 import zenoh
@@ -40,7 +40,9 @@ def secure(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, int
     folder = tmp_path_factory.mktemp("secure")
     certs, foreign = make_pki(folder)
     port = free_tcp_port()
-    configs = render_configs(certs, foreign, folder / "zenoh", router=f"tls/127.0.0.1:{port}", listen=f"tls/127.0.0.1:{port}")
+    configs = render_configs(
+        certs, foreign, folder / "zenoh", router=f"tls/127.0.0.1:{port}", listen=f"tls/127.0.0.1:{port}"
+    )
     router = Proc(arroch("router", "--zenoh-config", str(configs / "router.json5")), name="secure-router")
     try:
         router.wait_for("router ready", timeout=30)
@@ -74,11 +76,28 @@ def wait_until(check: Callable[[], bool], what: str, timeout: float = 10.0) -> N
         time.sleep(0.1)
 
 
-def test_only_the_right_roles_reach_the_restrictor_and_the_robots(secure, join, spawn, namespace: str, tmp_path: Path) -> None:
+def test_only_the_right_roles_reach_the_restrictor_and_the_robots(
+    secure, join, spawn, namespace: str, tmp_path: Path
+) -> None:
     configs, port = secure
-    restrictor = spawn(arroch("restrictor", "--namespace", namespace, "--zenoh-config", str(configs / "restrictor.json5"),
-                              "--clock", "wall", "--state-dir", str(tmp_path / "state")), name="restrictor")
-    sim = spawn(arroch("sim", "--namespace", namespace, "--zenoh-config", str(configs / "sim.json5"), "--mode", "lockstep"), name="sim")
+    restrictor = spawn(
+        arroch(
+            "restrictor",
+            "--namespace",
+            namespace,
+            "--zenoh-config",
+            str(configs / "restrictor.json5"),
+            "--clock",
+            "wall",
+            "--state-dir",
+            str(tmp_path / "state"),
+        ),
+        name="restrictor",
+    )
+    sim = spawn(
+        arroch("sim", "--namespace", namespace, "--zenoh-config", str(configs / "sim.json5"), "--mode", "lockstep"),
+        name="sim",
+    )
     restrictor.wait_for("up on namespace", timeout=30)
     sim.wait_for("up on namespace", timeout=60)
 
@@ -102,15 +121,20 @@ def test_only_the_right_roles_reach_the_restrictor_and_the_robots(secure, join, 
             heard.append(str(sample.key_expr))
 
     # Remote only: a session hears its own puts locally, without the router.
-    listener = intruder.session.declare_subscriber(intruder.keys.robot_command("*"), overheard, allowed_origin=zenoh.Locality.REMOTE)
+    listener = intruder.session.declare_subscriber(
+        intruder.keys.robot_command("*"), overheard, allowed_origin=zenoh.Locality.REMOTE
+    )
     command = RobotCommand(robot="r0", plan_id=1, action_id=1, action="stop")
     feedback = Feedback(kind="door_unavailable", params={"door": "d_storage", "minutes": 5})
 
     # Attacks: the intruder and members in the wrong role, on commands and feedback.
     intruder.publish(intruder.keys.robot_command("r0"), command)
     intruder.publish(intruder.keys.feedback(), feedback)
-    replies = [r for r in intruder.session.get(intruder.keys.feedback(), payload=encode(intruder.stamp(feedback)), timeout=2.0)
-               if r.ok is not None]
+    replies = [
+        r
+        for r in intruder.session.get(intruder.keys.feedback(), payload=encode(intruder.stamp(feedback)), timeout=2.0)
+        if r.ok is not None
+    ]
     assert replies == [], "the intruder's feedback query was answered"
     ar.publish(ar.keys.robot_command("r0"), command)
     planner.publish(planner.keys.feedback(), feedback)
@@ -122,7 +146,10 @@ def test_only_the_right_roles_reach_the_restrictor_and_the_robots(secure, join, 
     # Controls: the planner's command reaches the sim, the AR client's feedback the restrictor.
     planner.publish(planner.keys.robot_command("r0"), command)
     ar.publish(ar.keys.feedback(), feedback)
-    wait_until(lambda: counters(supervisor, "sim").get("received", 0) == before["sim"].get("received", 0) + 1, "the planner's command")
+    wait_until(
+        lambda: counters(supervisor, "sim").get("received", 0) == before["sim"].get("received", 0) + 1,
+        "the planner's command",
+    )
     wait_until(lambda: counters(supervisor, "restrictor").get("feedback_accepted", 0) == 1, "the AR client's feedback")
     time.sleep(GRACE)
     sim_now, restrictor_now = counters(supervisor, "sim"), counters(supervisor, "restrictor")

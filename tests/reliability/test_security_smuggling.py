@@ -33,9 +33,23 @@ INJECTED_NAMES = ["door).\nhuman_opens(d_storage, 1", "t0", "t1", "kind", "#incl
 CLI_INJECTIONS = [i for i in INJECTIONS[:12] if not i.startswith("-")] + ["d_storage\n:- human_opens(D, T).", "${door}"]
 
 
-def test_smuggled_asp_through_queries_and_the_command_line_is_refused(router, namespace, client, spawn, tmp_path: Path) -> None:
-    restrictor = spawn(arroch("restrictor", "--namespace", namespace, "--connect", router, "--clock", "wall",
-                              "--state-dir", str(tmp_path / "state")), name="restrictor")
+def test_smuggled_asp_through_queries_and_the_command_line_is_refused(
+    router, namespace, client, spawn, tmp_path: Path
+) -> None:
+    restrictor = spawn(
+        arroch(
+            "restrictor",
+            "--namespace",
+            namespace,
+            "--connect",
+            router,
+            "--clock",
+            "wall",
+            "--state-dir",
+            str(tmp_path / "state"),
+        ),
+        name="restrictor",
+    )
     restrictor.wait_for("up on namespace", timeout=30)
     library, site = load_library(), load_site()
 
@@ -59,8 +73,22 @@ def test_smuggled_asp_through_queries_and_the_command_line_is_refused(router, na
         valid = valid_params(entry, site, active_ids=("c999999",))
         for param in entry.params:
             for bad in CLI_INJECTIONS:
-                argv = ["feedback", "send", "--namespace", namespace, "--connect", router, "--clock", "wall", "--timeout", "5",
-                        "--kind", entry.id, *(f"--{n}={v}" for n, v in valid.items() if n != param.name), f"--{param.name}={bad}"]
+                argv = [
+                    "feedback",
+                    "send",
+                    "--namespace",
+                    namespace,
+                    "--connect",
+                    router,
+                    "--clock",
+                    "wall",
+                    "--timeout",
+                    "5",
+                    "--kind",
+                    entry.id,
+                    *(f"--{n}={v}" for n, v in valid.items() if n != param.name),
+                    f"--{param.name}={bad}",
+                ]
                 with contained(tmp_path, 30.0) as (out, err):
                     try:
                         code = main(argv)

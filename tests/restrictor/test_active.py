@@ -48,13 +48,29 @@ def test_accepted_feedback_becomes_a_versioned_constraint(open_set) -> None:
     assert active.version == 0 and active.message().constraints == []
     out = active.handle(feedback("door_unavailable", door="d_storage", minutes=4), now=100.5)
     assert out.ack.accepted and out.changed and not out.duplicate
-    assert (out.ack.to, out.ack.feedback_seq, out.ack.constraint_id, out.ack.constraints_version) == ("tablet", 1, "c1", 1)
+    assert (out.ack.to, out.ack.feedback_seq, out.ack.constraint_id, out.ack.constraints_version) == (
+        "tablet",
+        1,
+        "c1",
+        1,
+    )
     assert out.ack.reason == "added c1: door_unavailable(door=d_storage, minutes=4) during [100, 341)"
     message = active.message()
     assert message.version == 1
     [c] = message.constraints
-    assert (c.id, c.kind, c.params, c.start, c.end, c.origin) == ("c1", "door_unavailable", {"door": "d_storage", "minutes": 4}, 100.0, 341.0, "tablet")
-    assert message.asp == c.asp == "human_unavailable(d_storage, 100, 341).\n:- human_opens(d_storage, T), T >= 100, T < 341.\n"
+    assert (c.id, c.kind, c.params, c.start, c.end, c.origin) == (
+        "c1",
+        "door_unavailable",
+        {"door": "d_storage", "minutes": 4},
+        100.0,
+        341.0,
+        "tablet",
+    )
+    assert (
+        message.asp
+        == c.asp
+        == "human_unavailable(d_storage, 100, 341).\n:- human_opens(d_storage, T), T >= 100, T < 341.\n"
+    )
 
 
 def test_refused_feedback_changes_nothing(open_set) -> None:
@@ -80,7 +96,10 @@ def test_cancel_withdraws_an_active_constraint(open_set) -> None:
     assert out.ack.reason == "withdrew c1: forbid_room(room=lab, minutes=5)"
     assert [c.id for c in active.constraints] == ["c2"] and "lab" not in active.message().asp
     again = active.handle(feedback("cancel", seq=4, constraint_id="c1"), now=11.0)
-    assert not again.ack.accepted and again.ack.reason == "cancel: no active constraint c1 (it may have expired or been withdrawn)"
+    assert (
+        not again.ack.accepted
+        and again.ack.reason == "cancel: no active constraint c1 (it may have expired or been withdrawn)"
+    )
     assert active.version == 3
 
 
@@ -121,7 +140,9 @@ def test_duplicate_feedback_is_applied_once_and_answered_the_same(open_set) -> N
     active.handle(feedback("forbid_room", seq=9, room="lab", minutes=1), now=140.0)  # this is c2
     assert active.handle(feedback("cancel", seq=8, constraint_id="c2"), now=150.0).ack == refused.ack
     # the same seq from another sender is another feedback
-    other = active.handle(feedback("door_unavailable", src="human-model", seq=7, door="d_storage", minutes=4), now=160.0)
+    other = active.handle(
+        feedback("door_unavailable", src="human-model", seq=7, door="d_storage", minutes=4), now=160.0
+    )
     assert other.ack.accepted and not other.duplicate and other.ack.constraint_id == "c3"
 
 
@@ -225,17 +246,25 @@ def test_a_corrupt_state_row_is_reported_not_loaded(library, lab_site, state_dir
     active.handle(feedback("forbid_room", seq=1, room="lab", minutes=5), now=0.0)
     active.store._db.execute("UPDATE constraints SET body = json_set(body, '$.asp', 'p(1).')")
     active.store.close()
-    with pytest.raises(StoreError, match=r"restrictor.sqlite3: constraints row 1 is not a valid constraint: predicate\(s\) p/1"):
+    with pytest.raises(
+        StoreError, match=r"restrictor.sqlite3: constraints row 1 is not a valid constraint: predicate\(s\) p/1"
+    ):
         open_set()
 
 
-SCALARS = st.one_of(st.booleans(), st.integers(min_value=-(2**70), max_value=2**70),
-                    st.floats(allow_nan=False, allow_infinity=False), st.text(max_size=30),
-                    st.sampled_from(["d_storage", "d_lab", "lab", "room_a", "c1", "c2"]))
+SCALARS = st.one_of(
+    st.booleans(),
+    st.integers(min_value=-(2**70), max_value=2**70),
+    st.floats(allow_nan=False, allow_infinity=False),
+    st.text(max_size=30),
+    st.sampled_from(["d_storage", "d_lab", "lab", "room_a", "c1", "c2"]),
+)
 
 
 FEEDBACK = st.tuples(
-    st.one_of(st.sampled_from(["door_unavailable", "forbid_room", "door_available_now", "cancel"]), st.text(max_size=20)),
+    st.one_of(
+        st.sampled_from(["door_unavailable", "forbid_room", "door_available_now", "cancel"]), st.text(max_size=20)
+    ),
     st.dictionaries(st.sampled_from(["door", "room", "minutes", "constraint_id", "x"]), SCALARS, max_size=4),
 )
 
@@ -253,7 +282,9 @@ def test_any_feedback_gets_an_answer_and_only_valid_feedback_changes_the_set(lib
             out = active.handle(Feedback(kind=kind, params=params, src="fuzz", seq=seq), now=now + seq)
             assert out.ack.to == "fuzz" and out.ack.feedback_seq == seq and out.ack.reason
             assert active.version == version + (1 if out.ack.accepted else 0) + (1 if out.expired else 0)
-            assert out.ack.constraints_version == (active.version if out.ack.accepted else version + (1 if out.expired else 0))
+            assert out.ack.constraints_version == (
+                active.version if out.ack.accepted else version + (1 if out.expired else 0)
+            )
             for constraint in active.constraints:
                 check_program(constraint.asp)
     finally:

@@ -23,22 +23,31 @@ from tests.restrictor.helpers import answer_sets, possible, valid_params, values
 
 SLOTS = "slot(0..20).\n"  # 30-second slots: times 0, 30, ..., 600
 
-DOOR_PLAN = SLOTS + """
+DOOR_PLAN = (
+    SLOTS
+    + """
 door(d_storage; d_lab).
 1 { human_opens(D, S * 30) : slot(S) } 1 :- door(D).
 """
+)
 
-ROOM_PLAN = SLOTS + """
+ROOM_PLAN = (
+    SLOTS
+    + """
 room(room_a; lab).
 % robot r0 visits one room for one minute, starting at some slot
 1 { visit(Room, S * 30) : room(Room), slot(S) } 1.
 robot_in(r0, Room, T, T + 60) :- visit(Room, T).
 """
+)
 
-OPENING_PLAN = SLOTS + """
+OPENING_PLAN = (
+    SLOTS
+    + """
 opening(d_storage; p_corridor_room_a).
 1 { goes_through(r0, X, S * 30) : opening(X), slot(S) } 1.
 """
+)
 
 # The planner's reading of human_available (preferred, not forced), for the door_available_now test.
 PREFER_OFFERED = """
@@ -60,13 +69,16 @@ def compiled(library, site, kind: str, now: float, **params) -> Compiled:
 # ---------------------------------------------------------------------------- windows
 
 
-@pytest.mark.parametrize("now,minutes,expected", [
-    (0.0, 1, (0, 60)),
-    (100.0, 4, (100, 340)),
-    (100.25, 4, (100, 341)),  # floor the start, ceil the end: the window covers [now, now + 240)
-    (99.999, 1, (99, 160)),
-    (1_795_000_000.5, 240, (1_795_000_000, 1_795_014_401)),  # wall-clock seconds still fit ASP integers
-])
+@pytest.mark.parametrize(
+    "now,minutes,expected",
+    [
+        (0.0, 1, (0, 60)),
+        (100.0, 4, (100, 340)),
+        (100.25, 4, (100, 341)),  # floor the start, ceil the end: the window covers [now, now + 240)
+        (99.999, 1, (99, 160)),
+        (1_795_000_000.5, 240, (1_795_000_000, 1_795_014_401)),  # wall-clock seconds still fit ASP integers
+    ],
+)
 def test_windows_are_widened_to_whole_seconds(now: float, minutes: int, expected: tuple[int, int]) -> None:
     start, end = window(now, minutes)
     assert (start, end) == expected
@@ -91,17 +103,23 @@ def test_every_add_entry_compiles_to_asp_clingo_accepts(library, lab_site) -> No
             result = compiled(library_, lab_site, entry.id, 123.4, **valid_params(entry, lab_site))
             assert (result.start, result.end)[0] == 123
             # alone (atoms the planner would define are simply false), and with plan programs
-            assert possible(result.asp, "#defined human_opens/2. #defined robot_in/4. #defined goes_through/3.") is not None
+            assert (
+                possible(result.asp, "#defined human_opens/2. #defined robot_in/4. #defined goes_through/3.")
+                is not None
+            )
             assert possible(DOOR_PLAN, ROOM_PLAN, OPENING_PLAN, result.asp)
 
 
 def test_the_asp_is_the_documented_form(library, lab_site) -> None:
     assert compiled(library, lab_site, "door_unavailable", 100.0, door="d_storage", minutes=4).asp == (
-        "human_unavailable(d_storage, 100, 340).\n:- human_opens(d_storage, T), T >= 100, T < 340.\n")
+        "human_unavailable(d_storage, 100, 340).\n:- human_opens(d_storage, T), T >= 100, T < 340.\n"
+    )
     assert compiled(library, lab_site, "forbid_room", 100.0, room="room_a", minutes=2).asp == (
-        "room_forbidden(room_a, 100, 220).\n:- robot_in(R, room_a, S, E), S < 220, E > 100.\n")
+        "room_forbidden(room_a, 100, 220).\n:- robot_in(R, room_a, S, E), S < 220, E > 100.\n"
+    )
     assert compiled(library, lab_site, "door_available_now", 100.0, door="d_storage").asp == (
-        "human_available(d_storage, 100, 700).\n")
+        "human_available(d_storage, 100, 700).\n"
+    )
 
 
 # ---------------------------------------------------------------------------- intended effects
@@ -170,8 +188,13 @@ def test_a_whole_constraint_set_grounds_together(library, lab_site) -> None:
 
 
 def run_compile(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run(arroch("constraints", "compile", "--site", str(LAB), *args), cwd=ROOT,
-                          capture_output=True, text=True, timeout=60)
+    return subprocess.run(
+        arroch("constraints", "compile", "--site", str(LAB), *args),
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
 
 
 def test_the_compile_command_prints_the_asp_or_the_refusal() -> None:
@@ -181,12 +204,20 @@ def test_the_compile_command_prints_the_asp_or_the_refusal() -> None:
     refused = run_compile("--feedback", '{"kind": "door_unavailable", "door": "d_storage", "minutes": 4, "x": "p."}')
     assert refused.returncode == 1
     assert refused.stdout.strip() == "refused: door_unavailable: unknown parameter(s) 'x'; it takes: door, minutes"
-    injected = run_compile("--feedback", '{"kind": "forbid_room", "room": "lab).\\n#include \\"/etc/passwd\\".", "minutes": 4}')
+    injected = run_compile(
+        "--feedback", '{"kind": "forbid_room", "room": "lab).\\n#include \\"/etc/passwd\\".", "minutes": 4}'
+    )
     assert injected.returncode == 1 and injected.stdout.startswith("refused: forbid_room: site lab has no room")
     not_json = run_compile("--feedback", "{kind: forbid_room}")
     assert not_json.returncode == 1 and not_json.stdout.startswith("refused: feedback is not JSON")
     as_json = run_compile("--feedback", '{"kind": "forbid_room", "room": "lab", "minutes": 1}', "--json")
-    assert json.loads(as_json.stdout) == {"accepted": True, "kind": "forbid_room", "params": {"room": "lab", "minutes": 1},
-                                          "start": 0, "end": 60, "asp": "room_forbidden(lab, 0, 60).\n:- robot_in(R, lab, S, E), S < 60, E > 0.\n"}
+    assert json.loads(as_json.stdout) == {
+        "accepted": True,
+        "kind": "forbid_room",
+        "params": {"room": "lab", "minutes": 1},
+        "start": 0,
+        "end": 60,
+        "asp": "room_forbidden(lab, 0, 60).\n:- robot_in(R, lab, S, E), S < 60, E > 0.\n",
+    }
     cancel = run_compile("--feedback", '{"kind": "cancel", "constraint_id": "c4"}')
     assert cancel.returncode == 0 and "withdraws c4" in cancel.stdout

@@ -10,7 +10,11 @@ import pytest
 
 from protocol.site import loads_site
 from services.restrictor.library import (
-    CONSTRAINT, LibraryError, library_for_site, load_library, parse_library,
+    CONSTRAINT,
+    LibraryError,
+    library_for_site,
+    load_library,
+    parse_library,
 )
 from tests.procs import ROOT, arroch
 from tests.restrictor.conftest import HERE, LAB
@@ -33,11 +37,20 @@ def toml_value(value: Any) -> str:
 DOOR = {"name": "door", "type": "door", "label": "Door"}
 MINUTES = {"name": "minutes", "type": "int", "label": "Minutes", "min": 1, "max": 60}
 BUSY = {
-    "id": "busy", "label": "Busy", "help": "Not now.", "window_param": "minutes",
-    "asp": ":- human_opens(${door}, T), T >= ${t0}, T < ${t1}.", "params": [DOOR, MINUTES],
+    "id": "busy",
+    "label": "Busy",
+    "help": "Not now.",
+    "window_param": "minutes",
+    "asp": ":- human_opens(${door}, T), T >= ${t0}, T < ${t1}.",
+    "params": [DOOR, MINUTES],
 }
-WITHDRAW = {"id": "withdraw", "label": "Withdraw", "help": "Undo.", "effect": "cancel",
-            "params": [{"name": "which", "type": "constraint", "label": "Which"}]}
+WITHDRAW = {
+    "id": "withdraw",
+    "label": "Withdraw",
+    "help": "Undo.",
+    "effect": "cancel",
+    "params": [{"name": "which", "type": "constraint", "label": "Which"}],
+}
 
 
 def library_text(*entries: dict, top: str = "") -> str:
@@ -94,7 +107,10 @@ ERRORS = [
     ("version = 1", "mine.toml: needs at least one [[entry]]"),
     (library_text(BUSY, top='colour = "red"'), "mine.toml: unknown field(s) colour"),
     (library_text(BUSY, top="version = 2"), "mine.toml: version 2 is not supported"),
-    (library_text(with_(BUSY, id="Busy-Door")), "mine.toml: entry[0] (id 'Busy-Door'): id: 'Busy-Door' is not an identifier"),
+    (
+        library_text(with_(BUSY, id="Busy-Door")),
+        "mine.toml: entry[0] (id 'Busy-Door'): id: 'Busy-Door' is not an identifier",
+    ),
     (library_text(BUSY, BUSY), "mine.toml: entry[1] (id 'busy'): duplicate id 'busy'"),
     (library_text(with_(BUSY, label=None)), "entry[0] (id 'busy'): label: required"),
     (library_text(with_(BUSY, label="")), "entry[0] (id 'busy'): label: must not be empty"),
@@ -102,46 +118,125 @@ ERRORS = [
     (library_text(with_(BUSY, help=3)), "entry[0] (id 'busy'): help: expected a string, got int"),
     (library_text(with_(BUSY, colour="red")), "entry[0] (id 'busy'): unknown field(s) colour"),
     (library_text(with_(BUSY, effect="delete")), "entry[0] (id 'busy'): effect: 'delete' is not one of add, cancel"),
-    (library_text(with_(BUSY, params=[param(DOOR, type="string"), MINUTES])),
-     "entry[0] (id 'busy'): params[0] (name 'door'): type: 'string' is not one of"),
-    (library_text(with_(BUSY, params=[DOOR, param(MINUTES, max=None)])),
-     "params[1] (name 'minutes'): an int parameter needs both min and max"),
-    (library_text(with_(BUSY, params=[DOOR, param(MINUTES, min=5, max=3)])), "params[1] (name 'minutes'): min 5 is above max 3"),
-    (library_text(with_(BUSY, params=[DOOR, param(MINUTES, min=True)])), "params[1] (name 'minutes'): min: expected an integer, got bool"),
-    (library_text(with_(BUSY, params=[DOOR, param(MINUTES, max=2**40)])), "params[1] (name 'minutes'): range [1, 1099511627776] exceeds ASP integers"),
-    (library_text(with_(BUSY, params=[param(DOOR, min=1), MINUTES])), "params[0] (name 'door'): min/max apply to int parameters only"),
-    (library_text(with_(BUSY, params=[DOOR, param(MINUTES, human_operated=True)])),
-     "params[1] (name 'minutes'): human_operated applies to door parameters only"),
-    (library_text(with_(BUSY, params=[param(DOOR, human_operated="yes"), MINUTES])),
-     "params[0] (name 'door'): human_operated: expected true or false"),
-    (library_text(with_(BUSY, params=[param(DOOR, name="kind"), MINUTES])), "params[0] (name 'kind'): name: 'kind' is reserved"),
-    (library_text(with_(BUSY, params=[param(DOOR, name="t0"), MINUTES])), "params[0] (name 't0'): name: 't0' is reserved for the window"),
-    (library_text(with_(BUSY, params=[DOOR, DOOR, MINUTES])), "params[1] (name 'door'): duplicate parameter name 'door'"),
+    (
+        library_text(with_(BUSY, params=[param(DOOR, type="string"), MINUTES])),
+        "entry[0] (id 'busy'): params[0] (name 'door'): type: 'string' is not one of",
+    ),
+    (
+        library_text(with_(BUSY, params=[DOOR, param(MINUTES, max=None)])),
+        "params[1] (name 'minutes'): an int parameter needs both min and max",
+    ),
+    (
+        library_text(with_(BUSY, params=[DOOR, param(MINUTES, min=5, max=3)])),
+        "params[1] (name 'minutes'): min 5 is above max 3",
+    ),
+    (
+        library_text(with_(BUSY, params=[DOOR, param(MINUTES, min=True)])),
+        "params[1] (name 'minutes'): min: expected an integer, got bool",
+    ),
+    (
+        library_text(with_(BUSY, params=[DOOR, param(MINUTES, max=2**40)])),
+        "params[1] (name 'minutes'): range [1, 1099511627776] exceeds ASP integers",
+    ),
+    (
+        library_text(with_(BUSY, params=[param(DOOR, min=1), MINUTES])),
+        "params[0] (name 'door'): min/max apply to int parameters only",
+    ),
+    (
+        library_text(with_(BUSY, params=[DOOR, param(MINUTES, human_operated=True)])),
+        "params[1] (name 'minutes'): human_operated applies to door parameters only",
+    ),
+    (
+        library_text(with_(BUSY, params=[param(DOOR, human_operated="yes"), MINUTES])),
+        "params[0] (name 'door'): human_operated: expected true or false",
+    ),
+    (
+        library_text(with_(BUSY, params=[param(DOOR, name="kind"), MINUTES])),
+        "params[0] (name 'kind'): name: 'kind' is reserved",
+    ),
+    (
+        library_text(with_(BUSY, params=[param(DOOR, name="t0"), MINUTES])),
+        "params[0] (name 't0'): name: 't0' is reserved for the window",
+    ),
+    (
+        library_text(with_(BUSY, params=[DOOR, DOOR, MINUTES])),
+        "params[1] (name 'door'): duplicate parameter name 'door'",
+    ),
     (library_text(with_(BUSY, params=[param(DOOR, label=None), MINUTES])), "params[0] (name 'door'): label: required"),
-    (library_text(with_(BUSY, params=[param(DOOR, colour=1), MINUTES])), "params[0] (name 'door'): unknown field(s) colour"),
+    (
+        library_text(with_(BUSY, params=[param(DOOR, colour=1), MINUTES])),
+        "params[0] (name 'door'): unknown field(s) colour",
+    ),
     (library_text(with_(BUSY, params=["door"])), "params[0]: expected a table, got str"),
     (library_text(with_(BUSY, window_minutes=5)), "entry[0] (id 'busy'): needs exactly one of window_param"),
     (library_text(with_(BUSY, window_param=None)), "entry[0] (id 'busy'): needs exactly one of window_param"),
-    (library_text(with_(BUSY, window_param="door")), "entry[0] (id 'busy'): window_param: 'door' is not an int parameter"),
-    (library_text(with_(BUSY, params=[DOOR, param(MINUTES, min=0)])), "window_param: minutes must range within [1, 10080] minutes"),
-    (library_text(with_(BUSY, window_param=None, window_minutes=0,
-                        asp=":- human_opens(${door}, T), T < ${t1}.", params=[DOOR])), "window_minutes: 0 is outside [1, 10080]"),
+    (
+        library_text(with_(BUSY, window_param="door")),
+        "entry[0] (id 'busy'): window_param: 'door' is not an int parameter",
+    ),
+    (
+        library_text(with_(BUSY, params=[DOOR, param(MINUTES, min=0)])),
+        "window_param: minutes must range within [1, 10080] minutes",
+    ),
+    (
+        library_text(
+            with_(
+                BUSY, window_param=None, window_minutes=0, asp=":- human_opens(${door}, T), T < ${t1}.", params=[DOOR]
+            )
+        ),
+        "window_minutes: 0 is outside [1, 10080]",
+    ),
     (library_text(with_(BUSY, asp=None)), "entry[0] (id 'busy'): asp: required"),
-    (library_text(with_(BUSY, asp=":- robot_in(R, ${room}, S, E).")), "asp: placeholder(s) room are neither parameters nor t0/t1"),
-    (library_text(with_(BUSY, asp=":- human_opens(${door}, T), T < $5.")), "asp: a '$' that is not a ${name} placeholder"),
-    (library_text(with_(BUSY, asp=":- human_opens(d, T), T < ${t1}.")), "asp: parameter(s) door are not used by the template"),
-    (library_text(with_(BUSY, asp="blocked(${door}, ${t0}, ${t1}).")), "asp: predicate(s) blocked/3 are not in the shared vocabulary"),
-    (library_text(with_(BUSY, asp="#include <incmode>.\n:- human_opens(${door}, ${t0}).")), "asp: directive #include is not allowed"),
-    (library_text(with_(BUSY, asp="#script (python)\n#end.\n:- human_opens(${door}, ${t0}).")), "asp: directive #script is not allowed"),
+    (
+        library_text(with_(BUSY, asp=":- robot_in(R, ${room}, S, E).")),
+        "asp: placeholder(s) room are neither parameters nor t0/t1",
+    ),
+    (
+        library_text(with_(BUSY, asp=":- human_opens(${door}, T), T < $5.")),
+        "asp: a '$' that is not a ${name} placeholder",
+    ),
+    (
+        library_text(with_(BUSY, asp=":- human_opens(d, T), T < ${t1}.")),
+        "asp: parameter(s) door are not used by the template",
+    ),
+    (
+        library_text(with_(BUSY, asp="blocked(${door}, ${t0}, ${t1}).")),
+        "asp: predicate(s) blocked/3 are not in the shared vocabulary",
+    ),
+    (
+        library_text(with_(BUSY, asp="#include <incmode>.\n:- human_opens(${door}, ${t0}).")),
+        "asp: directive #include is not allowed",
+    ),
+    (
+        library_text(with_(BUSY, asp="#script (python)\n#end.\n:- human_opens(${door}, ${t0}).")),
+        "asp: directive #script is not allowed",
+    ),
     (library_text(with_(BUSY, asp=":- human_opens(${door}, ${t0}). % why")), "asp: comments ('%') are not allowed"),
     (library_text(with_(BUSY, asp=":- human_opens(${door}, ${t0})")), "asp: not valid ASP"),
-    (library_text(with_(WITHDRAW, asp=":- human_opens(d, 1).")), "entry[0] (id 'withdraw'): asp: a cancel entry has no asp"),
-    (library_text(with_(WITHDRAW, params=[DOOR])), "entry[0] (id 'withdraw'): params: a cancel entry takes exactly one parameter, of type constraint"),
-    (library_text(with_(BUSY, params=[DOOR, MINUTES, {"name": "which", "type": "constraint", "label": "W"}])),
-     "entry[0] (id 'busy'): params: which is of type constraint, which only a cancel entry takes"),
-    (library_text(with_(BUSY, cancels=[{"kind": "nope", "same": ["door"]}])), "entry[0] (id 'busy'): cancels[0]: kind: 'nope' is not an entry"),
-    (library_text(with_(BUSY, cancels=[{"kind": "busy", "same": ["room"]}])), "cancels[0]: same: 'room' must be a parameter of both busy and busy"),
-    (library_text(with_(BUSY, cancels=[{"kind": "withdraw"}]), WITHDRAW), "cancels[0]: kind: 'withdraw' is a cancel entry"),
+    (
+        library_text(with_(WITHDRAW, asp=":- human_opens(d, 1).")),
+        "entry[0] (id 'withdraw'): asp: a cancel entry has no asp",
+    ),
+    (
+        library_text(with_(WITHDRAW, params=[DOOR])),
+        "entry[0] (id 'withdraw'): params: a cancel entry takes exactly one parameter, of type constraint",
+    ),
+    (
+        library_text(with_(BUSY, params=[DOOR, MINUTES, {"name": "which", "type": "constraint", "label": "W"}])),
+        "entry[0] (id 'busy'): params: which is of type constraint, which only a cancel entry takes",
+    ),
+    (
+        library_text(with_(BUSY, cancels=[{"kind": "nope", "same": ["door"]}])),
+        "entry[0] (id 'busy'): cancels[0]: kind: 'nope' is not an entry",
+    ),
+    (
+        library_text(with_(BUSY, cancels=[{"kind": "busy", "same": ["room"]}])),
+        "cancels[0]: same: 'room' must be a parameter of both busy and busy",
+    ),
+    (
+        library_text(with_(BUSY, cancels=[{"kind": "withdraw"}]), WITHDRAW),
+        "cancels[0]: kind: 'withdraw' is a cancel entry",
+    ),
     (library_text(with_(BUSY, cancels=[{"kind": "busy", "when": 1}])), "cancels[0]: unknown field(s) when"),
     (library_text(with_(BUSY, cancels="busy")), "cancels: expected a list of tables, got str"),
 ]
@@ -174,11 +269,24 @@ def test_library_for_site_resolves_the_sites_choices(lab_site, library) -> None:
     shown = {entry["id"]: entry for entry in library_for_site(lab_site, library)}
     json.dumps(shown)  # plain JSON data
     door, minutes = shown["door_unavailable"]["params"]
-    assert door == {"name": "door", "type": "door", "label": "Door", "help": door["help"], "choices": ["d_storage"], "source": "site"}
+    assert door == {
+        "name": "door",
+        "type": "door",
+        "label": "Door",
+        "help": door["help"],
+        "choices": ["d_storage"],
+        "source": "site",
+    }
     assert (minutes["type"], minutes["min"], minutes["max"]) == ("int", 1, 240)
     assert shown["forbid_room"]["params"][0]["choices"] == ["corridor", "lab", "room_a", "storage"]
-    assert shown["cancel"]["params"][0] == {"name": "constraint_id", "type": "constraint", "label": "Constraint",
-                                            "help": shown["cancel"]["params"][0]["help"], "choices": None, "source": "constraints"}
+    assert shown["cancel"]["params"][0] == {
+        "name": "constraint_id",
+        "type": "constraint",
+        "label": "Constraint",
+        "help": shown["cancel"]["params"][0]["help"],
+        "choices": None,
+        "source": "constraints",
+    }
     assert shown["door_unavailable"]["window"] == {"param": "minutes"}
     assert shown["door_available_now"]["window"] == {"minutes": 10}
     assert shown["cancel"]["window"] is None and shown["cancel"]["effect"] == "cancel"
@@ -194,19 +302,34 @@ def test_entries_without_choices_on_a_site_are_marked_unusable(library) -> None:
 
 
 def test_the_library_command_prints_the_same_json(lab_site, library) -> None:
-    out = subprocess.run(arroch("constraints", "library", "--site", str(LAB), "--json"), cwd=ROOT,
-                         capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        arroch("constraints", "library", "--site", str(LAB), "--json"),
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.returncode == 0, out.stderr
     assert json.loads(out.stdout) == library_for_site(lab_site, library)
-    text = subprocess.run(arroch("constraints", "library", "--site", str(LAB), "--library", str(HERE / "lab_library.toml")),
-                          cwd=ROOT, capture_output=True, text=True, timeout=60)
+    text = subprocess.run(
+        arroch("constraints", "library", "--site", str(LAB), "--library", str(HERE / "lab_library.toml")),
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert text.returncode == 0 and "avoid_opening" in text.stdout and "p_corridor_room_a" in text.stdout
 
 
 def test_the_library_command_reports_a_bad_library_and_exits_2(tmp_path) -> None:
     path = tmp_path / "bad.toml"
     path.write_text(library_text(with_(BUSY, effect="explode")))
-    out = subprocess.run(arroch("constraints", "library", "--site", str(LAB), "--library", str(path)), cwd=ROOT,
-                         capture_output=True, text=True, timeout=60)
+    out = subprocess.run(
+        arroch("constraints", "library", "--site", str(LAB), "--library", str(path)),
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert out.returncode == 2
     assert "bad.toml: entry[0] (id 'busy'): effect: 'explode'" in out.stderr

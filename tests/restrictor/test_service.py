@@ -26,8 +26,22 @@ def start_restrictor(spawn, router, namespace, tmp_path):
     """``start_restrictor(clock="wall", state_dir=None)`` runs ``arroch restrictor`` and waits until it is up."""
 
     def _start(*, clock: str = "wall", state_dir=None, name: str = "restrictor"):
-        proc = spawn(arroch("restrictor", "--site", str(LAB), "--namespace", namespace, "--connect", router,
-                            "--clock", clock, "--state-dir", str(state_dir or tmp_path / "state")), name=name)
+        proc = spawn(
+            arroch(
+                "restrictor",
+                "--site",
+                str(LAB),
+                "--namespace",
+                namespace,
+                "--connect",
+                router,
+                "--clock",
+                clock,
+                "--state-dir",
+                str(state_dir or tmp_path / "state"),
+            ),
+            name=name,
+        )
         proc.wait_for("up on namespace", timeout=30)
         return proc
 
@@ -64,10 +78,17 @@ def test_feedback_is_acknowledged_and_the_set_published_and_served(start_restric
     assert ack.accepted and (ack.to, ack.constraint_id, ack.constraints_version) == (client.src, "c1", 1)
     published = wait_for_message(sets, lambda s: s.version == 1)
     [c1] = published.constraints
-    assert (c1.id, c1.kind, c1.params, c1.origin) == ("c1", "door_unavailable", {"door": "d_storage", "minutes": 4}, client.src)
+    assert (c1.id, c1.kind, c1.params, c1.origin) == (
+        "c1",
+        "door_unavailable",
+        {"door": "d_storage", "minutes": 4},
+        client.src,
+    )
     assert c1.end - c1.start in (240.0, 241.0)  # four minutes, widened to whole seconds
-    assert published.asp == f"human_unavailable(d_storage, {c1.start:.0f}, {c1.end:.0f}).\n" \
-                            f":- human_opens(d_storage, T), T >= {c1.start:.0f}, T < {c1.end:.0f}.\n"
+    assert (
+        published.asp == f"human_unavailable(d_storage, {c1.start:.0f}, {c1.end:.0f}).\n"
+        f":- human_opens(d_storage, T), T >= {c1.start:.0f}, T < {c1.end:.0f}.\n"
+    )
 
     # 2. feedback as a query: the reply is the ack (published on the ack key as well)
     ack2 = ask(client, "forbid_room", room="lab", minutes=2)
@@ -83,7 +104,7 @@ def test_feedback_is_acknowledged_and_the_set_published_and_served(start_restric
     # 4. refusals carry the reason and change nothing; injected text never reaches the set
     for kind, params, reason in [
         ("door_unavailable", {"door": "d_lab", "minutes": 4}, "door d_lab is not human-operated"),
-        ("forbid_room", {"room": "lab).\n#include \"/etc/passwd\".\n:- x(", "minutes": 4}, "site lab has no room"),
+        ("forbid_room", {"room": 'lab).\n#include "/etc/passwd".\n:- x(', "minutes": 4}, "site lab has no room"),
         ("forbid_room", {"room": "lab", "minutes": True}, "minutes must be an integer, got a boolean"),
         ("#script (python)", {}, "unknown constraint kind"),
         ("cancel", {"constraint_id": "c9"}, "no active constraint c9"),
@@ -99,17 +120,27 @@ def test_feedback_is_acknowledged_and_the_set_published_and_served(start_restric
     dup_seq = decode(payload, Feedback).seq
     first = wait_for_message(acks, lambda a: a.feedback_seq == dup_seq)
     second = wait_for_message(acks, lambda a: a.feedback_seq == dup_seq)
-    replies = [decode(r.ok.payload.to_bytes(), FeedbackAck) for r in client.session.get(client.keys.feedback(), payload=payload, timeout=3.0)]
+    replies = [
+        decode(r.ok.payload.to_bytes(), FeedbackAck)
+        for r in client.session.get(client.keys.feedback(), payload=payload, timeout=3.0)
+    ]
     assert first.accepted and first.constraint_id == "c3"
     for again in (second, *replies):
-        assert (again.accepted, again.reason, again.constraint_id, again.constraints_version) == \
-               (first.accepted, first.reason, first.constraint_id, first.constraints_version)
+        assert (again.accepted, again.reason, again.constraint_id, again.constraints_version) == (
+            first.accepted,
+            first.reason,
+            first.constraint_id,
+            first.constraints_version,
+        )
     assert query_set(client).version == 3
 
     # 6. garbage: the service keeps running, counts it, and a querier is told what is wrong
     client.session.put(client.keys.feedback(), b"\xc1 not msgpack")
     client.session.put(client.keys.feedback(), encode(ConstraintSet(version=99)))  # the wrong message type
-    [bad] = [decode(r.ok.payload.to_bytes(), FeedbackAck) for r in client.session.get(client.keys.feedback(), payload=b"\x93\x01", timeout=3.0)]
+    [bad] = [
+        decode(r.ok.payload.to_bytes(), FeedbackAck)
+        for r in client.session.get(client.keys.feedback(), payload=b"\x93\x01", timeout=3.0)
+    ]
     assert not bad.accepted and bad.reason.startswith("not a valid Feedback")
     counters = stats(client)
     assert counters["bad_messages"] >= 3 and counters["feedback_accepted"] == 3
@@ -122,7 +153,9 @@ def test_feedback_is_acknowledged_and_the_set_published_and_served(start_restric
     assert "restrictor" in proc.wait_for("stopped", timeout=1)
 
 
-def test_send_feedback_counts_forged_acks_and_keeps_waiting_for_the_real_one(start_restrictor, client, router, namespace) -> None:
+def test_send_feedback_counts_forged_acks_and_keeps_waiting_for_the_real_one(
+    start_restrictor, client, router, namespace
+) -> None:
     """A bad payload on the sender's ack key is counted as a bad message (not silently skipped),
     and the sender still gets the restrictor's real ack once one is up."""
     from concurrent.futures import ThreadPoolExecutor
@@ -132,8 +165,9 @@ def test_send_feedback_counts_forged_acks_and_keeps_waiting_for_the_real_one(sta
     forger = TestClient(namespace, router).open()
     try:
         with ThreadPoolExecutor(1) as pool:
-            pending = pool.submit(send_feedback, client, "door_unavailable", {"door": "d_storage", "minutes": 2},
-                                  timeout=30.0, retry=0.5)
+            pending = pool.submit(
+                send_feedback, client, "door_unavailable", {"door": "d_storage", "minutes": 2}, timeout=30.0, retry=0.5
+            )
             time.sleep(1.0)  # its ack subscription is declared and has reached the router
             for payload in (b"\xc1 not msgpack", encode(ConstraintSet(version=3)), b"\x93\x01"):
                 forger.session.put(forger.keys.feedback_ack(client.src), payload)
@@ -146,17 +180,24 @@ def test_send_feedback_counts_forged_acks_and_keeps_waiting_for_the_real_one(sta
     finally:
         forger.close()
     assert ack is not None and ack.accepted and ack.constraint_id == "c1" and ack.to == client.src
-    assert any(key.startswith("bad_messages:") and key.endswith(client.keys.feedback_ack(client.src))
-               for key in client.counters)
+    assert any(
+        key.startswith("bad_messages:") and key.endswith(client.keys.feedback_ack(client.src))
+        for key in client.counters
+    )
 
 
-def test_a_restart_restores_exactly_the_active_set(start_restrictor, spawn, router, namespace, client, tmp_path) -> None:
+def test_a_restart_restores_exactly_the_active_set(
+    start_restrictor, spawn, router, namespace, client, tmp_path
+) -> None:
     first = start_restrictor()
     assert ask(client, "door_unavailable", door="d_storage", minutes=30).accepted
     assert ask(client, "forbid_room", room="lab", minutes=30).accepted
     assert ask(client, "cancel", constraint_id="c1").accepted
     payload = encode(client.stamp(Feedback(kind="forbid_room", params={"room": "room_a", "minutes": 30})))
-    [before_ack] = [decode(r.ok.payload.to_bytes(), FeedbackAck) for r in client.session.get(client.keys.feedback(), payload=payload, timeout=3.0)]
+    [before_ack] = [
+        decode(r.ok.payload.to_bytes(), FeedbackAck)
+        for r in client.session.get(client.keys.feedback(), payload=payload, timeout=3.0)
+    ]
     before = query_set(client)
     assert before.version == 4 and [c.id for c in before.constraints] == ["c2", "c3"]
 
@@ -168,9 +209,16 @@ def test_a_restart_restores_exactly_the_active_set(start_restrictor, spawn, rout
     after = query_set(client)
     assert (after.version, after.constraints, after.asp) == (before.version, before.constraints, before.asp)
     # the retry of feedback answered before the crash is recognised, and gets the same answer
-    [again] = [decode(r.ok.payload.to_bytes(), FeedbackAck) for r in client.session.get(client.keys.feedback(), payload=payload, timeout=3.0)]
-    assert (again.accepted, again.constraint_id, again.constraints_version, again.reason) == \
-           (before_ack.accepted, before_ack.constraint_id, before_ack.constraints_version, before_ack.reason)
+    [again] = [
+        decode(r.ok.payload.to_bytes(), FeedbackAck)
+        for r in client.session.get(client.keys.feedback(), payload=payload, timeout=3.0)
+    ]
+    assert (again.accepted, again.constraint_id, again.constraints_version, again.reason) == (
+        before_ack.accepted,
+        before_ack.constraint_id,
+        before_ack.constraints_version,
+        before_ack.reason,
+    )
     # and the next change continues the versions and ids
     ack = ask(client, "door_available_now", door="d_storage")
     assert (ack.constraint_id, ack.constraints_version) == ("c4", 5)
@@ -180,8 +228,23 @@ def test_a_restart_restores_exactly_the_active_set(start_restrictor, spawn, rout
     assert second.popen.wait(10) == 0
 
     # --fresh (a new mission): the same directory, an empty set, the version goes on
-    third = spawn(arroch("restrictor", "--site", str(LAB), "--namespace", namespace, "--connect", router, "--clock", "wall",
-                         "--state-dir", str(tmp_path / "state"), "--fresh"), name="restrictor-3")
+    third = spawn(
+        arroch(
+            "restrictor",
+            "--site",
+            str(LAB),
+            "--namespace",
+            namespace,
+            "--connect",
+            router,
+            "--clock",
+            "wall",
+            "--state-dir",
+            str(tmp_path / "state"),
+            "--fresh",
+        ),
+        name="restrictor-3",
+    )
     third.wait_for("up on namespace", timeout=30)
     emptied = query_set(client)
     assert emptied.constraints == [] and emptied.version == 6
@@ -212,7 +275,9 @@ def test_constraints_expire_on_the_sim_clock(start_restrictor, client) -> None:
     assert wait_for_message(sets, lambda s: s.version == 4, timeout=5).constraints == []
 
 
-def test_in_lockstep_windows_start_at_the_feedbacks_stamp_and_expire_only_with_feedback(start_restrictor, client) -> None:
+def test_in_lockstep_windows_start_at_the_feedbacks_stamp_and_expire_only_with_feedback(
+    start_restrictor, client
+) -> None:
     """The clock heard here lags the simulator's by what is still on the way: a lockstep feedback's
     window starts at its own stamp, and nothing expires on a timer (a set published between two world
     versions would reach the planner at a moment of the machine's choosing)."""
@@ -249,8 +314,24 @@ def run_cli(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
 def test_the_command_line_sends_feedback_and_shows_the_set(start_restrictor, spawn, router, namespace) -> None:
     common = ["--site", str(LAB), "--namespace", namespace, "--connect", router]
     # sent before any restrictor is up: the sender retries until one answers
-    early = spawn(arroch("feedback", "send", *common, "--timeout", "40", "--retry", "0.5",
-                         "--kind", "door_unavailable", "--door", "d_storage", "--minutes", "4"), name="feedback-send")
+    early = spawn(
+        arroch(
+            "feedback",
+            "send",
+            *common,
+            "--timeout",
+            "40",
+            "--retry",
+            "0.5",
+            "--kind",
+            "door_unavailable",
+            "--door",
+            "d_storage",
+            "--minutes",
+            "4",
+        ),
+        name="feedback-send",
+    )
     time.sleep(1.5)
     start_restrictor()
     assert early.popen.wait(40) == 0, early.output
@@ -259,12 +340,29 @@ def test_the_command_line_sends_feedback_and_shows_the_set(start_restrictor, spa
 
     refused = run_cli("feedback", "send", *common, "--kind", "door_unavailable", "--door", "d_lab", "--minutes", "4")
     assert refused.returncode == 1
-    assert refused.stdout.strip() == "refused: door_unavailable: door d_lab is not human-operated (robots open it themselves); choices: d_storage"
+    assert (
+        refused.stdout.strip()
+        == "refused: door_unavailable: door d_lab is not human-operated (robots open it themselves); choices: d_storage"
+    )
     typed = run_cli("feedback", "send", *common, "--kind", "forbid_room", "--room", "lab", "--minutes", "four")
     assert typed.returncode == 1 and "minutes must be an integer, got the text 'four'" in typed.stdout
     # the command's own options are understood after --kind too
-    late_option = run_cli("feedback", "send", "--kind", "forbid_room", "--room", "room_a", "--namespace", namespace,
-                          "--minutes=2", "--connect", router, "--json", "--site", str(LAB))
+    late_option = run_cli(
+        "feedback",
+        "send",
+        "--kind",
+        "forbid_room",
+        "--room",
+        "room_a",
+        "--namespace",
+        namespace,
+        "--minutes=2",
+        "--connect",
+        router,
+        "--json",
+        "--site",
+        str(LAB),
+    )
     assert late_option.returncode == 0, late_option.stderr
     assert '"constraint_id": "c2"' in late_option.stdout
 
@@ -277,14 +375,21 @@ def test_the_command_line_sends_feedback_and_shows_the_set(start_restrictor, spa
     assert "human_unavailable(d_storage, " in show.stdout
 
     nobody = ["--site", str(LAB), "--namespace", namespace + "x", "--connect", router]
-    silent = run_cli("feedback", "send", *nobody, "--timeout", "1", "--kind", "forbid_room", "--room", "lab", "--minutes", "1")
+    silent = run_cli(
+        "feedback", "send", *nobody, "--timeout", "1", "--kind", "forbid_room", "--room", "lab", "--minutes", "1"
+    )
     assert silent.returncode == 3 and "no answer from a restrictor" in silent.stderr
     assert run_cli("constraints", "show", *nobody, "--timeout", "1").returncode == 3
     unknown = run_cli("feedback", "send", *common, "--kind", "paint_walls", "--colour", "red")
     assert unknown.returncode == 2 and "unknown constraint kind 'paint_walls'" in unknown.stderr
-    stray = run_cli("feedback", "send", *common, "--kind", "forbid_room", "--room", "lab", "--minutes", "1", "--time", "3")
+    stray = run_cli(
+        "feedback", "send", *common, "--kind", "forbid_room", "--room", "lab", "--minutes", "1", "--time", "3"
+    )
     assert stray.returncode == 2
-    assert "--time is neither an option of this command nor a parameter of forbid_room (it takes: --room, --minutes)" in stray.stderr
+    assert (
+        "--time is neither an option of this command nor a parameter of forbid_room (it takes: --room, --minutes)"
+        in stray.stderr
+    )
 
 
 def test_bad_configuration_is_reported_before_starting(tmp_path) -> None:
@@ -296,5 +401,7 @@ def test_bad_configuration_is_reported_before_starting(tmp_path) -> None:
     assert out.returncode == 2 and "missing.toml" in out.stderr
     help_text = run_cli("restrictor", "--help")
     assert help_text.returncode == 0 and "--state-dir" in help_text.stdout and "--library" in help_text.stdout
-    as_module = subprocess.run([sys.executable, "-m", "services.restrictor", "--help"], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    as_module = subprocess.run(
+        [sys.executable, "-m", "services.restrictor", "--help"], cwd=ROOT, capture_output=True, text=True, timeout=60
+    )
     assert as_module.returncode == 0 and as_module.stdout == help_text.stdout

@@ -44,31 +44,87 @@ def test_a_passage_may_be_named_either_way_round(lab_site) -> None:
 
 REASONS = [
     # (kind, params, expected reason)
-    ("door_closed", {"door": "d_storage"}, "unknown constraint kind 'door_closed'; the library has: door_unavailable, forbid_room, door_available_now, cancel"),
+    (
+        "door_closed",
+        {"door": "d_storage"},
+        "unknown constraint kind 'door_closed'; the library has: door_unavailable, forbid_room, door_available_now, cancel",
+    ),
     (7, {}, "kind must name a library entry, got int"),
     (None, {}, "kind must name a library entry, got NoneType"),
     ("door_unavailable", ["d_storage", 4], "door_unavailable: parameters must be a map, got list"),
     ("door_unavailable", {"door": "d_storage"}, "door_unavailable: missing parameter minutes (Minutes)"),
     ("door_unavailable", {"minutes": 4}, "door_unavailable: missing parameter door (Door)"),
-    ("door_unavailable", {"door": "d_storage", "minutes": 4, "robot": "r0"}, "door_unavailable: unknown parameter(s) 'robot'; it takes: door, minutes"),
-    ("door_available_now", {"door": "d_storage", "minutes": 4}, "door_available_now: unknown parameter(s) 'minutes'; it takes: door"),
-    ("door_unavailable", {"door": "d_storage", "minutes": True}, "door_unavailable: minutes must be an integer, got a boolean"),
-    ("door_unavailable", {"door": "d_storage", "minutes": 4.0}, "door_unavailable: minutes must be an integer, got the number 4.0"),
-    ("door_unavailable", {"door": "d_storage", "minutes": 4.5}, "door_unavailable: minutes must be an integer, got the number 4.5"),
-    ("door_unavailable", {"door": "d_storage", "minutes": "4"}, "door_unavailable: minutes must be an integer, got the text '4'"),
+    (
+        "door_unavailable",
+        {"door": "d_storage", "minutes": 4, "robot": "r0"},
+        "door_unavailable: unknown parameter(s) 'robot'; it takes: door, minutes",
+    ),
+    (
+        "door_available_now",
+        {"door": "d_storage", "minutes": 4},
+        "door_available_now: unknown parameter(s) 'minutes'; it takes: door",
+    ),
+    (
+        "door_unavailable",
+        {"door": "d_storage", "minutes": True},
+        "door_unavailable: minutes must be an integer, got a boolean",
+    ),
+    (
+        "door_unavailable",
+        {"door": "d_storage", "minutes": 4.0},
+        "door_unavailable: minutes must be an integer, got the number 4.0",
+    ),
+    (
+        "door_unavailable",
+        {"door": "d_storage", "minutes": 4.5},
+        "door_unavailable: minutes must be an integer, got the number 4.5",
+    ),
+    (
+        "door_unavailable",
+        {"door": "d_storage", "minutes": "4"},
+        "door_unavailable: minutes must be an integer, got the text '4'",
+    ),
     ("door_unavailable", {"door": "d_storage", "minutes": 0}, "door_unavailable: minutes 0 is below the minimum 1"),
     ("door_unavailable", {"door": "d_storage", "minutes": -3}, "door_unavailable: minutes -3 is below the minimum 1"),
-    ("door_unavailable", {"door": "d_storage", "minutes": 241}, "door_unavailable: minutes 241 is above the maximum 240"),
-    ("door_unavailable", {"door": "d_storage", "minutes": 2**70}, "door_unavailable: minutes 1180591620717411303424 is above the maximum 240"),
+    (
+        "door_unavailable",
+        {"door": "d_storage", "minutes": 241},
+        "door_unavailable: minutes 241 is above the maximum 240",
+    ),
+    (
+        "door_unavailable",
+        {"door": "d_storage", "minutes": 2**70},
+        "door_unavailable: minutes 1180591620717411303424 is above the maximum 240",
+    ),
     ("door_unavailable", {"door": 3, "minutes": 4}, "door_unavailable: door must be a door id, got the number 3"),
     ("door_unavailable", {"door": True, "minutes": 4}, "door_unavailable: door must be a door id, got a boolean"),
-    ("door_unavailable", {"door": "d_kitchen", "minutes": 4}, "door_unavailable: site lab has no door 'd_kitchen'; choices: d_storage"),
-    ("door_unavailable", {"door": "storage", "minutes": 4}, "door_unavailable: site lab has no door 'storage'; choices: d_storage"),
-    ("door_unavailable", {"door": "d_lab", "minutes": 4}, "door_unavailable: door d_lab is not human-operated (robots open it themselves); choices: d_storage"),
-    ("forbid_room", {"room": "kitchen", "minutes": 4}, "forbid_room: site lab has no room 'kitchen'; choices: corridor, lab, room_a, storage"),
+    (
+        "door_unavailable",
+        {"door": "d_kitchen", "minutes": 4},
+        "door_unavailable: site lab has no door 'd_kitchen'; choices: d_storage",
+    ),
+    (
+        "door_unavailable",
+        {"door": "storage", "minutes": 4},
+        "door_unavailable: site lab has no door 'storage'; choices: d_storage",
+    ),
+    (
+        "door_unavailable",
+        {"door": "d_lab", "minutes": 4},
+        "door_unavailable: door d_lab is not human-operated (robots open it themselves); choices: d_storage",
+    ),
+    (
+        "forbid_room",
+        {"room": "kitchen", "minutes": 4},
+        "forbid_room: site lab has no room 'kitchen'; choices: corridor, lab, room_a, storage",
+    ),
     ("forbid_room", {"room": "d_storage", "minutes": 4}, "forbid_room: site lab has no room 'd_storage'"),
     ("cancel", {"constraint_id": "c3"}, "cancel: no active constraint c3 (it may have expired or been withdrawn)"),
-    ("cancel", {"constraint_id": "c1; human_opens(d,1)."}, "cancel: constraint_id 'c1; human_opens(d,1).' is not a constraint id (like c12)"),
+    (
+        "cancel",
+        {"constraint_id": "c1; human_opens(d,1)."},
+        "cancel: constraint_id 'c1; human_opens(d,1).' is not a constraint id (like c12)",
+    ),
     ("cancel", {"constraint_id": 1}, "cancel: constraint_id must be a constraint id, got the number 1"),
 ]
 
@@ -85,8 +141,10 @@ def test_a_site_id_that_is_not_an_asp_constant_is_refused_not_written(library, l
     # generator) is checked again here, so a bad id can never be written into a constraint.
     site = dataclasses.replace(lab_site, rooms={**lab_site.rooms, "Room_A": lab_site.rooms["room_a"]})
     assert "Room_A" not in site_choices(library.get("forbid_room").params[0], site)
-    assert refusal(library, site, "forbid_room", {"room": "Room_A", "minutes": 4}) == \
-        "forbid_room: room 'Room_A' is not an ASP constant, so it cannot be used in a constraint"
+    assert (
+        refusal(library, site, "forbid_room", {"room": "Room_A", "minutes": 4})
+        == "forbid_room: room 'Room_A' is not an ASP constant, so it cannot be used in a constraint"
+    )
 
 
 def test_offline_a_cancel_is_only_checked_for_shape(library, lab_site) -> None:
@@ -96,8 +154,10 @@ def test_offline_a_cancel_is_only_checked_for_shape(library, lab_site) -> None:
 
 
 def test_the_tablet_json_form(library) -> None:
-    assert split_tablet_feedback({"kind": "door_unavailable", "door": "d_storage", "minutes": 4}) == \
-        ("door_unavailable", {"door": "d_storage", "minutes": 4})
+    assert split_tablet_feedback({"kind": "door_unavailable", "door": "d_storage", "minutes": 4}) == (
+        "door_unavailable",
+        {"door": "d_storage", "minutes": 4},
+    )
     for data, reason in [
         ([1, 2], "feedback must be a JSON object, got list"),
         ({"door": "d_storage"}, 'feedback needs a "kind"'),
@@ -153,7 +213,21 @@ INJECTIONS = [
     "",
     "a" * 10_000,
 ]
-NUMERIC_INJECTIONS = [True, False, 4.0, 1e308, -0.0, "4", "4).", "4. human_opens(d_storage, 1)", "0x10", "1e3", 2**31, -(2**31), 2**64]
+NUMERIC_INJECTIONS = [
+    True,
+    False,
+    4.0,
+    1e308,
+    -0.0,
+    "4",
+    "4).",
+    "4. human_opens(d_storage, 1)",
+    "0x10",
+    "1e3",
+    2**31,
+    -(2**31),
+    2**64,
+]
 
 
 def _all_slots(library, site):
@@ -183,7 +257,9 @@ def test_non_integers_and_huge_numbers_through_int_parameters_are_refused(librar
             compile_feedback(entry.id, params, library, lab_site, 100.0, ACTIVE)
 
 
-@pytest.mark.parametrize("bad", INJECTIONS + ["door_unavailable ", "Door_unavailable", "door_unavailable."], ids=range(len(INJECTIONS) + 3))
+@pytest.mark.parametrize(
+    "bad", INJECTIONS + ["door_unavailable ", "Door_unavailable", "door_unavailable."], ids=range(len(INJECTIONS) + 3)
+)
 def test_injected_text_through_the_kind_is_refused(library, lab_site, bad: str) -> None:
     params = valid_params(library.get("door_unavailable"), lab_site)
     with pytest.raises(Refusal) as info:
@@ -201,13 +277,19 @@ def test_injected_parameter_names_are_refused(library, lab_site) -> None:
 
 
 def test_reasons_quote_client_text_safely(library, lab_site) -> None:
-    reason = refusal(library, lab_site, "forbid_room", {"room": "x\n:- human_opens(D,T).\u202e" + "y" * 500, "minutes": 4})
+    reason = refusal(
+        library, lab_site, "forbid_room", {"room": "x\n:- human_opens(D,T).\u202e" + "y" * 500, "minutes": 4}
+    )
     assert reason.isascii() and "\n" not in reason and len(reason) < 300
 
 
 @settings(max_examples=300, deadline=None)
-@given(value=st.one_of(st.text(max_size=40), st.sampled_from(["d_storage", "d_lab", "room_a", "storage", "lab", "corridor"])),
-       slot=st.integers(min_value=0, max_value=100))
+@given(
+    value=st.one_of(
+        st.text(max_size=40), st.sampled_from(["d_storage", "d_lab", "room_a", "storage", "lab", "corridor"])
+    ),
+    slot=st.integers(min_value=0, max_value=100),
+)
 def test_any_text_is_accepted_exactly_when_it_is_a_site_choice(library, lab_site, value: str, slot: int) -> None:
     symbol_slots = [(e, p) for e, p in _all_slots(library, lab_site) if p.type not in (INT, CONSTRAINT)]
     entry, param = symbol_slots[slot % len(symbol_slots)]

@@ -7,7 +7,10 @@ import pytest
 from services.restrictor.vocabulary import VOCABULARY, UnsafeProgram, check_program, is_asp_constant
 
 ACCEPTED = [
-    ("human_unavailable(d, 0, 60).\n:- human_opens(d, T), T >= 0, T < 60.", {("human_unavailable", 3), ("human_opens", 2)}),
+    (
+        "human_unavailable(d, 0, 60).\n:- human_opens(d, T), T >= 0, T < 60.",
+        {("human_unavailable", 3), ("human_opens", 2)},
+    ),
     ("room_forbidden(r, 0, 60).\n:- robot_in(R, r, S, E), S < 60, E > 0.", {("room_forbidden", 3), ("robot_in", 4)}),
     (":- goes_through(R, p, T), T < 10.", {("goes_through", 3)}),
     (":- #count { R : robot_in(R, r, S, E) } > 1.", {("robot_in", 4)}),
@@ -55,15 +58,34 @@ def test_anything_else_is_refused_with_the_reason(text: str, problem: str) -> No
 def test_the_vocabulary_is_the_documented_one() -> None:
     # docs/architecture.md, "ASP vocabulary shared by restrictor and planner"
     assert set(VOCABULARY) == {
-        ("human_opens", 2), ("robot_in", 4), ("goes_through", 3),
-        ("human_unavailable", 3), ("room_forbidden", 3), ("human_available", 3),
+        ("human_opens", 2),
+        ("robot_in", 4),
+        ("goes_through", 3),
+        ("human_unavailable", 3),
+        ("room_forbidden", 3),
+        ("human_available", 3),
     }
 
 
-@pytest.mark.parametrize("value,ok", [
-    ("d_storage", True), ("room_a", True), ("x", True), ("dA1", True),
-    ("D_storage", False), ("_x", False), ("not", False), ("d-storage", False), ("1d", False),
-    ("", False), ("d storage", False), ("d.x", False), (3, False), (None, False), ("a" * 65, False),
-])
+@pytest.mark.parametrize(
+    "value,ok",
+    [
+        ("d_storage", True),
+        ("room_a", True),
+        ("x", True),
+        ("dA1", True),
+        ("D_storage", False),
+        ("_x", False),
+        ("not", False),
+        ("d-storage", False),
+        ("1d", False),
+        ("", False),
+        ("d storage", False),
+        ("d.x", False),
+        (3, False),
+        (None, False),
+        ("a" * 65, False),
+    ],
+)
 def test_asp_constants(value, ok: bool) -> None:
     assert is_asp_constant(value) is ok

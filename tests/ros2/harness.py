@@ -35,8 +35,15 @@ class TwistSeen:
 
 
 class FakeBase:
-    def __init__(self, client: TestClient, robot: str, start: tuple[float, float, float], config: Ros2Config, *,
-                 publish_clock: bool = True) -> None:
+    def __init__(
+        self,
+        client: TestClient,
+        robot: str,
+        start: tuple[float, float, float],
+        config: Ros2Config,
+        *,
+        publish_clock: bool = True,
+    ) -> None:
         self.client = client
         self.robot = robot
         self.start = start
@@ -73,7 +80,9 @@ class FakeBase:
             now = self.now()
             seq += 1
             if self.publish_clock:
-                self.client.publish(self.client.keys.clock(), Clock(time=now, mode="realtime", rate=1.0, world_version=1))
+                self.client.publish(
+                    self.client.keys.clock(), Clock(time=now, mode="realtime", rate=1.0, world_version=1)
+                )
             with self._lock:
                 self.x, self.y, self.theta = integrate(self.x, self.y, self.theta, self.v, self.omega, PERIOD)
                 x, y, theta, v, omega = self.x, self.y, self.theta, self.v, self.omega
@@ -108,11 +117,20 @@ class FakeBase:
             if found:
                 return found[0]
             time.sleep(0.01)
-        raise AssertionError(f"no {what} after site time {after:.2f} within {timeout} s; last twists {self.twists[-5:]}")
+        raise AssertionError(
+            f"no {what} after site time {after:.2f} within {timeout} s; last twists {self.twists[-5:]}"
+        )
 
 
-def straight_command(robot: str, start: tuple[float, float, float], length: float, *, action_id: int = 1, opening: str = "d_lab",
-                     offset: float = 0.0) -> RobotCommand:
+def straight_command(
+    robot: str,
+    start: tuple[float, float, float],
+    length: float,
+    *,
+    action_id: int = 1,
+    opening: str = "d_lab",
+    offset: float = 0.0,
+) -> RobotCommand:
     """An ``approach`` whose trajectory runs ``length`` m straight ahead of ``start`` (shifted ``offset`` m
     back along the heading: a trajectory that starts that far from the robot)."""
     x, y, th = start

@@ -48,7 +48,12 @@ class Tap:
 
         def on_sample(sample) -> None:  # noqa: ANN001
             att = sample.attachment
-            self.q.put((ros.deserialize(sample.payload.to_bytes(), typename), Attachment.decode(att.to_bytes()) if att is not None else None))
+            self.q.put(
+                (
+                    ros.deserialize(sample.payload.to_bytes(), typename),
+                    Attachment.decode(att.to_bytes()) if att is not None else None,
+                )
+            )
 
         client.hold(client.session.declare_subscriber(key, on_sample))
 
@@ -65,9 +70,24 @@ class Tap:
 
 
 def test_bridge_messages_decode_to_the_poses_they_came_from(spawn, router, namespace, client, tmp_path):
-    restrictor = spawn(arroch("restrictor", "--connect", router, "--namespace", namespace, "--fresh", "--clock", "wall",
-                              "--state-dir", str(tmp_path)), name="restrictor")
-    bridge = spawn(arroch("ros2", "bridge", "--connect", router, "--namespace", namespace, "--clock", "wall"), name="bridge")
+    restrictor = spawn(
+        arroch(
+            "restrictor",
+            "--connect",
+            router,
+            "--namespace",
+            namespace,
+            "--fresh",
+            "--clock",
+            "wall",
+            "--state-dir",
+            str(tmp_path),
+        ),
+        name="restrictor",
+    )
+    bridge = spawn(
+        arroch("ros2", "bridge", "--connect", router, "--namespace", namespace, "--clock", "wall"), name="bridge"
+    )
     bridge.wait_for("ros2bridge-", timeout=20)
     restrictor.wait_for("restrictor-", timeout=20)
     tf = Tap(client, "/tf", ros.TF_MESSAGE)
@@ -88,7 +108,10 @@ def test_bridge_messages_decode_to_the_poses_they_came_from(spawn, router, names
 
     # Intent -> Path
     rows = [[10.0 + i, 12.5 + 0.1 * i, 8.0 - 0.2 * i, -1.5707963 + 0.05 * i] for i in range(12)]
-    client.publish(client.keys.intent("r1"), Intent(robot="r1", plan_id=7, action_id=3, action="approach", args=["d_lab"], trajectory=rows))
+    client.publish(
+        client.keys.intent("r1"),
+        Intent(robot="r1", plan_id=7, action_id=3, action="approach", args=["d_lab"], trajectory=rows),
+    )
     msg, _ = path.next()
     assert len(msg.poses) == len(rows)
     for row, ps in zip(rows, msg.poses):
@@ -115,7 +138,10 @@ def test_bridge_messages_decode_to_the_poses_they_came_from(spawn, router, names
     assert len(walls) == len(SITE.walls)
     tags = {k.id: k for k in msg.markers if k.ns == "tags"}
     for lm in SITE.landmarks:
-        assert abs(tags[lm.tag].pose.position.x - lm.position[0]) <= MM and abs(tags[lm.tag].pose.position.y - lm.position[1]) <= MM
+        assert (
+            abs(tags[lm.tag].pose.position.x - lm.position[0]) <= MM
+            and abs(tags[lm.tag].pose.position.y - lm.position[1]) <= MM
+        )
 
     # Feedback in (std_msgs/String JSON) -> the restrictor -> ack out
     from protocol.ros2.node import RosNode
@@ -126,16 +152,24 @@ def test_bridge_messages_decode_to_the_poses_they_came_from(spawn, router, names
     feedback.publish(ros.string("not json"))
     msg, _ = acks.next()
     assert json.loads(msg.data)["accepted"] is False
-    feedback.publish(ros.string(json.dumps({"kind": "door_unavailable", "params": {"door": "d_storage", "minutes": 4}})))
+    feedback.publish(
+        ros.string(json.dumps({"kind": "door_unavailable", "params": {"door": "d_storage", "minutes": 4}}))
+    )
     msg, _ = acks.next(timeout=15)
     assert json.loads(msg.data).get("accepted") is True, msg.data
     assert json.loads(msg.data)["constraint_id"]
 
     # The topics are announced as rmw_zenoh does (what `ros2 topic list` reads).
-    tokens = [str(r.ok.key_expr) for r in client.session.liveliness().get("@ros2_lv/0/**", timeout=3) if r.ok is not None]
+    tokens = [
+        str(r.ok.key_expr) for r in client.session.liveliness().get("@ros2_lv/0/**", timeout=3) if r.ok is not None
+    ]
     assert any("/NN/%/%arroch/arroch_bridge" in t for t in tokens), tokens
-    assert any(t.endswith(f"/MP/%/%arroch/arroch_bridge/%tf/tf2_msgs::msg::dds_::TFMessage_/{ros.PUBLISHED_HASHES[ros.TF_MESSAGE]}/1:2:1,10:,:,:,,")
-               for t in tokens), tokens
+    assert any(
+        t.endswith(
+            f"/MP/%/%arroch/arroch_bridge/%tf/tf2_msgs::msg::dds_::TFMessage_/{ros.PUBLISHED_HASHES[ros.TF_MESSAGE]}/1:2:1,10:,:,:,,"
+        )
+        for t in tokens
+    ), tokens
 
 
 def test_driver_pose_matches_the_odometry_it_came_from(spawn, router, namespace, client):
@@ -146,7 +180,9 @@ def test_driver_pose_matches_the_odometry_it_came_from(spawn, router, namespace,
         odom = Tap(client, "/r1/odom", ros.ODOMETRY)
         twist = Tap(client, "/r1/cmd_vel", ros.TWIST)
         poses = client.collect(client.keys.robot_pose(robot), RobotPose)
-        spawn(arroch("robot", "--ros2", "--robot", robot, "--connect", router, "--namespace", namespace), name="robot").wait_for("robot robot-r1-", timeout=20)
+        spawn(
+            arroch("robot", "--ros2", "--robot", robot, "--connect", router, "--namespace", namespace), name="robot"
+        ).wait_for("robot robot-r1-", timeout=20)
         base.first_zero_after(0.0, timeout=10)
         client.publish(client.keys.robot_command(robot), straight_command(robot, start, 1.2, opening="d_lab"))
         base.wait_moving()
@@ -187,8 +223,21 @@ def test_driver_takes_map_to_odom_from_tf(spawn, router, namespace, client, tmp_
         tf = RosNode(client, NAMING, "test_localiser", "/").publisher("/tf", ros.TF_MESSAGE)
         map_to_odom = (12.0, 8.2, -1.4)  # not the start pose: the pose must come from tf
         poses = client.collect(client.keys.robot_pose(robot), RobotPose)
-        spawn(arroch("robot", "--ros2", "--robot", robot, "--connect", router, "--namespace", namespace,
-                     "--ros2-config", str(config_file)), name="robot").wait_for("robot robot-r1-", timeout=20)
+        spawn(
+            arroch(
+                "robot",
+                "--ros2",
+                "--robot",
+                robot,
+                "--connect",
+                router,
+                "--namespace",
+                namespace,
+                "--ros2-config",
+                str(config_file),
+            ),
+            name="robot",
+        ).wait_for("robot robot-r1-", timeout=20)
         deadline = time.monotonic() + 10
         while not poses.qsize() and time.monotonic() < deadline:
             tf.publish(ros.t(ros.TF_MESSAGE)(transforms=[ros.transform_stamped(0.0, "map", "odom", *map_to_odom)]))
@@ -204,7 +253,9 @@ def test_simulated_bases_publish_their_robots_poses_as_odometry(spawn, router, n
     """``arroch sim --ros2-bases``: each base's odometry, read back and moved by its map->odom
     transform (the start pose), is where the simulator has the robot; a Twist moves it."""
     taps = {rid: Tap(client, f"/{rid}/odom", ros.ODOMETRY) for rid in SITE.robots}
-    spawn(arroch("sim", "--connect", router, "--namespace", namespace, "--ros2-bases"), name="sim").wait_for("sim sim-", timeout=20)
+    spawn(arroch("sim", "--connect", router, "--namespace", namespace, "--ros2-bases"), name="sim").wait_for(
+        "sim sim-", timeout=20
+    )
     for rid, tap in taps.items():
         msg, att = tap.next(timeout=10)
         p = ros.pose_2d(msg, ros.ODOMETRY)
@@ -232,8 +283,21 @@ def test_driver_takes_its_pose_from_a_localisation_topic(spawn, router, namespac
     localiser = RosNode(client, NAMING, "test_amcl", "/r1").publisher("amcl_pose", ros.POSE_COV_STAMPED)
     twist = Tap(client, "/r1/cmd_vel", ros.TWIST)
     poses = client.collect(client.keys.robot_pose("r1"), RobotPose)
-    spawn(arroch("robot", "--ros2", "--robot", "r1", "--connect", router, "--namespace", namespace,
-                 "--ros2-config", str(config_file)), name="robot").wait_for("robot robot-r1-", timeout=20)
+    spawn(
+        arroch(
+            "robot",
+            "--ros2",
+            "--robot",
+            "r1",
+            "--connect",
+            router,
+            "--namespace",
+            namespace,
+            "--ros2-config",
+            str(config_file),
+        ),
+        name="robot",
+    ).wait_for("robot robot-r1-", timeout=20)
     where = (12.3456, 7.6543, -1.2345)
     deadline = time.monotonic() + 10
     while not poses.qsize() and time.monotonic() < deadline:

@@ -17,8 +17,16 @@ DT = 0.05
 
 def make(robot: str = "r1") -> Driver:
     p = SITE.params
-    return Driver(robot, SITE, DriverConfig(controller=ControllerConfig(speed=p.robot_speed), radius=p.robot_radius, load_time=p.load_time,
-                                            control_period=DT))
+    return Driver(
+        robot,
+        SITE,
+        DriverConfig(
+            controller=ControllerConfig(speed=p.robot_speed),
+            radius=p.robot_radius,
+            load_time=p.load_time,
+            control_period=DT,
+        ),
+    )
 
 
 def line(start: tuple[float, float, float], end: tuple[float, float]) -> list[list[float]]:
@@ -26,7 +34,13 @@ def line(start: tuple[float, float, float], end: tuple[float, float]) -> list[li
     return [[0.0, x, y, th], [5.0, end[0], end[1], th]]
 
 
-def run(driver: Driver, pose: tuple[float, float, float], seconds: float, t0: float = 0.0, doors: dict[str, bool] | None = None):
+def run(
+    driver: Driver,
+    pose: tuple[float, float, float],
+    seconds: float,
+    t0: float = 0.0,
+    doors: dict[str, bool] | None = None,
+):
     """Drive the unicycle by the driver's answers; returns the final pose, time and the largest speed."""
     x, y, th = pose
     top = 0.0
@@ -42,7 +56,9 @@ def run(driver: Driver, pose: tuple[float, float, float], seconds: float, t0: fl
 def test_follows_a_trajectory_to_its_end():
     d = make()
     start = SITE.robots["r1"].start  # (12.5, 8.0) facing -y, in the lab
-    cmd = RobotCommand(robot="r1", plan_id=1, action_id=1, action="approach", args=["d_lab"], trajectory=line(start, (12.5, 7.0)))
+    cmd = RobotCommand(
+        robot="r1", plan_id=1, action_id=1, action="approach", args=["d_lab"], trajectory=line(start, (12.5, 7.0))
+    )
     assert d.assign(cmd, start, 0.0) == "accepted" and d.s.state == "moving"
     (x, y, _), _, top = run(d, start, 6.0)
     assert math.dist((x, y), (12.5, 7.0)) <= 0.02 and top <= SITE.params.robot_speed + 1e-9
@@ -53,7 +69,9 @@ def test_follows_a_trajectory_to_its_end():
 def test_holds_short_of_a_closed_door_then_goes_through():
     d = make()
     start = SITE.robots["r1"].start
-    cmd = RobotCommand(robot="r1", plan_id=1, action_id=1, action="gothrough", args=["d_lab"], trajectory=line(start, (12.5, 5.0)))
+    cmd = RobotCommand(
+        robot="r1", plan_id=1, action_id=1, action="gothrough", args=["d_lab"], trajectory=line(start, (12.5, 5.0))
+    )
     assert d.assign(cmd, start, 0.0) == "accepted"
     pose, t, _ = run(d, start, 8.0)
     assert d.s.state == "waiting_at_door" and d.s.waiting_door == "d_lab"
@@ -78,16 +96,48 @@ def test_refusals():
     d = make("r0")
     start = SITE.robots["r0"].start
     others = next(o for o in SITE.objects.values() if o.robot != "r0")
-    assert d.assign(RobotCommand(robot="r0", plan_id=1, action_id=1, action="load", args=[others.id]), start, 0.0) == "refused"
+    assert (
+        d.assign(RobotCommand(robot="r0", plan_id=1, action_id=1, action="load", args=[others.id]), start, 0.0)
+        == "refused"
+    )
     assert "belongs to robot" in d.s.detail and d.s.state == "failed"
-    assert d.assign(RobotCommand(robot="r0", plan_id=1, action_id=2, action="unload", args=["o0"]), start, 0.0) == "refused"
-    assert d.assign(RobotCommand(robot="r0", plan_id=1, action_id=3, action="approach", args=["d_lab"], trajectory=line(start, (3.0, 5.0))), None, 0.0) == "refused"
+    assert (
+        d.assign(RobotCommand(robot="r0", plan_id=1, action_id=2, action="unload", args=["o0"]), start, 0.0)
+        == "refused"
+    )
+    assert (
+        d.assign(
+            RobotCommand(
+                robot="r0",
+                plan_id=1,
+                action_id=3,
+                action="approach",
+                args=["d_lab"],
+                trajectory=line(start, (3.0, 5.0)),
+            ),
+            None,
+            0.0,
+        )
+        == "refused"
+    )
     assert d.s.detail == "no pose of the robot yet"
     far = [[0.0, 5.0, 5.0, 0.0], [1.0, 6.0, 5.0, 0.0]]
-    assert d.assign(RobotCommand(robot="r0", plan_id=1, action_id=4, action="approach", args=["d_lab"], trajectory=far), start, 0.0) == "refused"
+    assert (
+        d.assign(
+            RobotCommand(robot="r0", plan_id=1, action_id=4, action="approach", args=["d_lab"], trajectory=far),
+            start,
+            0.0,
+        )
+        == "refused"
+    )
     assert "trajectory starts" in d.s.detail
     mine = next(o for o in SITE.objects.values() if o.robot == "r0")
-    assert d.assign(RobotCommand(robot="r0", plan_id=1, action_id=5, action="load", args=[mine.id], trajectory=[]), start, 0.0) == "accepted"
+    assert (
+        d.assign(
+            RobotCommand(robot="r0", plan_id=1, action_id=5, action="load", args=[mine.id], trajectory=[]), start, 0.0
+        )
+        == "accepted"
+    )
     run(d, start, 0.2)
     assert d.s.state == "failed" and "m away" in d.s.detail  # arrived out of reach of the object
     assert d.control(start, 1.0, lambda door: True) == (0.0, 0.0)

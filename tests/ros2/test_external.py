@@ -14,7 +14,9 @@ SITE = load_site()
 
 
 def status(action_id: int, action: str, state: str, **kw) -> RobotStatus:
-    return RobotStatus(robot="r0", state=state, plan_id=1, action_id=action_id, action=action, args=kw.pop("args", []), **kw)
+    return RobotStatus(
+        robot="r0", state=state, plan_id=1, action_id=action_id, action=action, args=kw.pop("args", []), **kw
+    )
 
 
 def kinds(engine: Engine) -> list[tuple[str, str, bool]]:
@@ -27,7 +29,14 @@ def test_statuses_become_events_and_world_versions():
     engine.start()
     engine.take_events()
     version = engine.world_version
-    cmd = RobotCommand(robot="r0", plan_id=1, action_id=1, action="load", args=["o0"], trajectory=[[0, 1.5, 5.0, 0.0], [1, 2.0, 5.0, 0.0]])
+    cmd = RobotCommand(
+        robot="r0",
+        plan_id=1,
+        action_id=1,
+        action="load",
+        args=["o0"],
+        trajectory=[[0, 1.5, 5.0, 0.0], [1, 2.0, 5.0, 0.0]],
+    )
     assert engine.apply_command(cmd) == "external"
     ext = engine.external["r0"]
     ext.on_pose(RobotPose(robot="r0", x=2.0, y=5.0, theta=0.1, vel=0.5, omega=0.0))
@@ -70,7 +79,9 @@ def test_a_ros2_base_integrates_twists_and_stops_without_them():
     for _ in range(int(CMD_VEL_TIMEOUT / engine.config.tick) + 5):
         engine.step()
     moved = engine.robots["r0"].x - x0
-    assert math.isclose(moved, 0.5 * CMD_VEL_TIMEOUT, abs_tol=0.5 * engine.config.tick + 1e-9)  # then the watchdog stopped it
+    assert math.isclose(
+        moved, 0.5 * CMD_VEL_TIMEOUT, abs_tol=0.5 * engine.config.tick + 1e-9
+    )  # then the watchdog stopped it
     assert engine.robots["r0"].v == 0.0
 
 

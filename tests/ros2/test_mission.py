@@ -26,11 +26,28 @@ SITE = load_site()
 def test_default_mission_through_ros2(spawn, tmp_path: Path, key_format: str):
     run_dir = tmp_path / "runs"
     ros2 = f"--key-format {key_format} --domain 7"
-    drivers = [f"--child={rid}={{python}} -m services.cli robot --ros2 --robot {rid} {ros2}" for rid in sorted(SITE.robots)]
+    drivers = [
+        f"--child={rid}={{python}} -m services.cli robot --ros2 --robot {rid} {ros2}" for rid in sorted(SITE.robots)
+    ]
     proc = spawn(
-        arroch("up", "--services", "planner,restrictor", "--mode", "lockstep", "--seed", "1", "--until-done",
-               "--run-dir", str(run_dir), "--progress", "off", "--timeout", f"{TIMEOUT:g}",
-               f"--child=world={{python}} -m services.cli sim --mode lockstep --seed 1 --ros2-bases {ros2}", *drivers),
+        arroch(
+            "up",
+            "--services",
+            "planner,restrictor",
+            "--mode",
+            "lockstep",
+            "--seed",
+            "1",
+            "--until-done",
+            "--run-dir",
+            str(run_dir),
+            "--progress",
+            "off",
+            "--timeout",
+            f"{TIMEOUT:g}",
+            f"--child=world={{python}} -m services.cli sim --mode lockstep --seed 1 --ros2-bases {ros2}",
+            *drivers,
+        ),
         name="up",
     )
     deadline = time.monotonic() + TIMEOUT + 20

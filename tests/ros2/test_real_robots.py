@@ -24,16 +24,22 @@ def test_a_real_robot_goes_through_an_automatic_door(spawn, router, namespace, c
     sim.wait_for("sim sim-", timeout=20)
     base = FakeBase(client, robot, start, Ros2Config(), publish_clock=False)
     try:
-        spawn(arroch("robot", "--ros2", "--robot", robot, "--connect", router, "--namespace", namespace), name="robot").wait_for(
-            "robot robot-r1-", timeout=20)
+        spawn(
+            arroch("robot", "--ros2", "--robot", robot, "--connect", router, "--namespace", namespace), name="robot"
+        ).wait_for("robot robot-r1-", timeout=20)
         base.first_zero_after(0.0, timeout=10)
         rows = straight_command(robot, start, 3.0).trajectory
-        client.publish(client.keys.robot_command(robot),
-                       RobotCommand(robot=robot, plan_id=1, action_id=1, action="gothrough", args=["d_lab"], trajectory=rows))
+        client.publish(
+            client.keys.robot_command(robot),
+            RobotCommand(robot=robot, plan_id=1, action_id=1, action="gothrough", args=["d_lab"], trajectory=rows),
+        )
         opened = wait_for_message(events, lambda e: e.kind == "door_opened" and e.door == "d_lab", timeout=15)
         assert opened.data["by"] == robot
-        done = wait_for_message(events, lambda e: e.kind in ("action_done", "action_failed", "closed_door_crossing") and e.robot == robot,
-                                timeout=20)
+        done = wait_for_message(
+            events,
+            lambda e: e.kind in ("action_done", "action_failed", "closed_door_crossing") and e.robot == robot,
+            timeout=20,
+        )
         assert done.kind == "action_done" and done.data["action_id"] == 1 and done.data["world_version"] >= 2, done
         assert done.data["pose"][1] < SITE.doors["d_lab"].center[1] - SITE.params.robot_radius
         seen = []

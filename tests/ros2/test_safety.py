@@ -9,10 +9,9 @@ from __future__ import annotations
 import signal
 import sys
 import textwrap
+import time
 
 import pytest
-
-import time
 
 from protocol.messages import DoorState, RobotCommand, RobotStatus
 from protocol.ros2.config import Ros2Config
@@ -43,7 +42,9 @@ def driver_output() -> str:
 
 def start_driver(spawn, router: str, namespace: str, *extra: str, robot: str = ROBOT):
     _DRIVERS.clear()
-    proc = spawn(arroch("robot", "--ros2", "--robot", robot, "--connect", router, "--namespace", namespace, *extra), name="robot")
+    proc = spawn(
+        arroch("robot", "--ros2", "--robot", robot, "--connect", router, "--namespace", namespace, *extra), name="robot"
+    )
     proc.wait_for(f"robot robot-{robot}-", timeout=20)
     _DRIVERS.append(proc)
     return proc
@@ -79,14 +80,21 @@ def test_stale_pose_stops_the_base(spawn, router, namespace, client, base):
 
 
 def test_killed_planner_stops_the_base(spawn, router, namespace, client, base):
-    planner = spawn([sys.executable, "-c", textwrap.dedent(f"""
+    planner = spawn(
+        [
+            sys.executable,
+            "-c",
+            textwrap.dedent(f"""
         import time
         from protocol.service import Service
         from protocol.transport import ZenohOptions
         with Service("planner", "{namespace}", ZenohOptions(mode="client", connect=["{router}"])):
             print("planner token declared", flush=True)
             time.sleep(600)
-    """)], name="planner")
+    """),
+        ],
+        name="planner",
+    )
     planner.wait_for("planner token declared", timeout=20)
     driver = start_driver(spawn, router, namespace)
     drive(client, base)
@@ -100,7 +108,9 @@ def test_refused_command_stops_the_base(spawn, router, namespace, client, base):
     drive(client, base)
     # A trajectory starting 3 m behind the robot: refused (the execution contract's 1.5 m).
     refused = straight_command(ROBOT, START, 8.0, action_id=2, offset=3.0)
-    stop = assert_stops_in_time(base, lambda: client.publish(client.keys.robot_command(ROBOT), refused), "the refused command")
+    stop = assert_stops_in_time(
+        base, lambda: client.publish(client.keys.robot_command(ROBOT), refused), "the refused command"
+    )
     failed = wait_for_message(statuses, lambda s: s.action_id == 2 and s.state == "failed", timeout=5)
     assert "trajectory starts" in failed.detail
     assert all(tw.zero for tw in base.twists if tw.site_time > stop.site_time)
@@ -126,8 +136,10 @@ def test_closed_door_holds_the_robot_short_of_the_leaf(spawn, router, namespace,
         base.first_zero_after(0.0, timeout=10)
         client.publish(client.keys.door_state("d_lab"), DoorState(door="d_lab", open=False))
         rows = straight_command(robot, start, 3.0).trajectory
-        client.publish(client.keys.robot_command(robot),
-                       RobotCommand(robot=robot, plan_id=1, action_id=1, action="gothrough", args=["d_lab"], trajectory=rows))
+        client.publish(
+            client.keys.robot_command(robot),
+            RobotCommand(robot=robot, plan_id=1, action_id=1, action="gothrough", args=["d_lab"], trajectory=rows),
+        )
         wait_for_message(statuses, lambda st: st.state == "waiting_at_door" and st.waiting_door == "d_lab", timeout=15)
         base.first_zero_after(base.now())
         time.sleep(0.3)

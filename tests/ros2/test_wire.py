@@ -22,12 +22,18 @@ def test_type_hashes_match_what_ros2_publishes(typename):
 
 def test_rmw_zenoh_keys_and_tokens():
     naming = TopicNaming("rmw_zenoh", 3)
-    assert naming.data_key("/r0/cmd_vel", ros.TWIST) == f"3/r0/cmd_vel/geometry_msgs::msg::dds_::Twist_/{ros.PUBLISHED_HASHES[ros.TWIST]}"
+    assert (
+        naming.data_key("/r0/cmd_vel", ros.TWIST)
+        == f"3/r0/cmd_vel/geometry_msgs::msg::dds_::Twist_/{ros.PUBLISHED_HASHES[ros.TWIST]}"
+    )
     assert naming.subscription_key("/r0/odom", ros.ODOMETRY) == "3/r0/odom/nav_msgs::msg::dds_::Odometry_/*"
     assert naming.node_token("abcd", 0, "/", "talker") == "@ros2_lv/3/abcd/0/0/NN/%/%/talker"
     token = naming.endpoint_token("abcd", 0, 10, "MP", "/", "talker", "/chatter", ros.STRING)
     # The shape of rmw_zenoh's design document's example for the talker demo.
-    assert token == f"@ros2_lv/3/abcd/0/10/MP/%/%/talker/%chatter/std_msgs::msg::dds_::String_/{ros.PUBLISHED_HASHES[ros.STRING]}/1:2:1,10:,:,:,,"
+    assert (
+        token
+        == f"@ros2_lv/3/abcd/0/10/MP/%/%/talker/%chatter/std_msgs::msg::dds_::String_/{ros.PUBLISHED_HASHES[ros.STRING]}/1:2:1,10:,:,:,,"
+    )
 
 
 def test_ros2dds_keys_are_the_topic_names():
@@ -66,8 +72,10 @@ def test_cdr_round_trip_of_an_odometry():
 
 def test_config_file(tmp_path):
     f = tmp_path / "robots.toml"
-    f.write_text('[ros2]\nkey_format = "ros2dds"\ndomain = 5\n[ros2.robots.r0]\nnamespace = "/tb3"\npose_topic = "amcl_pose"\n'
-                 'pose_type = "pose"\nmap_to_odom = [1, 2, 0.5]\n')
+    f.write_text(
+        '[ros2]\nkey_format = "ros2dds"\ndomain = 5\n[ros2.robots.r0]\nnamespace = "/tb3"\npose_topic = "amcl_pose"\n'
+        'pose_type = "pose"\nmap_to_odom = [1, 2, 0.5]\n'
+    )
     config = load_ros2_config(f)
     assert config.naming().key_format == "ros2dds" and config.domain == 5
     link = config.link("r0")
@@ -81,16 +89,19 @@ def test_config_file(tmp_path):
     assert mixed.with_overrides(domain=2).naming("r1").domain == 2  # the command line wins
 
 
-@pytest.mark.parametrize("table, where", [
-    ({"key_format": "dds"}, "ros2.key_format"),
-    ({"domain": 999}, "ros2.domain"),
-    ({"robots": {"r0": {"map_to_odom": [1, 2]}}}, "ros2.robots.r0.map_to_odom"),
-    ({"robots": {"r0": {"pose_type": "gps"}}}, "ros2.robots.r0.pose_type"),
-    ({"robots": {"r0": {"cmd_vel": "bad topic"}}}, "ros2.robots.r0.cmd_vel"),
-    ({"robots": {"r0": {"speed": 1}}}, "ros2.robots.r0.speed"),
-    ({"robots": {"r0": {"pose_timeout": -1}}}, "ros2.robots.r0.pose_timeout"),
-    ({"robots": {"r0": {"key_format": "fastdds"}}}, "ros2.robots.r0.key_format"),
-])
+@pytest.mark.parametrize(
+    "table, where",
+    [
+        ({"key_format": "dds"}, "ros2.key_format"),
+        ({"domain": 999}, "ros2.domain"),
+        ({"robots": {"r0": {"map_to_odom": [1, 2]}}}, "ros2.robots.r0.map_to_odom"),
+        ({"robots": {"r0": {"pose_type": "gps"}}}, "ros2.robots.r0.pose_type"),
+        ({"robots": {"r0": {"cmd_vel": "bad topic"}}}, "ros2.robots.r0.cmd_vel"),
+        ({"robots": {"r0": {"speed": 1}}}, "ros2.robots.r0.speed"),
+        ({"robots": {"r0": {"pose_timeout": -1}}}, "ros2.robots.r0.pose_timeout"),
+        ({"robots": {"r0": {"key_format": "fastdds"}}}, "ros2.robots.r0.key_format"),
+    ],
+)
 def test_config_errors_name_the_key(table, where):
     with pytest.raises(RosConfigError, match=f"robots.toml: {where}"):
         parse_ros2_config(table, "robots.toml")
@@ -101,7 +112,9 @@ def test_site_markers_follow_the_state():
     from services.ros2.markers import SiteState, site_markers
 
     site = load_site()
-    state = SiteState(doors_open={"d_lab": True}, carried_by={"o0": "r0"}, delivered={"o1"}, object_at={"o1": (6.0, 2.0)})
+    state = SiteState(
+        doors_open={"d_lab": True}, carried_by={"o0": "r0"}, delivered={"o1"}, object_at={"o1": (6.0, 2.0)}
+    )
     msg = ros.deserialize(ros.serialize(site_markers(site, state, 3.0), ros.MARKER_ARRAY), ros.MARKER_ARRAY)
     by = {(m.ns, m.id): m for m in msg.markers}
     assert len([k for k in by if k[0] == "walls"]) == len(site.walls)
@@ -111,5 +124,7 @@ def test_site_markers_follow_the_state():
     carried = by[("objects", objects.index("o0"))]
     assert carried.header.frame_id == "r0/base_link" and carried.frame_locked
     delivered = by[("objects", objects.index("o1"))]
-    assert (delivered.pose.position.x, delivered.pose.position.y) == (6.0, 2.0) and abs(delivered.color.a - 0.4) < 1e-6  # float32
+    assert (delivered.pose.position.x, delivered.pose.position.y) == (6.0, 2.0) and abs(
+        delivered.color.a - 0.4
+    ) < 1e-6  # float32
     assert {m.header.frame_id for m in msg.markers if m.ns == "robots"} == {f"{rid}/base_link" for rid in site.robots}

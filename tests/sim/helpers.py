@@ -76,7 +76,18 @@ def small_site() -> Site:
     return loads_site(SMALL_SITE, "simtest.toml")
 
 
-def command(robot: str, action_id: int, action: str, args: list[str], points: list[tuple[float, float]], *, now: float = 0.0, speed: float = 0.5, duration: float = 0.0, plan_id: int = 1) -> RobotCommand:
+def command(
+    robot: str,
+    action_id: int,
+    action: str,
+    args: list[str],
+    points: list[tuple[float, float]],
+    *,
+    now: float = 0.0,
+    speed: float = 0.5,
+    duration: float = 0.0,
+    plan_id: int = 1,
+) -> RobotCommand:
     """A RobotCommand along straight segments through ``points`` (rows timed at ``speed``)."""
     import math
 
@@ -88,7 +99,9 @@ def command(robot: str, action_id: int, action: str, args: list[str], points: li
         prev = points[max(i - 1, 0)]
         a, b = (prev, (x, y)) if i == len(points) - 1 else ((x, y), nxt)
         rows.append([t, x, y, math.atan2(b[1] - a[1], b[0] - a[0])])
-    return RobotCommand(robot=robot, plan_id=plan_id, action_id=action_id, action=action, args=args, trajectory=rows, duration=duration)
+    return RobotCommand(
+        robot=robot, plan_id=plan_id, action_id=action_id, action=action, args=args, trajectory=rows, duration=duration
+    )
 
 
 def run_mission(engine: Engine, *, max_time: float = 7200.0) -> list[SimEvent]:

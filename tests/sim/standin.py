@@ -74,7 +74,9 @@ def tasks_for(site: Site, robot: str) -> list[Task]:
     return out
 
 
-def trajectory(start: tuple[float, float, float], target: tuple[float, float], now: float, speed: float) -> list[list[float]]:
+def trajectory(
+    start: tuple[float, float, float], target: tuple[float, float], now: float, speed: float
+) -> list[list[float]]:
     """Straight line from the robot to ``target``, timed at ``speed``; rows [t, x, y, theta]."""
     x, y, theta = start
     heading = math.atan2(target[1] - y, target[0] - x) if math.dist((x, y), target) > 1e-6 else theta
@@ -114,7 +116,17 @@ class ScriptedPlanner:
             self.next_id[rid] += 1
             rows = trajectory(poses[rid], task.target, now, self.site.params.robot_speed) if task.target else []
             duration = self.site.params.load_time if task.action in ("load", "unload") else 0.0
-            out.append(RobotCommand(robot=rid, plan_id=plan_id, action_id=self.next_id[rid], action=task.action, args=task.args, trajectory=rows, duration=duration))
+            out.append(
+                RobotCommand(
+                    robot=rid,
+                    plan_id=plan_id,
+                    action_id=self.next_id[rid],
+                    action=task.action,
+                    args=task.args,
+                    trajectory=rows,
+                    duration=duration,
+                )
+            )
             self.busy[rid] = self.next_id[rid]
         return out
 
@@ -122,7 +134,9 @@ class ScriptedPlanner:
         steps = {}
         for rid, todo in self.todo.items():
             steps[rid] = [
-                PlanStep(action=t.action, args=t.args, start=now, end=now, action_id=self.busy.get(rid, 0) if i == 0 else 0)
+                PlanStep(
+                    action=t.action, args=t.args, start=now, end=now, action_id=self.busy.get(rid, 0) if i == 0 else 0
+                )
                 for i, t in enumerate(todo)
             ]
         return steps
@@ -131,7 +145,9 @@ class ScriptedPlanner:
 class StandInPlanner(Service):
     """The scripted planner on Zenoh, plus a restrictor stand-in answering feedback queries."""
 
-    def __init__(self, site: Site, namespace: str, endpoint: str, *, accept_feedback: bool = True, restrictor: bool = True) -> None:
+    def __init__(
+        self, site: Site, namespace: str, endpoint: str, *, accept_feedback: bool = True, restrictor: bool = True
+    ) -> None:
         super().__init__("standin", namespace, ZenohOptions(mode="client", connect=[endpoint]))
         self.site = site
         self.script = ScriptedPlanner(site)
@@ -213,8 +229,15 @@ class StandInPlanner(Service):
             self.feedback.append(msg)
             if self.accept_feedback:
                 self.constraints_version += 1
-            ack = self.stamp(FeedbackAck(to=msg.src, feedback_seq=msg.seq, accepted=self.accept_feedback, constraints_version=self.constraints_version, reason="" if self.accept_feedback else "refused by the stand-in"))
+            ack = self.stamp(
+                FeedbackAck(
+                    to=msg.src,
+                    feedback_seq=msg.seq,
+                    accepted=self.accept_feedback,
+                    constraints_version=self.constraints_version,
+                    reason="" if self.accept_feedback else "refused by the stand-in",
+                )
+            )
             if self.accept_feedback and self.answered:
                 self._publish_plan(msg.stamp)
         return ack
-

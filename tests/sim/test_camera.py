@@ -17,8 +17,8 @@ from __future__ import annotations
 import json
 import math
 import subprocess
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import cv2
 import numpy as np
@@ -27,11 +27,11 @@ import pytest
 
 from protocol.apriltag import apriltag_corners, opencv_corners
 from protocol.codec import decode, encode
+from protocol.frames import matrix_from_quat, rotation_angle
 from protocol.messages import CameraFrame, CameraTruth
 from protocol.site import load_site
 from protocol.site.model import Site
 from services.ar_client.detect import apriltag_detector
-from protocol.frames import matrix_from_quat, rotation_angle
 from services.cli import main
 from services.sim.camera import FAR, NEAR, CameraSpec, frame_message, truth_json, truth_message
 from services.sim.world import World
@@ -88,7 +88,11 @@ def _tags_in_view(world: World, camera: CameraSpec, *, whole_quad: bool, margin:
         if np.any((points - eye) @ camera.R_world_camera[:, 2] <= NEAR):
             continue
         uv = camera.project(points)
-        if uv.min() < margin or np.any(uv[:, 0] > camera.width - 1 - margin) or np.any(uv[:, 1] > camera.height - 1 - margin):
+        if (
+            uv.min() < margin
+            or np.any(uv[:, 0] > camera.width - 1 - margin)
+            or np.any(uv[:, 1] > camera.height - 1 - margin)
+        ):
             continue
         if world.ray(eye, lm.position) is None:  # walls have collision shapes, tags do not
             out.add(lm.tag)
@@ -105,7 +109,9 @@ def _pose_error(site: Site, camera: CameraSpec, found: dict[int, np.ndarray], K:
     rvec, tvec = cv2.solvePnPRefineLM(obj, img, K, None, rvec, tvec)
     R_cw, _ = cv2.Rodrigues(rvec)
     position = -R_cw.T @ tvec.reshape(3)
-    return float(np.linalg.norm(position - np.asarray(camera.position))), math.degrees(rotation_angle(R_cw.T, camera.R_world_camera))
+    return float(np.linalg.norm(position - np.asarray(camera.position))), math.degrees(
+        rotation_angle(R_cw.T, camera.R_world_camera)
+    )
 
 
 # ---------------------------------------------------------------------- geometry of the spec
@@ -146,7 +152,9 @@ def test_intrinsics_and_projection() -> None:
 def test_gl_matrices_are_pybullets_own() -> None:
     cam = CameraSpec((8.0, 2.0, 1.3), math.radians(-70), math.radians(5), 1280, 720, 60.0)
     eye = np.asarray(cam.position)
-    expected_view = pybullet.computeViewMatrix(eye.tolist(), (eye + cam.R_world_camera[:, 2]).tolist(), (-cam.R_world_camera[:, 1]).tolist())
+    expected_view = pybullet.computeViewMatrix(
+        eye.tolist(), (eye + cam.R_world_camera[:, 2]).tolist(), (-cam.R_world_camera[:, 1]).tolist()
+    )
     np.testing.assert_allclose(cam.view_matrix(), expected_view, atol=1e-5)  # pybullet computes in float32
     expected_proj = pybullet.computeProjectionMatrixFOV(60.0, 1280 / 720, NEAR, FAR)
     np.testing.assert_allclose(cam.projection_matrix(), expected_proj, rtol=1e-6, atol=1e-6)
@@ -221,7 +229,9 @@ def test_site_corners_project_onto_detected_corners(world: World) -> None:
         for w, h in ((640, 480), (1280, 720)):
             cam = CameraSpec.from_degrees(*view, w, h, 60.0)
             found = _detect_apriltag(_gray(world.render(cam)))
-            assert len(_tags_in_view(world, cam, whole_quad=True) - set(found)) <= 1  # AprilTag 3 (decimating) may miss a small one
+            assert (
+                len(_tags_in_view(world, cam, whole_quad=True) - set(found)) <= 1
+            )  # AprilTag 3 (decimating) may miss a small one
             for tag, corners in found.items():
                 predicted = cam.project(world.landmark_corners(tag))
                 residuals.append(corners - predicted)
@@ -243,14 +253,22 @@ def test_site_corners_project_onto_detected_corners(world: World) -> None:
     ],
 )
 def test_opencv_finds_the_tags_and_the_pose_agrees_with_the_truth(
-    world: World, site: Site, aruco: cv2.aruco.ArucoDetector, view: tuple, size: tuple[int, int], max_mm: float, max_deg: float
+    world: World,
+    site: Site,
+    aruco: cv2.aruco.ArucoDetector,
+    view: tuple,
+    size: tuple[int, int],
+    max_mm: float,
+    max_deg: float,
 ) -> None:
     cam = CameraSpec.from_degrees(*view, *size, 60.0)
     found = _detect_opencv(aruco, _gray(world.render(cam)))
     must = _tags_in_view(world, cam, whole_quad=True)
     assert len(must) >= 4
     assert must <= set(found) <= _tags_in_view(world, cam, whole_quad=False, margin=0.0)
-    residual = np.concatenate([np.linalg.norm(found[t] - cam.project(world.landmark_corners(t)), axis=1) for t in found])
+    residual = np.concatenate(
+        [np.linalg.norm(found[t] - cam.project(world.landmark_corners(t)), axis=1) for t in found]
+    )
     assert np.median(residual) < 0.7 and residual.max() < 2.5  # OpenCV's corners: noisier than AprilTag 3's
     position_error, rotation_error = _pose_error(site, cam, found, cam.K)
     assert position_error * 1000 < max_mm, f"position off by {position_error * 1000:.1f} mm"
@@ -288,8 +306,12 @@ def test_frames_carry_gravity_as_an_imu_measures_it(world: World) -> None:
     np.testing.assert_allclose(exact, cam.R_world_camera.T @ [0.0, 0.0, -9.80665], atol=1e-9)
     assert exact[1] > 9.0  # a camera pitched a little: gravity mostly along the image's "down"
     rng = np.random.default_rng(0)
-    angles = [math.degrees(math.acos(np.clip(np.dot(frame_message("t", image, cam, rng=rng).gravity, exact) / 9.80665**2, -1, 1)))
-              for _ in range(200)]
+    angles = [
+        math.degrees(
+            math.acos(np.clip(np.dot(frame_message("t", image, cam, rng=rng).gravity, exact) / 9.80665**2, -1, 1))
+        )
+        for _ in range(200)
+    ]
     assert 0.8 < float(np.median(angles)) < 2.0  # two tilt axes at N(0, 1 deg) each: median ~1.2 deg
     assert frame_message("t", image, cam, gravity_noise_deg=None).gravity == []
     parser = argparse.ArgumentParser()
@@ -307,10 +329,25 @@ def _run(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run(arroch(*args), cwd=ROOT, capture_output=True, text=True, timeout=120)
 
 
-def test_snapshot_command_writes_a_frame_the_ar_client_localises(tmp_path: Path, site: Site, aruco: cv2.aruco.ArucoDetector) -> None:
+def test_snapshot_command_writes_a_frame_the_ar_client_localises(
+    tmp_path: Path, site: Site, aruco: cv2.aruco.ArucoDetector
+) -> None:
     out, truth_file = tmp_path / "snap.png", tmp_path / "truth.json"
     x, y, z, yaw, pitch = SOUTH_OBLIQUE
-    done = _run("sim", "snapshot", "--camera", f"{x},{y},{z},{yaw},{pitch}", "--size", "1280x720", "--fov", "60", "--out", str(out), "--truth", str(truth_file))
+    done = _run(
+        "sim",
+        "snapshot",
+        "--camera",
+        f"{x},{y},{z},{yaw},{pitch}",
+        "--size",
+        "1280x720",
+        "--fov",
+        "60",
+        "--out",
+        str(out),
+        "--truth",
+        str(truth_file),
+    )
     assert done.returncode == 0, done.stderr
     truth = json.loads(truth_file.read_text())
     cam = CameraSpec.from_degrees(x, y, z, yaw, pitch, 1280, 720, 60.0)
@@ -326,11 +363,22 @@ def test_snapshot_command_writes_a_frame_the_ar_client_localises(tmp_path: Path,
     position_error, rotation_error = _pose_error(site, cam, found, K)
     assert position_error < 0.01 and rotation_error < 0.3
     # The AR client's own localisation (its detector, edge refinement and solver) agrees too.
-    located = _run("ar", "localize", "--image", str(out), "--intrinsics", ",".join(f"{v:.6f}" for v in truth["intrinsics"]), "--json")
+    located = _run(
+        "ar",
+        "localize",
+        "--image",
+        str(out),
+        "--intrinsics",
+        ",".join(f"{v:.6f}" for v in truth["intrinsics"]),
+        "--json",
+    )
     assert located.returncode == 0, located.stdout + located.stderr
     result = json.loads(located.stdout.strip().splitlines()[-1])
     assert np.linalg.norm(np.subtract(result["position"], truth["position"])) < 0.01
-    assert math.degrees(rotation_angle(matrix_from_quat(result["quaternion"]), matrix_from_quat(truth["quaternion"]))) < 0.3
+    assert (
+        math.degrees(rotation_angle(matrix_from_quat(result["quaternion"]), matrix_from_quat(truth["quaternion"])))
+        < 0.3
+    )
 
 
 @pytest.mark.parametrize(
@@ -345,7 +393,9 @@ def test_snapshot_command_writes_a_frame_the_ar_client_localises(tmp_path: Path,
         (["--camera", "8,2,1.3,-70,0", "--site", "/no/such/site.toml"], "site.toml"),
     ],
 )
-def test_snapshot_refuses_bad_arguments(tmp_path: Path, capsys: pytest.CaptureFixture, args: list[str], message: str) -> None:
+def test_snapshot_refuses_bad_arguments(
+    tmp_path: Path, capsys: pytest.CaptureFixture, args: list[str], message: str
+) -> None:
     argv = ["sim", "snapshot", *args, "--out", str(tmp_path / "a.png"), "--truth", str(tmp_path / "a.json")]
     try:
         code = main(argv)

@@ -20,7 +20,6 @@ from tests.conftest import wait_for_message
 from tests.sim.standin import StandInPlanner
 from tests.sim.test_sim_service import Running, drain, sim_argv
 
-
 # ---------------------------------------------------------------------- the rules, pure
 
 
@@ -112,7 +111,9 @@ def on_grid(t: float) -> bool:
 
 
 @pytest.mark.integration
-def test_lockstep_holds_time_for_each_frames_overlay_then_times_out_then_falls_back_and_resumes(router, client, spawn, tmp_path):
+def test_lockstep_holds_time_for_each_frames_overlay_then_times_out_then_falls_back_and_resumes(
+    router, client, spawn, tmp_path
+):
     namespace = client.keys.site
     human = tmp_path / "human.toml"
     human.write_text(LONG_MISSION)
@@ -123,9 +124,31 @@ def test_lockstep_holds_time_for_each_frames_overlay_then_times_out_then_falls_b
     def answer(frame: CameraFrame) -> None:
         client.publish(client.keys.overlay("tab"), Overlay(camera="tab", frame_seq=frame.seq))
 
-    sim = spawn(sim_argv(router, namespace, "--mode", "lockstep", "--seed", "3", "--human-config", str(human), "--camera", "tablet",
-                         "--camera-id", "tab", "--camera-size", "160x120", "--camera-rate", str(RATE), "--camera-hold", str(HOLD),
-                         "--camera-hold-timeout", str(TIMEOUT)), name="sim")
+    sim = spawn(
+        sim_argv(
+            router,
+            namespace,
+            "--mode",
+            "lockstep",
+            "--seed",
+            "3",
+            "--human-config",
+            str(human),
+            "--camera",
+            "tablet",
+            "--camera-id",
+            "tab",
+            "--camera-size",
+            "160x120",
+            "--camera-rate",
+            str(RATE),
+            "--camera-hold",
+            str(HOLD),
+            "--camera-hold-timeout",
+            str(TIMEOUT),
+        ),
+        name="sim",
+    )
     sim.wait_for("up on namespace", timeout=30)
     # No planner yet: the hold at t=0 waits for the plan answering t=0, so that its frame is drawn
     # with the robots' paths of that instant; no frame meanwhile.

@@ -13,8 +13,8 @@ import math
 
 import pytest
 
-from protocol.pursuit import ControllerConfig, Path, PurePursuit, integrate
 from protocol.plane import segment_distance, wrap
+from protocol.pursuit import ControllerConfig, Path, PurePursuit, integrate
 
 CFG = ControllerConfig(speed=0.5, max_turn_rate=1.5, lookahead=0.3)
 DT = 0.05

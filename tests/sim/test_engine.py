@@ -57,7 +57,13 @@ def test_mission_metrics_are_the_papers():
 def test_without_a_planner_the_mission_ends_unfinished_at_the_time_limit():
     from services.sim.engine import EngineConfig
 
-    engine = Engine(small_site(), method="no-comm", seed=1, config=EngineConfig(time_limit=60.0), human=HumanConfig(task_mean=30.0, task_std=0.0, task_min=1.0))
+    engine = Engine(
+        small_site(),
+        method="no-comm",
+        seed=1,
+        config=EngineConfig(time_limit=60.0),
+        human=HumanConfig(task_mean=30.0, task_std=0.0, task_min=1.0),
+    )
     engine.start()
     while not engine.done:
         engine.step()
@@ -69,7 +75,10 @@ def test_without_a_planner_the_mission_ends_unfinished_at_the_time_limit():
 
 
 def plan(plan_id: int, world: int, constraints: int = 0, fronts: dict[str, int] | None = None) -> TeamPlan:
-    robots = {rid: [PlanStep(action="approach", args=["d"], start=0, end=1, action_id=aid)] for rid, aid in (fronts or {}).items()}
+    robots = {
+        rid: [PlanStep(action="approach", args=["d"], start=0, end=1, action_id=aid)]
+        for rid, aid in (fronts or {}).items()
+    }
     return TeamPlan(plan_id=plan_id, world_version=world, constraints_version=constraints, robots=robots)
 
 

@@ -42,7 +42,7 @@ def test_task_time_has_the_configured_mean_and_spread():
     durations = []
     for seed in range(3000):
         h = model("no-feedback", seed, focus_count=0)
-        (t, done), = [(t, a) for t, a in run(h, until=2000.0, dt=50.0) if isinstance(a, TaskDone)]
+        ((t, done),) = [(t, a) for t, a in run(h, until=2000.0, dt=50.0) if isinstance(a, TaskDone)]
         durations.append(done.time)
         assert done.time == pytest.approx(h.task_duration)  # no interruption: exactly her task
     d = np.array(durations)
@@ -137,7 +137,11 @@ def test_a2_is_declared_at_about_0_9_of_focus_intervals_in_arroch_only():
             assert h.counters.focus_started > 0
 
 
-CALLED = {"arroch": {"door_probability": 1.0}, "no-feedback": {"door_probability": 1.0}, "no-comm": {"no_comm_probability": 1.0}}
+CALLED = {
+    "arroch": {"door_probability": 1.0},
+    "no-feedback": {"door_probability": 1.0},
+    "no-comm": {"no_comm_probability": 1.0},
+}
 ROBOTS_WAITING = {"r0": 0.0, "r1": 0.0, "r2": 0.0}
 
 
@@ -261,7 +265,10 @@ def test_config_file_is_read_and_checked(tmp_path):
     with pytest.raises(ValueError, match="focus_reading"):
         HumanConfig.from_toml(bad)
     good.write_text('[human]\nfocus_reading = "strict"\ninterruption_cost = 15\n')
-    assert (HumanConfig.from_toml(good).focus_reading, HumanConfig.from_toml(good).interruption_cost) == ("strict", 15.0)
+    assert (HumanConfig.from_toml(good).focus_reading, HumanConfig.from_toml(good).interruption_cost) == (
+        "strict",
+        15.0,
+    )
     bad.write_text("[human]\nfocus_count = 1.5\n")
     with pytest.raises(ValueError, match="focus_count must be an integer"):
         HumanConfig.from_toml(bad)

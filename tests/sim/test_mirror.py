@@ -32,7 +32,9 @@ def test_no_robot_ever_overlaps_a_wall_or_a_closed_or_closing_leaf(office):
                     planner.finished(event.robot, event.data["action_id"], True)
             if engine.world_version > answered:
                 answered, plans = engine.world_version, plans + 1
-                for cmd in planner.commands(plans, engine.time, {r: (b.x, b.y, b.theta) for r, b in engine.robots.items()}):
+                for cmd in planner.commands(
+                    plans, engine.time, {r: (b.x, b.y, b.theta) for r, b in engine.robots.items()}
+                ):
                     engine.apply_command(cmd)
                 continue
             engine.step()
@@ -46,7 +48,9 @@ def test_no_robot_ever_overlaps_a_wall_or_a_closed_or_closing_leaf(office):
                 # Never a closed leaf, never a closing one. An open or opening leaf may touch a robot:
                 # one parked in its sweep (see doors.py), or one whose (here straight-line) path
                 # grazes it, which is the motion planner's business, not the executor's.
-                assert door.target_open and door.fraction > 0.0, f"{rid} overlaps {hit} (fraction {door.fraction}, opening {door.target_open}) at t={engine.time}"
+                assert door.target_open and door.fraction > 0.0, (
+                    f"{rid} overlaps {hit} (fraction {door.fraction}, opening {door.target_open}) at t={engine.time}"
+                )
                 leaf_contacts += 1
     assert engine.completed
     assert plans > 50

@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from services.sim.engine import Engine
 from protocol.plane import segment_distance
+from services.sim.engine import Engine
 from services.sim.human import HumanConfig
 from tests.sim.helpers import command, small_site
 
@@ -49,7 +49,11 @@ def gap_distance(engine: Engine, door: str, rid: str) -> float:
 def test_robot_stops_before_a_closed_door_and_goes_on_once_it_opens(engine):
     engine.apply_command(command("r0", 1, "gothrough", ["d_storage"], [(1.0, 5.0), (6.0, 5.0), (6.0, 3.0)]))
     closest = []
-    events = run_until(engine, lambda ev: kinds(ev, "waiting_at_door"), on_step=lambda: closest.append(gap_distance(engine, "d_storage", "r0")))
+    events = run_until(
+        engine,
+        lambda ev: kinds(ev, "waiting_at_door"),
+        on_step=lambda: closest.append(gap_distance(engine, "d_storage", "r0")),
+    )
     wait = kinds(events, "waiting_at_door")[0]
     assert wait.robot == "r0" and wait.door == "d_storage"
     r0 = engine.robots["r0"]
@@ -58,7 +62,11 @@ def test_robot_stops_before_a_closed_door_and_goes_on_once_it_opens(engine):
     assert r0.y == pytest.approx(4.0 + RADIUS + 0.15, abs=0.02)
     # It stays there while the door stays shut.
     held_at = (r0.x, r0.y)
-    run_until(engine, lambda ev: engine.time >= wait.time + 30.0, on_step=lambda: closest.append(gap_distance(engine, "d_storage", "r0")))
+    run_until(
+        engine,
+        lambda ev: engine.time >= wait.time + 30.0,
+        on_step=lambda: closest.append(gap_distance(engine, "d_storage", "r0")),
+    )
     assert (r0.x, r0.y) == held_at and r0.state == "waiting_at_door"
     assert min(closest) >= RADIUS + 0.05  # never touched the closed leaf
     version = engine.world_version
@@ -78,12 +86,21 @@ def test_a_door_closing_in_front_of_a_robot_stops_it_before_the_leaf(engine):
     engine.doors.human_open("d_storage", 0.0)
     run_until(engine, lambda ev: engine.time >= 14.0)
     # r1 needs more than 10 s to get there: the hold time (20 s) runs out on the way.
-    engine.apply_command(command("r1", 1, "gothrough", ["d_storage"], [(10.0, 5.0), (6.0, 5.0), (6.0, 3.0)], now=engine.time))
+    engine.apply_command(
+        command("r1", 1, "gothrough", ["d_storage"], [(10.0, 5.0), (6.0, 5.0), (6.0, 3.0)], now=engine.time)
+    )
     closest = []
-    events = run_until(engine, lambda ev: kinds(ev, "action_done"), limit=200, on_step=lambda: (
-        closest.append(gap_distance(engine, "d_storage", "r1")) if not engine.doors.passable("d_storage") else None,
-        engine.doors.human_open("d_storage", engine.time) if engine.robots["r1"].state == "waiting_at_door" else None,
-    ))
+    events = run_until(
+        engine,
+        lambda ev: kinds(ev, "action_done"),
+        limit=200,
+        on_step=lambda: (
+            closest.append(gap_distance(engine, "d_storage", "r1")) if not engine.doors.passable("d_storage") else None,
+            engine.doors.human_open("d_storage", engine.time)
+            if engine.robots["r1"].state == "waiting_at_door"
+            else None,
+        ),
+    )
     assert kinds(events, "door_closed") and kinds(events, "waiting_at_door")
     assert min(closest) >= RADIUS + 0.05
 
@@ -115,8 +132,11 @@ def test_automatic_door_opens_ahead_of_a_robot_on_its_way(engine):
     # Asked 1.75 m ahead, the door has swung open before the robot gets there: no stop.
     engine.apply_command(command("r0", 1, "gothrough", ["d_office"], [(1.0, 5.0), (3.0, 5.0), (3.0, 7.0)]))
     crossed = []
-    events = run_until(engine, lambda ev: kinds(ev, "action_done"), on_step=lambda: (
-        crossed.append(engine.time) if engine.robots["r0"].y > 6.0 - RADIUS and not crossed else None))
+    events = run_until(
+        engine,
+        lambda ev: kinds(ev, "action_done"),
+        on_step=lambda: crossed.append(engine.time) if engine.robots["r0"].y > 6.0 - RADIUS and not crossed else None,
+    )
     opened = kinds(events, "door_opened")[0]
     assert crossed[0] > opened.time  # its disc reached the door line only once the door was open
     assert not kinds(events, "waiting_at_door")
@@ -141,7 +161,9 @@ def test_human_door_stays_open_while_the_doorway_is_occupied(engine):
     events = run_until(engine, lambda ev: kinds(ev, "door_opened"))
     opened_at = kinds(events, "door_opened")[0].time
     # r1 parks in the doorway for a while.
-    engine.apply_command(command("r1", 1, "approach", ["d_storage"], [(10.0, 5.0), (6.0, 5.0), (6.0, 4.0)], now=engine.time))
+    engine.apply_command(
+        command("r1", 1, "approach", ["d_storage"], [(10.0, 5.0), (6.0, 5.0), (6.0, 4.0)], now=engine.time)
+    )
     run_until(engine, lambda ev: kinds(ev, "action_done"))
     events = run_until(engine, lambda ev: engine.time >= opened_at + 40.0)
     assert not kinds(events, "door_closed")  # hold time long over, but the doorway is not clear
@@ -164,8 +186,11 @@ def test_load_and_unload_take_load_time_and_the_object_rides_along(engine):
     load_time = engine.site.params.load_time
     engine.apply_command(command("r1", 1, "load", ["o1"], [(10.0, 5.0), (10.8, 5.0)], duration=load_time))
     started = []
-    events = run_until(engine, lambda ev: kinds(ev, "action_done"), on_step=lambda: (
-        started.append(engine.time) if engine.robots["r1"].state == "loading" and not started else None))
+    events = run_until(
+        engine,
+        lambda ev: kinds(ev, "action_done"),
+        on_step=lambda: started.append(engine.time) if engine.robots["r1"].state == "loading" and not started else None,
+    )
     loaded = kinds(events, "loaded")[0]
     assert loaded.object == "o1" and loaded.robot == "r1"
     assert loaded.time - (started[0] - engine.config.tick) == pytest.approx(load_time, abs=engine.config.tick + 1e-9)
@@ -176,7 +201,9 @@ def test_load_and_unload_take_load_time_and_the_object_rides_along(engine):
     engine.apply_command(command("r1", 2, "gothrough", ["d_storage"], path, now=engine.time))
     run_until(engine, lambda ev: kinds(ev, "action_done"))
     r1 = engine.robots["r1"]
-    engine.apply_command(command("r1", 3, "unload", ["o1"], [(r1.x, r1.y), (5.5, 2.0)], now=engine.time, duration=load_time))
+    engine.apply_command(
+        command("r1", 3, "unload", ["o1"], [(r1.x, r1.y), (5.5, 2.0)], now=engine.time, duration=load_time)
+    )
     events = run_until(engine, lambda ev: kinds(ev, "action_done"))
     delivered = kinds(events, "delivered")[0]
     assert delivered.object == "o1"
@@ -248,7 +275,9 @@ def test_a_leaf_never_closes_onto_a_robot_in_its_sweep(engine):
     # d_storage swings into the storage room; r1 parks there 0.6 m from the door, within the leaf's reach.
     engine.doors.human_open("d_storage", 0.0)
     run_until(engine, lambda ev: engine.doors.passable("d_storage"))
-    engine.apply_command(command("r1", 1, "gothrough", ["d_storage"], [(10.0, 5.0), (6.0, 5.0), (6.0, 3.4)], now=engine.time))
+    engine.apply_command(
+        command("r1", 1, "gothrough", ["d_storage"], [(10.0, 5.0), (6.0, 5.0), (6.0, 3.4)], now=engine.time)
+    )
     events = run_until(engine, lambda ev: engine.time >= 60.0)
     assert kinds(events, "action_done") and not kinds(events, "door_closed")  # hold long over, robot in the sweep
     engine.apply_command(command("r1", 2, "approach", ["d_storage"], [(6.0, 3.4), (7.0, 1.5)], now=engine.time))

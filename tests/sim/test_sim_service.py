@@ -70,8 +70,26 @@ def test_two_seeded_lockstep_runs_give_identical_event_logs(router, client, spaw
             poses = watcher.collect(watcher.keys.robot_pose(), RobotPose)
             out = tmp_path / f"events{run}.jsonl"
             metrics = tmp_path / f"metrics{run}.json"
-            sim = spawn(sim_argv(router, namespace, "--mode", "lockstep", "--seed", "5", "--method", "arroch", "--human-config", str(human),
-                                 "--until-done", "--events-out", str(out), "--metrics-out", str(metrics)), name=f"sim{run}")
+            sim = spawn(
+                sim_argv(
+                    router,
+                    namespace,
+                    "--mode",
+                    "lockstep",
+                    "--seed",
+                    "5",
+                    "--method",
+                    "arroch",
+                    "--human-config",
+                    str(human),
+                    "--until-done",
+                    "--events-out",
+                    str(out),
+                    "--metrics-out",
+                    str(metrics),
+                ),
+                name=f"sim{run}",
+            )
             sim.wait_for("up on namespace")
             if run == 0:
                 # No planner yet: lockstep time must not move.
@@ -89,7 +107,10 @@ def test_two_seeded_lockstep_runs_give_identical_event_logs(router, client, spaw
             st = drain(statuses)
             assert any(x.state == "waiting_at_door" and x.waiting_door == "d_storage" for x in st)
             assert any(x.state == "unloading" and x.carrying for x in st)
-            assert max(x.world_version for x in st) == json.loads(out.read_text().splitlines()[-1])["data"]["world_versions"]
+            assert (
+                max(x.world_version for x in st)
+                == json.loads(out.read_text().splitlines()[-1])["data"]["world_versions"]
+            )
             ds = drain(doors)
             assert any(d.door == "d_storage" and d.open and d.by == "human" and d.until > d.stamp for d in ds)
             ps = drain(poses)
@@ -105,12 +126,18 @@ def test_two_seeded_lockstep_runs_give_identical_event_logs(router, client, spaw
     assert kinds.count("delivered") == 9 and kinds[-1] == "mission_done"
     assert "waiting_at_door" in kinds and "human_opens_door" in kinds and "human_done" in kinds
     # Feedback really went over Zenoh to the (stand-in) restrictor, and was acknowledged.
-    assert feedback[0] and all(kind == "door_unavailable" and set(p) == {"door", "minutes"} for kind, p, _src in feedback[0])
+    assert feedback[0] and all(
+        kind == "door_unavailable" and set(p) == {"door", "minutes"} for kind, p, _src in feedback[0]
+    )
     assert [(k, p) for k, p, _ in feedback[0]] == [(k, p) for k, p, _ in feedback[1]]
     assert kinds.count("feedback_sent") == len(feedback[0]) == m["feedback"]["accepted"]
     # What went over the wire is what was logged, and mission_done carries the metrics.
     assert [(e.kind, e.stamp) for e in wire[1]] == [(e["kind"], e["time"]) for e in events]
-    assert wire[1][-1].data["team_completion_time"] == events[-1]["data"]["team_completion_time"] == m["team_completion_time"]
+    assert (
+        wire[1][-1].data["team_completion_time"]
+        == events[-1]["data"]["team_completion_time"]
+        == m["team_completion_time"]
+    )
     assert m["run"]["realtime_factor"] > 1.0
 
 
@@ -118,12 +145,30 @@ def test_human_feedback_reaches_the_real_restrictor(router, client, spawn, tmp_p
     site = load_site(None)
     human = tmp_path / "human.toml"
     # One focus interval, always declared: the restrictor must get exactly one door_unavailable.
-    human.write_text("[human]\ntask_mean = 240.0\ntask_std = 0.0\nfocus_count = 1\nfocus_min_minutes = 2\nfocus_max_minutes = 2\ndeclare_probability = 1.0\n")
+    human.write_text(
+        "[human]\ntask_mean = 240.0\ntask_std = 0.0\nfocus_count = 1\nfocus_min_minutes = 2\nfocus_max_minutes = 2\ndeclare_probability = 1.0\n"
+    )
     namespace = client.keys.site
     sets = client.collect(client.keys.constraints(), ConstraintSet)
     events = client.collect(client.keys.event(), Event)
-    spawn(arroch("restrictor", "--connect", router, "--namespace", namespace, "--clock", "sim", "--state-dir", str(tmp_path / "state")), name="restrictor").wait_for("up on namespace")
-    sim = spawn(sim_argv(router, namespace, "--mode", "lockstep", "--seed", "2", "--human-config", str(human), "--until-done"), name="sim")
+    spawn(
+        arroch(
+            "restrictor",
+            "--connect",
+            router,
+            "--namespace",
+            namespace,
+            "--clock",
+            "sim",
+            "--state-dir",
+            str(tmp_path / "state"),
+        ),
+        name="restrictor",
+    ).wait_for("up on namespace")
+    sim = spawn(
+        sim_argv(router, namespace, "--mode", "lockstep", "--seed", "2", "--human-config", str(human), "--until-done"),
+        name="sim",
+    )
     sim.wait_for("up on namespace")
     with Running(StandInPlanner(site, namespace, router, restrictor=False)):
         assert sim.popen.wait(60) == 0, sim.output
@@ -147,7 +192,17 @@ def test_bad_input_is_refused_counted_and_survived_then_sigterm_exits_cleanly(ro
     key = client.keys.robot_command("r0")
     client.session.put(key, b"\x93not msgpack at all")
     client.session.put(key, encode(Event(kind="oops")))
-    client.publish(key, RobotCommand(robot="r0", plan_id=1, action_id=1, action="approach", args=["d_nowhere"], trajectory=[[0, 1.5, 5.0, 0.0], [1, 2.0, 5.0, 0.0]]))
+    client.publish(
+        key,
+        RobotCommand(
+            robot="r0",
+            plan_id=1,
+            action_id=1,
+            action="approach",
+            args=["d_nowhere"],
+            trajectory=[[0, 1.5, 5.0, 0.0], [1, 2.0, 5.0, 0.0]],
+        ),
+    )
     failed = wait_for_message(events, lambda e: e.kind == "action_failed", timeout=10)
     assert failed.robot == "r0" and "d_nowhere" in failed.data["reason"] and failed.data["action_id"] == 1
     status = wait_for_message(statuses, lambda s: s.robot == "r0" and s.state == "failed", timeout=10)
@@ -205,7 +260,18 @@ def test_bad_configuration_exits_2_before_any_session(args, message, spawn):
 def test_help(spawn):
     proc = spawn(arroch("sim", "--help"), name="help")
     assert proc.popen.wait(20) == 0
-    for option in ("--method", "--mode", "--rate", "--seed", "--door-probability", "--human-config", "--until-done", "--camera", "--events-out", "--metrics-out"):
+    for option in (
+        "--method",
+        "--mode",
+        "--rate",
+        "--seed",
+        "--door-probability",
+        "--human-config",
+        "--until-done",
+        "--camera",
+        "--events-out",
+        "--metrics-out",
+    ):
         assert option in proc.output
 
 
@@ -215,22 +281,57 @@ def test_feedback_nobody_acknowledges_ends_lockstep_loudly_as_failed(router, cli
     waits, and past --lockstep-abort it fails (exit code 3, an ERROR line, no metrics)."""
     site = load_site(None)
     human = tmp_path / "human.toml"
-    human.write_text("[human]\ntask_mean = 400.0\ntask_std = 0.0\nfocus_count = 1\ndeclare_probability = 1.0\nfeedback_timeout = 0.3\nfeedback_retries = 1\n")
+    human.write_text(
+        "[human]\ntask_mean = 400.0\ntask_std = 0.0\nfocus_count = 1\ndeclare_probability = 1.0\nfeedback_timeout = 0.3\nfeedback_retries = 1\n"
+    )
     metrics = tmp_path / "m.json"
-    sim = spawn(sim_argv(router, client.keys.site, "--mode", "lockstep", "--method", "arroch", "--human-config", str(human),
-                         "--until-done", "--metrics-out", str(metrics), "--lockstep-abort", "2"), name="sim")
+    sim = spawn(
+        sim_argv(
+            router,
+            client.keys.site,
+            "--mode",
+            "lockstep",
+            "--method",
+            "arroch",
+            "--human-config",
+            str(human),
+            "--until-done",
+            "--metrics-out",
+            str(metrics),
+            "--lockstep-abort",
+            "2",
+        ),
+        name="sim",
+    )
     sim.wait_for("up on namespace")
     with Running(StandInPlanner(site, client.keys.site, router, restrictor=False)):  # and no restrictor at all
         assert sim.popen.wait(60) == 3, sim.output
     assert "lockstep aborted" in sim.output and "no ack of the human's feedback door_unavailable" in sim.output
-    assert "no ack for feedback" not in sim.output  # it kept trying (every 0.3 s) rather than giving up after 2 attempts
+    assert (
+        "no ack for feedback" not in sim.output
+    )  # it kept trying (every 0.3 s) rather than giving up after 2 attempts
     assert not metrics.exists()
 
 
 @pytest.mark.parametrize("method", ["no-feedback", "no-comm"])
 def test_baselines_complete_without_feedback(router, client, spawn, tmp_path, method):
     metrics = tmp_path / "m.json"
-    sim = spawn(sim_argv(router, client.keys.site, "--mode", "lockstep", "--method", method, "--seed", "4", "--until-done", "--metrics-out", str(metrics)), name="sim")
+    sim = spawn(
+        sim_argv(
+            router,
+            client.keys.site,
+            "--mode",
+            "lockstep",
+            "--method",
+            method,
+            "--seed",
+            "4",
+            "--until-done",
+            "--metrics-out",
+            str(metrics),
+        ),
+        name="sim",
+    )
     sim.wait_for("up on namespace")
     with Running(StandInPlanner(load_site(None), client.keys.site, router)) as planner:
         assert sim.popen.wait(60) == 0, sim.output
@@ -248,7 +349,23 @@ def test_tablet_camera_publishes_frames_and_their_truth(router, client, spawn):
 
     frames = client.collect(client.keys.camera_frame("tab"), CameraFrame)
     truths = client.collect(client.keys.camera_truth("tab"), CameraTruth)
-    sim = spawn(sim_argv(router, client.keys.site, "--rate", "5", "--camera", "tablet", "--camera-id", "tab", "--camera-rate", "4", "--camera-size", "320x240"), name="sim")
+    sim = spawn(
+        sim_argv(
+            router,
+            client.keys.site,
+            "--rate",
+            "5",
+            "--camera",
+            "tablet",
+            "--camera-id",
+            "tab",
+            "--camera-rate",
+            "4",
+            "--camera-size",
+            "320x240",
+        ),
+        name="sim",
+    )
     first = wait_for_message(frames, timeout=30)
     time.sleep(1.5)
     got = [first, *drain(frames)]
@@ -270,7 +387,21 @@ def test_tablet_camera_publishes_frames_and_their_truth(router, client, spawn):
 
 def test_snapshot_subcommand_is_wired(spawn, tmp_path):
     out, truth = tmp_path / "f.png", tmp_path / "t.json"
-    proc = spawn(arroch("sim", "snapshot", "--camera", "9,1.5,1.3,120,0", "--size", "320x240", "--out", str(out), "--truth", str(truth)), name="snapshot")
+    proc = spawn(
+        arroch(
+            "sim",
+            "snapshot",
+            "--camera",
+            "9,1.5,1.3,120,0",
+            "--size",
+            "320x240",
+            "--out",
+            str(out),
+            "--truth",
+            str(truth),
+        ),
+        name="snapshot",
+    )
     assert proc.popen.wait(60) == 0, proc.output
     assert out.stat().st_size > 1000
     assert json.loads(truth.read_text())["position"] == [9.0, 1.5, 1.3]

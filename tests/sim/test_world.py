@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -73,7 +73,9 @@ def test_openings_are_cut_to_their_width(world: World, site: Site) -> None:
             assert world.ray(*_across(site, oid, offset)) is None, f"{oid} blocked at {offset:+.2f} m"
         for offset in (-half - 0.03, half + 0.03):
             hit = world.ray(*_across(site, oid, offset))
-            assert hit is not None and hit.startswith("wall:"), f"{oid}: nothing beside the gap at {offset:+.2f} m ({hit})"
+            assert hit is not None and hit.startswith("wall:"), (
+                f"{oid}: nothing beside the gap at {offset:+.2f} m ({hit})"
+            )
 
 
 def test_a_closed_leaf_fills_its_doorway_and_an_open_one_clears_it(world: World, site: Site) -> None:
@@ -94,7 +96,9 @@ def test_a_half_open_leaf_turns_about_its_hinge(world: World, site: Site) -> Non
     world.set_door_opening("d_storage", 0.5)
     (cx, cy, _), orn = world.pose_of("d_storage")
     yaw = 2.0 * math.atan2(orn[2], orn[3])
-    mid = leaf.closed_yaw + 0.5 * math.atan2(math.sin(leaf.open_yaw - leaf.closed_yaw), math.cos(leaf.open_yaw - leaf.closed_yaw))
+    mid = leaf.closed_yaw + 0.5 * math.atan2(
+        math.sin(leaf.open_yaw - leaf.closed_yaw), math.cos(leaf.open_yaw - leaf.closed_yaw)
+    )
     assert math.cos(yaw - mid) == pytest.approx(1.0, abs=1e-9)
     # The leaf's near end is still at the hinge.
     assert cx - leaf.length / 2 * math.cos(yaw) == pytest.approx(leaf.hinge[0], abs=1e-9)
@@ -115,7 +119,11 @@ def test_landmark_quads_sit_on_the_site_corners(world: World, site: Site) -> Non
 
 
 def test_a_landmark_buried_in_a_wall_is_reported(caplog: pytest.LogCaptureFixture) -> None:
-    text = default_site_path().read_text(encoding="utf-8").replace("position = [6.44, 0.051, 1.25]", "position = [6.44, 0.03, 1.25]")
+    text = (
+        default_site_path()
+        .read_text(encoding="utf-8")
+        .replace("position = [6.44, 0.051, 1.25]", "position = [6.44, 0.03, 1.25]")
+    )
     buried = loads_site(text)
     with caplog.at_level(logging.WARNING, logger="services.sim.world"):
         World(buried).close()
@@ -145,7 +153,9 @@ def test_robots_wear_the_shared_palette(world: World, site: Site) -> None:
     """Seen from straight above, a robot's top (behind its heading bar) is its palette colour, the
     colour the AR overlay draws it in."""
     palette = robot_colors(site.robots)
-    assert {rid: list(rgb) for rid, rgb in palette.items()} == {rid: c[:3] for rid, c in overlay_colours(site.robots).items()}
+    assert {rid: list(rgb) for rid, rgb in palette.items()} == {
+        rid: c[:3] for rid, c in overlay_colours(site.robots).items()
+    }
     for rid, rgb in palette.items():
         world.set_robot_pose(rid, 8.5, 2.0, 0.0)
         image = world.render(CameraSpec((8.4, 2.0, 2.0), 0.0, math.radians(-89.0), 48, 48))

@@ -22,15 +22,26 @@ def run(*args: str) -> subprocess.CompletedProcess:
 def test_check_prints_a_summary() -> None:
     out = run("site", "check", str(default_site_path()))
     assert out.returncode == 0, out.stderr
-    for line in ("site office", "rooms (9)", "doors (6): d_storage (human-operated)", "passages (4)", "landmarks (33): tags 0-32",
-                 "robots (3): r0 in corridor", "objects (9)", "human: in storage"):
+    for line in (
+        "site office",
+        "rooms (9)",
+        "doors (6): d_storage (human-operated)",
+        "passages (4)",
+        "landmarks (33): tags 0-32",
+        "robots (3): r0 in corridor",
+        "objects (9)",
+        "human: in storage",
+    ):
         assert line in out.stdout
 
 
 def test_check_refuses_a_bad_file_with_the_reason() -> None:
     out = run("site", "check", str(BAD / "door_off_edge.toml"))
     assert out.returncode == 1
-    assert 'door_off_edge.toml: doors[1] (id "d_b"): center (6, 3.3) is not on an edge shared by rooms "c" and "b"' in out.stderr
+    assert (
+        'door_off_edge.toml: doors[1] (id "d_b"): center (6, 3.3) is not on an edge shared by rooms "c" and "b"'
+        in out.stderr
+    )
     assert out.stdout == ""
     missing = run("site", "check", "no/such/site.toml")
     assert missing.returncode == 1 and "site.toml: no such site file" in missing.stderr

@@ -31,17 +31,19 @@ def test_rooms_and_lookup(site: Site) -> None:
 def test_walls_merge_shared_edges_and_cut_openings(site: Site) -> None:
     got = sorted((w.a, w.b, w.box) for w in site.walls)
     h = 0.05
-    expected = sorted([
-        ((0.0, 0.0), (8.0, 0.0), (-h, -h, 8.0 + h, h)),  # a's and b's south edges, one wall
-        ((0.0, 3.0), (1.55, 3.0), (-h, 3.0 - h, 1.55, 3.0 + h)),  # up to d_ac's jamb (no extension into the gap)
-        ((2.45, 3.0), (5.5, 3.0), (2.45, 3.0 - h, 5.5, 3.0 + h)),  # between d_ac and d_b
-        ((6.5, 3.0), (8.0, 3.0), (6.5, 3.0 - h, 8.0 + h, 3.0 + h)),
-        ((0.0, 5.0), (8.0, 5.0), (-h, 5.0 - h, 8.0 + h, 5.0 + h)),
-        ((0.0, 0.0), (0.0, 5.0), (-h, -h, h, 5.0 + h)),  # a's and c's west edges, merged
-        ((4.0, 0.0), (4.0, 1.0), (4.0 - h, -h, 4.0 + h, 1.0)),  # a|b wall, below the passage
-        ((4.0, 2.0), (4.0, 3.0), (4.0 - h, 2.0, 4.0 + h, 3.0 + h)),  # above it
-        ((8.0, 0.0), (8.0, 5.0), (8.0 - h, -h, 8.0 + h, 5.0 + h)),
-    ])
+    expected = sorted(
+        [
+            ((0.0, 0.0), (8.0, 0.0), (-h, -h, 8.0 + h, h)),  # a's and b's south edges, one wall
+            ((0.0, 3.0), (1.55, 3.0), (-h, 3.0 - h, 1.55, 3.0 + h)),  # up to d_ac's jamb (no extension into the gap)
+            ((2.45, 3.0), (5.5, 3.0), (2.45, 3.0 - h, 5.5, 3.0 + h)),  # between d_ac and d_b
+            ((6.5, 3.0), (8.0, 3.0), (6.5, 3.0 - h, 8.0 + h, 3.0 + h)),
+            ((0.0, 5.0), (8.0, 5.0), (-h, 5.0 - h, 8.0 + h, 5.0 + h)),
+            ((0.0, 0.0), (0.0, 5.0), (-h, -h, h, 5.0 + h)),  # a's and c's west edges, merged
+            ((4.0, 0.0), (4.0, 1.0), (4.0 - h, -h, 4.0 + h, 1.0)),  # a|b wall, below the passage
+            ((4.0, 2.0), (4.0, 3.0), (4.0 - h, 2.0, 4.0 + h, 3.0 + h)),  # above it
+            ((8.0, 0.0), (8.0, 5.0), (8.0 - h, -h, 8.0 + h, 5.0 + h)),
+        ]
+    )
     assert len(got) == len(expected)
     for (ga, gb, gbox), (ea, eb, ebox) in zip(got, expected):
         assert ga == pytest.approx(ea) and gb == pytest.approx(eb) and gbox == pytest.approx(ebox)
@@ -92,12 +94,14 @@ def test_door_leaves(site: Site) -> None:
 def test_landmark_corners_tl_tr_br_bl_seen_from_the_front(site: Site) -> None:
     (lm,) = site.landmarks
     # On a's south wall, facing north: a viewer looking south has east (+x) on her left.
-    expected = np.array([
-        [1.08, 0.051, 1.38],  # TL
-        [0.92, 0.051, 1.38],  # TR
-        [0.92, 0.051, 1.22],  # BR
-        [1.08, 0.051, 1.22],  # BL
-    ])
+    expected = np.array(
+        [
+            [1.08, 0.051, 1.38],  # TL
+            [0.92, 0.051, 1.38],  # TR
+            [0.92, 0.051, 1.22],  # BR
+            [1.08, 0.051, 1.22],  # BL
+        ]
+    )
     np.testing.assert_allclose(lm.corners(), expected, atol=1e-12)
     np.testing.assert_allclose(lm.corners(printed=True)[0], [1.1, 0.051, 1.4], atol=1e-12)
     # The corner order is clockwise as seen from the front: (TR - TL) x (BL - TL) points at the viewer.

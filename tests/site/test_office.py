@@ -83,9 +83,15 @@ def test_every_room_robot_and_object_connects_on_the_inflated_grid(robots: int |
     from protocol.site import generate_site
 
     site = load_site() if robots is None else loads_site(generate_site(robots, seed=seed))
-    grid = site.occupancy_grid(resolution=0.05, open_doors=tuple(site.door_leaves), inflate=site.params.robot_radius + 0.05)
+    grid = site.occupancy_grid(
+        resolution=0.05, open_doors=tuple(site.door_leaves), inflate=site.params.robot_radius + 0.05
+    )
     _, labels = cv2.connectedComponents((~grid.occupied).astype(np.uint8), connectivity=8)
-    points = [r.center for r in site.rooms.values()] + [r.start[:2] for r in site.robots.values()] + [o.position for o in site.objects.values()]
+    points = (
+        [r.center for r in site.rooms.values()]
+        + [r.start[:2] for r in site.robots.values()]
+        + [o.position for o in site.objects.values()]
+    )
     found = {labels[grid.world_to_cell(x, y)] for x, y in points}
     assert 0 not in found, "a room centre, robot or object sits on an occupied cell"
     assert len(found) == 1, "the free space is split: some place cannot be reached"

@@ -31,11 +31,20 @@ EXPECTED: dict[str, tuple[str, tuple[str, ...]]] = {
     "bad_site_name": ("site", ("name", "cannot be a key namespace")),
     "tag_not_36h11": ("landmarks[0] (tag 600)", ("not in family 36h11",)),
     "overlapping_rooms": ('rooms[1] (id "b")', ('overlaps rooms[0] (id "a")',)),
-    "door_off_edge": ('doors[1] (id "d_b")', ('center (6, 3.3) is not on an edge shared by rooms "c" and "b"', "y = 3 for x in [4, 8]")),
+    "door_off_edge": (
+        'doors[1] (id "d_b")',
+        ('center (6, 3.3) is not on an edge shared by rooms "c" and "b"', "y = 3 for x in [4, 8]"),
+    ),
     "door_rooms_apart": ('doors[1] (id "d_b")', ('not on an edge shared by rooms "a" and "e"', "share no wall")),
-    "door_past_edge": ('doors[1] (id "d_b")', ("width 1 at center (7.7, 3) does not fit", "whole width must lie on it")),
+    "door_past_edge": (
+        'doors[1] (id "d_b")',
+        ("width 1 at center (7.7, 3) does not fit", "whole width must lie on it"),
+    ),
     "door_at_corner": ('doors[1] (id "d_b")', ("must stay 0.05 m (half a wall) from the ends of the shared edge",)),
-    "passage_off_edge": ('passages[0] (id "p_a_b")', ('not on an edge shared by rooms "a" and "b"', "x = 4 for y in [0, 3]")),
+    "passage_off_edge": (
+        'passages[0] (id "p_a_b")',
+        ('not on an edge shared by rooms "a" and "b"', "x = 4 for y in [0, 3]"),
+    ),
     "door_unknown_room": ('doors[1] (id "d_b")', ('unknown room "attic"',)),
     "door_too_narrow": ('doors[0] (id "d_ac")', ("width 0.45 is too narrow for a robot of radius 0.25",)),
     "openings_overlap": ('passages[1] (id "p_c_a")', ('overlaps or touches doors[0] (id "d_ac")',)),
@@ -101,10 +110,19 @@ def test_the_tiny_site_the_bad_files_derive_from_is_valid() -> None:
 @pytest.mark.parametrize(
     "text,expected",
     [
-        ('rooms = [1, 2]\n', "x.toml: rooms[0]: expected a table, got 1"),
-        ('[site]\nname = "x"\n[[rooms]]\nid = 5\nrect = [0, 0, 1, 1]\n', "x.toml: rooms[0]: id: expected a string, got 5"),
-        ('[site]\nname = "x"\n[[rooms]]\nid = "a"\nrect = [0, 0, "1", 1]\n', 'x.toml: rooms[0] (id "a"): rect[2]: expected a number, got "1"'),
-        ('[site]\nname = "x"\n[[rooms]]\nid = "a"\nrect = [0, 0, 1]\n', 'x.toml: rooms[0] (id "a"): rect: expected an array of 4 numbers [xmin, ymin, xmax, ymax], got an array [0, 0, 1]'),
+        ("rooms = [1, 2]\n", "x.toml: rooms[0]: expected a table, got 1"),
+        (
+            '[site]\nname = "x"\n[[rooms]]\nid = 5\nrect = [0, 0, 1, 1]\n',
+            "x.toml: rooms[0]: id: expected a string, got 5",
+        ),
+        (
+            '[site]\nname = "x"\n[[rooms]]\nid = "a"\nrect = [0, 0, "1", 1]\n',
+            'x.toml: rooms[0] (id "a"): rect[2]: expected a number, got "1"',
+        ),
+        (
+            '[site]\nname = "x"\n[[rooms]]\nid = "a"\nrect = [0, 0, 1]\n',
+            'x.toml: rooms[0] (id "a"): rect: expected an array of 4 numbers [xmin, ymin, xmax, ymax], got an array [0, 0, 1]',
+        ),
         ("site = 3\n", "x.toml: site: expected a table, got 3"),
     ],
 )

@@ -32,7 +32,9 @@ def _segments_hit_boxes(p: np.ndarray, q: np.ndarray, boxes: np.ndarray) -> np.n
     return (enter < leave).any(axis=1)
 
 
-def visible_matrix(site: Site, cameras: np.ndarray, yaws: np.ndarray, vfov_deg: float = 60.0, aspect: float = 4.0 / 3.0) -> np.ndarray:
+def visible_matrix(
+    site: Site, cameras: np.ndarray, yaws: np.ndarray, vfov_deg: float = 60.0, aspect: float = 4.0 / 3.0
+) -> np.ndarray:
     """(P, T) booleans: pose p sees landmark t, i.e. its four black-square corners are inside the image,
     it faces the camera and no wall or closed door leaf stands between them."""
     tan_v = math.tan(math.radians(vfov_deg) / 2.0)
@@ -64,7 +66,9 @@ def visible_tags(site: Site, camera: tuple[float, float, float], yaw: float) -> 
     return [site.landmarks[i].tag for i in np.nonzero(row)[0]]
 
 
-def tablet_poses(site: Site, room_id: str, min_wall_distance: float = 0.7, step: float = 0.1, height: float = 1.3) -> tuple[np.ndarray, np.ndarray]:
+def tablet_poses(
+    site: Site, room_id: str, min_wall_distance: float = 0.7, step: float = 0.1, height: float = 1.3
+) -> tuple[np.ndarray, np.ndarray]:
     """Cameras on a grid (boundaries included) at least ``min_wall_distance`` from the room's wall faces,
     each with the four yaws facing the walls: ``(cameras (P, 3), yaws (P,))``."""
     x0, y0, x1, y1 = site.rooms[room_id].rect

@@ -12,10 +12,11 @@ from __future__ import annotations
 import asyncio
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import aiohttp
 import cv2
@@ -77,7 +78,9 @@ def snapshots(n: int = 6, width: int = 640, height: int = 480) -> Snapshots:
     return Snapshots(frames, cameras)
 
 
-def snapshot_at(view: tuple[float, float, float, float, float], width: int = 640, height: int = 480) -> tuple[np.ndarray, CameraSpec]:
+def snapshot_at(
+    view: tuple[float, float, float, float, float], width: int = 640, height: int = 480
+) -> tuple[np.ndarray, CameraSpec]:
     """One RGB sim snapshot from ``view`` (X, Y, Z, YAW, PITCH as in ``arroch sim snapshot --camera``) and its camera."""
     camera = CameraSpec.from_degrees(*view, width, height, VFOV)
     with World(SITE) as world:
@@ -119,12 +122,31 @@ class Server:
     token: str
 
 
-def start_tablet(spawn: Callable[..., Proc], router: str, namespace: str, state_dir: Path, *extra: str, port: int | None = None) -> Server:
+def start_tablet(
+    spawn: Callable[..., Proc], router: str, namespace: str, state_dir: Path, *extra: str, port: int | None = None
+) -> Server:
     from protocol.transport import free_tcp_port
 
     port = port or free_tcp_port()
-    proc = spawn(arroch("tablet", "--namespace", namespace, "--connect", router, "--clock", "wall", "--host", "127.0.0.1",
-                        "--port", str(port), "--state-dir", str(state_dir), *extra), name="tablet")
+    proc = spawn(
+        arroch(
+            "tablet",
+            "--namespace",
+            namespace,
+            "--connect",
+            router,
+            "--clock",
+            "wall",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(port),
+            "--state-dir",
+            str(state_dir),
+            *extra,
+        ),
+        name="tablet",
+    )
     line = proc.wait_for("?token=", timeout=40)
     url = re.search(r"https://\S+", line).group(0)
     token = url.split("token=")[1].split("&")[0]

@@ -23,7 +23,11 @@ SUPERSAMPLE = 2
 
 
 def _rotation(ax: float, ay: float, az: float) -> np.ndarray:
-    return cv2.Rodrigues(np.array([ax, 0.0, 0.0]))[0] @ cv2.Rodrigues(np.array([0.0, ay, 0.0]))[0] @ cv2.Rodrigues(np.array([0.0, 0.0, az]))[0]
+    return (
+        cv2.Rodrigues(np.array([ax, 0.0, 0.0]))[0]
+        @ cv2.Rodrigues(np.array([0.0, ay, 0.0]))[0]
+        @ cv2.Rodrigues(np.array([0.0, 0.0, az]))[0]
+    )
 
 
 def _poses(n: int = 12, seed: int = 3) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -43,7 +47,13 @@ def _view(texture: np.ndarray, metres_per_px: float, R: np.ndarray, centre: np.n
     """The texture (a board lying on its z = 0 plane, its middle at ``centre``) as the true camera sees it."""
     th, tw = texture.shape[:2]
     # Texture pixel (u, v) → board point (X, Y, 0), the texture's centre at the board origin.
-    S = np.array([[metres_per_px, 0, (0.5 - tw / 2) * metres_per_px], [0, metres_per_px, (0.5 - th / 2) * metres_per_px], [0, 0, 1]])
+    S = np.array(
+        [
+            [metres_per_px, 0, (0.5 - tw / 2) * metres_per_px],
+            [0, metres_per_px, (0.5 - th / 2) * metres_per_px],
+            [0, 0, 1],
+        ]
+    )
     s = SUPERSAMPLE
     K = np.array([[TRUE.fx * s, 0, (TRUE.cx + 0.5) * s - 0.5], [0, TRUE.fy * s, (TRUE.cy + 0.5) * s - 0.5], [0, 0, 1]])
     H = K @ np.column_stack([R[:, 0], R[:, 1], centre]) @ S
@@ -76,7 +86,9 @@ def _write_views(folder, texture: np.ndarray, square: float) -> None:  # noqa: A
 @pytest.mark.parametrize("spec", ["chessboard:9x6:0.025", "charuco:7x5:0.04:0.03"])
 def test_recovers_the_true_intrinsics(spec, tmp_path):
     pattern = Pattern.parse(spec)
-    texture = _chessboard_texture(pattern.cols, pattern.rows) if pattern.kind == "chessboard" else _charuco_texture(pattern)
+    texture = (
+        _chessboard_texture(pattern.cols, pattern.rows) if pattern.kind == "chessboard" else _charuco_texture(pattern)
+    )
     _write_views(tmp_path, texture, pattern.square)
     result = calibrate(image_files(tmp_path), pattern)
     K = result.intrinsics
@@ -91,8 +103,22 @@ def test_recovers_the_true_intrinsics(spec, tmp_path):
 def test_command_writes_a_file_the_tablet_reads(tmp_path):
     _write_views(tmp_path / "images", _chessboard_texture(9, 6), 0.025)
     out = tmp_path / "intrinsics.json"
-    result = subprocess.run(arroch("ar", "calibrate", "--images", str(tmp_path / "images"), "--pattern", "chessboard:9x6:0.025",
-                                   "--out", str(out)), cwd=ROOT, capture_output=True, text=True, timeout=120)
+    result = subprocess.run(
+        arroch(
+            "ar",
+            "calibrate",
+            "--images",
+            str(tmp_path / "images"),
+            "--pattern",
+            "chessboard:9x6:0.025",
+            "--out",
+            str(out),
+        ),
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert result.returncode == 0, result.stderr
     assert "wrote" in result.stdout and "RMS" in result.stdout
     K = load_intrinsics(out)
@@ -111,7 +137,12 @@ def test_too_few_views_and_bad_input_exit_2(tmp_path):
         (["--images", str(images), "--pattern", "checkers:9x6"], "--pattern"),
         (["--images", str(images), "--pattern", "charuco:7x5:0.03:0.04"], "smaller than the square"),
     ):
-        result = subprocess.run(arroch("ar", "calibrate", *args, "--out", str(tmp_path / "K.json")), cwd=ROOT,
-                                capture_output=True, text=True, timeout=60)
+        result = subprocess.run(
+            arroch("ar", "calibrate", *args, "--out", str(tmp_path / "K.json")),
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
         assert result.returncode == 2 and message in result.stderr, (args, result.stderr)
     assert not (tmp_path / "K.json").exists()

@@ -30,8 +30,19 @@ from services.ar_client.overlay import AVATAR_HEIGHT, OverlayBuilder
 from services.sim.camera import CameraSpec, frame_message
 from tests.conftest import wait_for_message
 from tests.procs import arroch
-from tests.tablet.helpers import (ROBOT_XY, SITE, Snapshots, fake_camera, hfov_deg, insecure, run, snapshot_at, snapshots,
-                                  start_tablet, write_video)
+from tests.tablet.helpers import (
+    ROBOT_XY,
+    SITE,
+    Snapshots,
+    fake_camera,
+    hfov_deg,
+    insecure,
+    run,
+    snapshot_at,
+    snapshots,
+    start_tablet,
+    write_video,
+)
 
 pytestmark = pytest.mark.integration
 
@@ -57,7 +68,9 @@ def _screen(browser) -> np.ndarray:  # noqa: ANN001
 
 def _stage_box(browser, element: str, size: tuple[int, int]) -> tuple[float, float, float]:  # noqa: ANN001
     """(x, y, scale) of a ``size`` picture shown with object-fit: contain in ``element`` (viewport px)."""
-    rect = browser.evaluate(f"(() => {{ const r = document.getElementById('{element}').getBoundingClientRect(); return [r.x, r.y, r.width, r.height]; }})()")
+    rect = browser.evaluate(
+        f"(() => {{ const r = document.getElementById('{element}').getBoundingClientRect(); return [r.x, r.y, r.width, r.height]; }})()"
+    )
     x, y, bw, bh = rect
     s = min(bw / size[0], bh / size[1])
     return x + (bw - size[0] * s) / 2, y + (bh - size[1] * s) / 2, s
@@ -68,7 +81,7 @@ def _colour_hits(image: np.ndarray, points: np.ndarray, colour, radius: int = 3,
     hits = 0
     for u, v in points:
         u, v = int(round(u)), int(round(v))
-        patch = image[max(v - radius, 0):v + radius + 1, max(u - radius, 0):u + radius + 1].astype(int)
+        patch = image[max(v - radius, 0) : v + radius + 1, max(u - radius, 0) : u + radius + 1].astype(int)
         if patch.size and (np.abs(patch - np.array(colour)).max(axis=2) <= tolerance).any():
             hits += 1
     return hits / len(points)
@@ -102,7 +115,7 @@ def _avatar_rim() -> np.ndarray:
     return np.column_stack([x + r * np.cos(a), y + r * np.sin(a), np.full(len(a), AVATAR_HEIGHT)])
 
 
-def _feedback_spy(client) -> "queue.Queue[Feedback]":  # noqa: ANN001
+def _feedback_spy(client) -> queue.Queue[Feedback]:  # noqa: ANN001
     """Every Feedback query on Zenoh, seen by a queryable that never answers (the restrictor does)."""
     seen: queue.Queue = queue.Queue()
 
@@ -114,9 +127,23 @@ def _feedback_spy(client) -> "queue.Queue[Feedback]":  # noqa: ANN001
     return seen
 
 
-def test_ar_page_overlays_where_the_robot_is_and_feedback_round_trips(router, namespace, client, spawn, browser, tmp_path):
-    restrictor = spawn(arroch("restrictor", "--namespace", namespace, "--connect", router, "--clock", "wall",
-                              "--state-dir", str(tmp_path / "restrictor")), name="restrictor")
+def test_ar_page_overlays_where_the_robot_is_and_feedback_round_trips(
+    router, namespace, client, spawn, browser, tmp_path
+):
+    restrictor = spawn(
+        arroch(
+            "restrictor",
+            "--namespace",
+            namespace,
+            "--connect",
+            router,
+            "--clock",
+            "wall",
+            "--state-dir",
+            str(tmp_path / "restrictor"),
+        ),
+        name="restrictor",
+    )
     shots = snapshots()
     _assert_pictures_lack_the_robot(shots)
     video, intrinsics = fake_camera(tmp_path, shots)
@@ -129,8 +156,11 @@ def test_ar_page_overlays_where_the_robot_is_and_feedback_round_trips(router, na
 
     page = browser(fake_camera=video, window=(1280, 800))
     page.navigate(server.url)
-    state = page.wait_for("window.arroch && window.arroch.state().overlay && window.arroch.state().overlay.ok"
-                          " && window.arroch.state().overlay.primitives > 0 && window.arroch.state()", timeout=40)
+    state = page.wait_for(
+        "window.arroch && window.arroch.state().overlay && window.arroch.state().overlay.ok"
+        " && window.arroch.state().overlay.primitives > 0 && window.arroch.state()",
+        timeout=40,
+    )
     assert state["camera"] == "on" and state["video"] == [shots.intrinsics.width, shots.intrinsics.height]
     assert state["overlay"]["intrinsics"].startswith("calibrated")
     assert len(state["overlay"]["tags"]) >= 4 and state["overlay"]["rmse"] < 1.0
@@ -145,30 +175,41 @@ def test_ar_page_overlays_where_the_robot_is_and_feedback_round_trips(router, na
     truth = _drawn_through(image, shots, box)
     rim = _on_screen(_avatar_rim(), truth, box)
     assert _colour_hits(image, rim, COLOUR) >= 0.8, "the avatar's rim is not where the robot is"
-    far = _on_screen(np.array([[9.6, 0.06, 1.9], [7.0, 0.06, 1.9], [8.3, 0.06, 1.7]]), truth, box)  # wall above the tags
+    far = _on_screen(
+        np.array([[9.6, 0.06, 1.9], [7.0, 0.06, 1.9], [8.3, 0.06, 1.7]]), truth, box
+    )  # wall above the tags
     assert _colour_hits(image, far, COLOUR, radius=6) == 0.0
     shifted = rim + [np.ptp(rim[:, 0]) + 20.0, 0.0]  # beside the avatar, clear of it: the check must be able to fail
     assert _colour_hits(image, shifted, COLOUR, radius=2) < 0.2
 
     # A tap on "I can't open this door for a while" with 30 minutes: a Feedback on Zenoh, an ack on the page.
-    page.evaluate("(() => { const s = document.getElementById('param-door_unavailable-minutes'); s.value = '30';"
-                  " s.dispatchEvent(new Event('change')); })()")
+    page.evaluate(
+        "(() => { const s = document.getElementById('param-door_unavailable-minutes'); s.value = '30';"
+        " s.dispatchEvent(new Event('change')); })()"
+    )
     page.click(*page.center_of("#send-door_unavailable"))
     sent = feedback_seen.get(timeout=15)
     assert sent.kind == "door_unavailable" and sent.params == {"door": "d_storage", "minutes": 30}
     ack = wait_for_message(acks, lambda a: a.to == sent.src and a.feedback_seq == sent.seq, timeout=15)
     assert ack.accepted and ack.constraint_id
-    shown = page.wait_for("(() => { const t = document.getElementById('result-door_unavailable').textContent;"
-                          " return t.startsWith('accepted') && t; })()", timeout=15)
+    shown = page.wait_for(
+        "(() => { const t = document.getElementById('result-door_unavailable').textContent;"
+        " return t.startsWith('accepted') && t; })()",
+        timeout=15,
+    )
     assert ack.constraint_id in shown
     # The live set reaches the page: the new constraint is listed and becomes the cancel choice.
-    page.wait_for(f"document.getElementById('active-constraints').textContent.includes('{ack.constraint_id}')", timeout=10)
+    page.wait_for(
+        f"document.getElementById('active-constraints').textContent.includes('{ack.constraint_id}')", timeout=10
+    )
     assert page.evaluate("document.getElementById('param-cancel-constraint_id').value") == ack.constraint_id
 
     # A wrong token: the page is refused (403), and so is the WebSocket.
     bad = server.url.replace(server.token, "x" * len(server.token))
     page.navigate(bad)
-    assert "wrong access token" in page.wait_for("document.body && document.body.innerText.startsWith('403') && document.body.innerText", timeout=10)
+    assert "wrong access token" in page.wait_for(
+        "document.body && document.body.innerText.startsWith('403') && document.body.innerText", timeout=10
+    )
 
     async def refused_socket() -> int:
         async with aiohttp.ClientSession(connector=insecure()) as http:
@@ -205,9 +246,12 @@ def test_viewer_mode_shows_the_sim_stream_with_overlay_and_the_map(router, names
     try:
         page = browser(window=(1280, 800))  # no camera at all
         page.navigate(server.url)
-        state = page.wait_for("window.arroch && window.arroch.state().stream_frames > 2 && window.arroch.state().overlay"
-                              " && window.arroch.state().overlay.ok && window.arroch.state().overlay.primitives > 0"
-                              " && window.arroch.state()", timeout=40)
+        state = page.wait_for(
+            "window.arroch && window.arroch.state().stream_frames > 2 && window.arroch.state().overlay"
+            " && window.arroch.state().overlay.ok && window.arroch.state().overlay.primitives > 0"
+            " && window.arroch.state()",
+            timeout=40,
+        )
         assert state["mode"] == "viewer" and state["camera"] == "off" and state["robots"] == [ROBOT]
         time.sleep(0.3)
         image = _screen(page)
@@ -215,7 +259,9 @@ def test_viewer_mode_shows_the_sim_stream_with_overlay_and_the_map(router, names
         box = _stage_box(page, "stage", (shots.intrinsics.width, shots.intrinsics.height))
         assert _colour_hits(image, _on_screen(_avatar_rim(), _drawn_through(image, shots, box), box), COLOUR) >= 0.8
         # The map: the robot's disc at its position (the page's map transform: fit the site's bounds, 16 px margin).
-        mx, my, mw, mh = page.evaluate("(() => { const r = document.getElementById('map').getBoundingClientRect(); return [r.x, r.y, r.width, r.height]; })()")
+        mx, my, mw, mh = page.evaluate(
+            "(() => { const r = document.getElementById('map').getBoundingClientRect(); return [r.x, r.y, r.width, r.height]; })()"
+        )
         bx0, by0, bx1, by1 = SITE.bounds
         ms = min((mw - 32) / (bx1 - bx0), (mh - 32) / (by1 - by0))
         ox, oy = (mw - (bx1 - bx0) * ms) / 2, (mh - (by1 - by0) * ms) / 2
@@ -245,7 +291,7 @@ def test_no_tags_in_view_means_lost_and_nothing_drawn(router, namespace, client,
     assert pose.startswith("LOST (no pose yet)"), pose
     image = _screen(page)
     x0, y0, s = _stage_box(page, "stage", (camera.width, camera.height))
-    stage = image[int(y0):int(y0 + camera.height * s), int(x0):int(x0 + camera.width * s)].astype(int)
+    stage = image[int(y0) : int(y0 + camera.height * s), int(x0) : int(x0 + camera.width * s)].astype(int)
     assert not (np.abs(stage - np.array(COLOUR)).max(axis=2) <= 45).any()
 
 

@@ -77,15 +77,25 @@ def test_token_origin_and_headers(router, namespace, spawn, tmp_path):
     async def check() -> None:
         # unsafe=True: keep cookies of an IP-address host, as a browser does.
         async with aiohttp.ClientSession(connector=insecure(), cookie_jar=aiohttp.CookieJar(unsafe=True)) as http:
-            for url in (f"{server.base}/", f"{server.base}/?token=wrong", f"{server.base}/static/app.js", f"{server.base}/ca.pem"):
+            for url in (
+                f"{server.base}/",
+                f"{server.base}/?token=wrong",
+                f"{server.base}/static/app.js",
+                f"{server.base}/ca.pem",
+            ):
                 async with http.get(url) as r:
                     assert r.status == 403, url
             async with http.get(f"{server.base}/?token={server.token}") as r:
-                assert r.status == 200 and "<canvas id=\"overlay\">" in await r.text()
+                assert r.status == 200 and '<canvas id="overlay">' in await r.text()
                 assert "script-src 'self'" in r.headers["Content-Security-Policy"]
                 assert r.headers["Referrer-Policy"] == "no-referrer" and r.headers["Cache-Control"] == "no-store"
                 cookie = r.cookies["arroch_tablet"]
-                assert cookie.value == server.token and cookie["httponly"] and cookie["secure"] and cookie["samesite"] == "Strict"
+                assert (
+                    cookie.value == server.token
+                    and cookie["httponly"]
+                    and cookie["secure"]
+                    and cookie["samesite"] == "Strict"
+                )
             # The cookie now opens the assets (as for the page's own script tags), but not other files.
             async with http.get(f"{server.base}/static/app.js") as r:
                 assert r.status == 200 and r.headers["Content-Type"].startswith("text/javascript")
@@ -101,7 +111,12 @@ def test_token_origin_and_headers(router, namespace, spawn, tmp_path):
                 assert err.value.status == 403
             ws, hello = await _open(http, server.base, server.token)
             assert hello["mode"] == "ar" and hello["max_fps"] == 15 and hello["site"]["name"] == "office"
-            assert {e["id"] for e in hello["library"]} >= {"door_unavailable", "forbid_room", "door_available_now", "cancel"}
+            assert {e["id"] for e in hello["library"]} >= {
+                "door_unavailable",
+                "forbid_room",
+                "door_available_now",
+                "cancel",
+            }
             await ws.close()
 
     run(check())
@@ -117,12 +132,24 @@ def _bad_messages() -> list[tuple[str, object, int | tuple[int, ...]]]:
         ("huge picture", wire.pack_frame(2, huge_sof), wire.CLOSE_TOO_BIG),
         # The server closes as soon as the announced length is too big, before reading the rest: the
         # sender, still writing, may see the close frame (1009) or only the dropped connection (1006).
-        ("oversized message", wire.pack_frame(3, b"\xff\xd8" + b"\0" * (wire.MAX_FRAME_BYTES + 1024)), (wire.CLOSE_TOO_BIG, 1006)),
+        (
+            "oversized message",
+            wire.pack_frame(3, b"\xff\xd8" + b"\0" * (wire.MAX_FRAME_BYTES + 1024)),
+            (wire.CLOSE_TOO_BIG, 1006),
+        ),
         ("malformed JSON", "{not json", wire.CLOSE_BAD_DATA),
         ("JSON not an object", "[1, 2, 3]", wire.CLOSE_POLICY),
         ("unknown type", json.dumps({"type": "launch_missiles"}), wire.CLOSE_POLICY),
-        ("feedback with a nested value", json.dumps({"type": "feedback", "id": 1, "kind": "forbid_room", "params": {"room": {"x": 1}}}), wire.CLOSE_POLICY),
-        ("feedback without an id", json.dumps({"type": "feedback", "kind": "forbid_room", "params": {}}), wire.CLOSE_POLICY),
+        (
+            "feedback with a nested value",
+            json.dumps({"type": "feedback", "id": 1, "kind": "forbid_room", "params": {"room": {"x": 1}}}),
+            wire.CLOSE_POLICY,
+        ),
+        (
+            "feedback without an id",
+            json.dumps({"type": "feedback", "kind": "forbid_room", "params": {}}),
+            wire.CLOSE_POLICY,
+        ),
         ("ping flood", [json.dumps({"type": "ping", "t": k}) for k in range(400)], wire.CLOSE_POLICY),
     ]
 
@@ -159,8 +186,20 @@ def test_garbage_disconnects_only_its_sender(router, namespace, spawn, tmp_path)
 
 
 def test_a_refusal_and_its_reason_reach_the_client(router, namespace, spawn, tmp_path):
-    restrictor = spawn(arroch("restrictor", "--namespace", namespace, "--connect", router, "--clock", "wall",
-                              "--state-dir", str(tmp_path / "restrictor")), name="restrictor")
+    restrictor = spawn(
+        arroch(
+            "restrictor",
+            "--namespace",
+            namespace,
+            "--connect",
+            router,
+            "--clock",
+            "wall",
+            "--state-dir",
+            str(tmp_path / "restrictor"),
+        ),
+        name="restrictor",
+    )
     server = start_tablet(spawn, router, namespace, tmp_path / "state", "--no-qr")
     restrictor.wait_for("up on namespace", timeout=30)
 
@@ -168,10 +207,18 @@ def test_a_refusal_and_its_reason_reach_the_client(router, namespace, spawn, tmp
         async with aiohttp.ClientSession(connector=insecure()) as http:
             ws, _ = await _open(http, server.base, server.token, mode="viewer")
             inbox = _Inbox(ws)
-            await ws.send_str(json.dumps({"type": "feedback", "id": 7, "kind": "forbid_room", "params": {"room": "ballroom", "minutes": 5}}))
+            await ws.send_str(
+                json.dumps(
+                    {"type": "feedback", "id": 7, "kind": "forbid_room", "params": {"room": "ballroom", "minutes": 5}}
+                )
+            )
             ack = await inbox.next("ack")
             assert ack["id"] == 7 and ack["status"] == "refused" and "ballroom" in ack["reason"]
-            await ws.send_str(json.dumps({"type": "feedback", "id": 8, "kind": "forbid_room", "params": {"room": "lab", "minutes": 5}}))
+            await ws.send_str(
+                json.dumps(
+                    {"type": "feedback", "id": 8, "kind": "forbid_room", "params": {"room": "lab", "minutes": 5}}
+                )
+            )
             ack = await inbox.next("ack")
             assert ack["id"] == 8 and ack["status"] == "accepted" and ack["constraint_id"]
             update = await inbox.next("constraints")
@@ -206,19 +253,26 @@ def test_certificate_reused_token_fresh_clean_exit(router, namespace, spawn, tmp
     assert second.proc.popen.wait(10) == 0
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--intrinsics", "/nonexistent/intrinsics.json"], "nonexistent"),
-    (["--camera-source", "webcam"], "--camera-source"),
-    (["--camera-source", "sim:bad/id"], "cannot be used in a key"),
-    (["--fov", "300"], "--fov"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--intrinsics", "/nonexistent/intrinsics.json"], "nonexistent"),
+        (["--camera-source", "webcam"], "--camera-source"),
+        (["--camera-source", "sim:bad/id"], "cannot be used in a key"),
+        (["--fov", "300"], "--fov"),
+    ],
+)
 def test_bad_configuration_exits_2(args, message, tmp_path):
-    result = subprocess.run(arroch("tablet", "--state-dir", str(tmp_path), *args), cwd=ROOT, capture_output=True, text=True, timeout=60)
+    result = subprocess.run(
+        arroch("tablet", "--state-dir", str(tmp_path), *args), cwd=ROOT, capture_output=True, text=True, timeout=60
+    )
     assert result.returncode == 2 and message in result.stderr, result.stderr
 
 
 def test_help_documents_the_commands():
     out = subprocess.run(arroch("tablet", "--help"), cwd=ROOT, capture_output=True, text=True, timeout=60).stdout
     assert "--camera-source" in out and "--intrinsics" in out and "--site" in out
-    out = subprocess.run(arroch("ar", "calibrate", "--help"), cwd=ROOT, capture_output=True, text=True, timeout=60).stdout
+    out = subprocess.run(
+        arroch("ar", "calibrate", "--help"), cwd=ROOT, capture_output=True, text=True, timeout=60
+    ).stdout
     assert "chessboard:COLSxROWS:SQUARE" in out

@@ -9,8 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
-from protocol.messages import Overlay, Primitive
 from protocol.frames import look_at
+from protocol.messages import Overlay, Primitive
 from services.ar_client.project import Intrinsics, Projector
 from services.ar_client.web import wire
 from services.ar_client.web.intrinsics import CameraModel, default_intrinsics, load_intrinsics, scaled, write_intrinsics
@@ -26,7 +26,17 @@ def test_jpeg_size_reads_the_header_of_real_jpegs(size, progressive):
     assert wire.jpeg_size(data) == size
 
 
-@pytest.mark.parametrize("data", [b"", b"\xff\xd8", b"GIF89a....", b"\xff\xd8\xff\xe0\x00\x01", b"\xff\xd8\x00\x00\x00\x00", b"\xff\xd8\xff\xda\x00\x08abcdef"])
+@pytest.mark.parametrize(
+    "data",
+    [
+        b"",
+        b"\xff\xd8",
+        b"GIF89a....",
+        b"\xff\xd8\xff\xe0\x00\x01",
+        b"\xff\xd8\x00\x00\x00\x00",
+        b"\xff\xd8\xff\xda\x00\x08abcdef",
+    ],
+)
 def test_jpeg_size_refuses_what_is_not_a_jpeg_header(data):
     with pytest.raises(Violation) as err:
         wire.jpeg_size(data)
@@ -39,9 +49,13 @@ def test_frames_are_bounded_before_decoding():
     assert (frame.seq, frame.width, frame.height, frame.jpeg) == (7, 640, 480, ok)
     huge = bytes.fromhex("ffd8ffc0000b08ea60ea6001011100")  # claims 60000x60000 in 15 bytes
     tiny = cv2.imencode(".jpg", np.zeros((8, 8, 3), np.uint8))[1].tobytes()
-    for payload, code in ((wire.pack_frame(1, huge), wire.CLOSE_TOO_BIG), (wire.pack_frame(1, tiny), wire.CLOSE_TOO_BIG),
-                          (wire.pack_frame(1, ok, b"XXXX"), wire.CLOSE_UNSUPPORTED), (b"ARF1", wire.CLOSE_UNSUPPORTED),
-                          (wire.pack_frame(1, b"\xff\xd8" + bytes(wire.MAX_FRAME_BYTES)), wire.CLOSE_TOO_BIG)):
+    for payload, code in (
+        (wire.pack_frame(1, huge), wire.CLOSE_TOO_BIG),
+        (wire.pack_frame(1, tiny), wire.CLOSE_TOO_BIG),
+        (wire.pack_frame(1, ok, b"XXXX"), wire.CLOSE_UNSUPPORTED),
+        (b"ARF1", wire.CLOSE_UNSUPPORTED),
+        (wire.pack_frame(1, b"\xff\xd8" + bytes(wire.MAX_FRAME_BYTES)), wire.CLOSE_TOO_BIG),
+    ):
         with pytest.raises(Violation) as err:
             wire.parse_frame(payload)
         assert err.value.code == code
@@ -49,27 +63,52 @@ def test_frames_are_bounded_before_decoding():
 
 def test_text_and_feedback_shapes():
     assert wire.parse_text('{"type": "ping", "t": 1}') == {"type": "ping", "t": 1}
-    for text, code in (("{", wire.CLOSE_BAD_DATA), ("[]", wire.CLOSE_POLICY), ('{"type": 3}', wire.CLOSE_POLICY),
-                       ("[" * 100000, wire.CLOSE_TOO_BIG), ('{"type": "x", "a": ' + "[" * 5000 + "]" * 5000 + "}", wire.CLOSE_BAD_DATA)):
+    for text, code in (
+        ("{", wire.CLOSE_BAD_DATA),
+        ("[]", wire.CLOSE_POLICY),
+        ('{"type": 3}', wire.CLOSE_POLICY),
+        ("[" * 100000, wire.CLOSE_TOO_BIG),
+        ('{"type": "x", "a": ' + "[" * 5000 + "]" * 5000 + "}", wire.CLOSE_BAD_DATA),
+    ):
         with pytest.raises(Violation) as err:
             wire.parse_text(text)
         assert err.value.code == code, text[:20]
-    request = wire.parse_feedback({"type": "feedback", "id": 3, "kind": "door_unavailable", "params": {"door": "d_storage", "minutes": 30}})
+    request = wire.parse_feedback(
+        {"type": "feedback", "id": 3, "kind": "door_unavailable", "params": {"door": "d_storage", "minutes": 30}}
+    )
     assert (request.id, request.kind, request.params) == (3, "door_unavailable", {"door": "d_storage", "minutes": 30})
-    for bad in ({"id": -1, "kind": "k", "params": {}}, {"id": True, "kind": "k", "params": {}}, {"id": 1, "kind": "", "params": {}},
-                {"id": 1, "kind": "k", "params": []}, {"id": 1, "kind": "k", "params": {"a": [1]}}, {"id": 1, "kind": "k", "params": {"a": True}},
-                {"id": 1, "kind": "k", "params": {"a": "x" * 65}}, {"id": 1, "kind": "k", "params": {"a": float("nan")}},
-                {"id": 1, "kind": "k", "params": {f"p{i}": 1 for i in range(33)}}, {"id": 1, "kind": "k", "params": {"a": 2**60}}):
+    for bad in (
+        {"id": -1, "kind": "k", "params": {}},
+        {"id": True, "kind": "k", "params": {}},
+        {"id": 1, "kind": "", "params": {}},
+        {"id": 1, "kind": "k", "params": []},
+        {"id": 1, "kind": "k", "params": {"a": [1]}},
+        {"id": 1, "kind": "k", "params": {"a": True}},
+        {"id": 1, "kind": "k", "params": {"a": "x" * 65}},
+        {"id": 1, "kind": "k", "params": {"a": float("nan")}},
+        {"id": 1, "kind": "k", "params": {f"p{i}": 1 for i in range(33)}},
+        {"id": 1, "kind": "k", "params": {"a": 2**60}},
+    ):
         with pytest.raises(Violation):
             wire.parse_feedback({"type": "feedback", **bad})
 
 
 def test_overlay_message_keeps_the_world_and_drops_status_and_ui():
-    overlay = Overlay(camera="tablet-1", frame_seq=9, width=640, height=480, ok=True, tags=[1, 2], reprojection_rmse=0.1234,
-                      primitives=[Primitive(kind="polyline", points=[[1.234, 2.0], [3.0, 4.06]], color=[1, 2, 3, 255], layer="robot:r0"),
-                                  Primitive(kind="text", points=[[5, 5]], text="pose", layer="status"),
-                                  Primitive(kind="polygon", points=[[0, 0], [1, 0], [1, 1]], layer="ui"),
-                                  Primitive(kind="circle", points=[[9, 9]], radius=4, style="xray", layer="intent:r0")])
+    overlay = Overlay(
+        camera="tablet-1",
+        frame_seq=9,
+        width=640,
+        height=480,
+        ok=True,
+        tags=[1, 2],
+        reprojection_rmse=0.1234,
+        primitives=[
+            Primitive(kind="polyline", points=[[1.234, 2.0], [3.0, 4.06]], color=[1, 2, 3, 255], layer="robot:r0"),
+            Primitive(kind="text", points=[[5, 5]], text="pose", layer="status"),
+            Primitive(kind="polygon", points=[[0, 0], [1, 0], [1, 1]], layer="ui"),
+            Primitive(kind="circle", points=[[9, 9]], radius=4, style="xray", layer="intent:r0"),
+        ],
+    )
     data = json.loads(wire.overlay_json(overlay, intrinsics="calibrated", server_ms=12.345))
     assert data["seq"] == 9 and data["ok"] and data["rmse"] == 0.123 and data["server_ms"] == 12.3
     assert [p["l"] for p in data["primitives"]] == ["robot:r0", "intent:r0"]
@@ -114,7 +153,9 @@ def test_token_and_origin_checks():
     assert len(token) >= 24 and new_token() != token
     assert token_matches(token, {"token": token}, {})
     assert token_matches(token, {}, {COOKIE: token})
-    assert not token_matches(token, {"token": "wrong"}, {COOKIE: token})  # an explicit wrong token is not rescued by the cookie
+    assert not token_matches(
+        token, {"token": "wrong"}, {COOKIE: token}
+    )  # an explicit wrong token is not rescued by the cookie
     assert not token_matches(token, {}, {}) and not token_matches(token, {"token": token[:-1]}, {})
     assert token_matches(token, {"token": token}, {COOKIE: "stale"})
     assert not token_matches(token, {"token": "é"}, {})

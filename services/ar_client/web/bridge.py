@@ -19,7 +19,8 @@ answered), which blocks and so runs on the server's feedback threads, never on t
 from __future__ import annotations
 
 import threading
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from protocol.clock import SimClock, WallClock
 from protocol.messages import CameraFrame, ConstraintSet, FeedbackAck, Overlay
@@ -56,7 +57,9 @@ class TabletBridge(Service):
         self.world.follow(self)
         self.subscribe(k.constraints(), ConstraintSet, self._constraints)
         if self.sim_camera is not None:
-            self.subscribe(k.camera_frame(self.sim_camera), CameraFrame, lambda msg, key: self.on_sim_frame(msg), latest=True)
+            self.subscribe(
+                k.camera_frame(self.sim_camera), CameraFrame, lambda msg, key: self.on_sim_frame(msg), latest=True
+            )
             self.log.info("viewer stream from %s", k.camera_frame(self.sim_camera))
         # A late joiner asks for the live set; off the worker, since a query blocks.
         threading.Thread(target=self._fetch_constraints, name="tablet-constraints", daemon=True).start()

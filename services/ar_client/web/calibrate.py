@@ -48,7 +48,7 @@ class Pattern:
     dictionary: str = "4X4_50"
 
     @staticmethod
-    def parse(text: str) -> "Pattern":
+    def parse(text: str) -> Pattern:
         parts = text.split(":")
         kind = parts[0].lower()
         usage = "expected chessboard:COLSxROWS:SQUARE or charuco:COLSxROWS:SQUARE:MARKER[:DICT]"
@@ -81,13 +81,13 @@ class Pattern:
                 raise ValueError(f"--pattern {text!r}: unknown marker dictionary {parts[4]!r}")
         return Pattern(kind, cols, rows, square, marker, dictionary)
 
-    def charuco_board(self) -> "cv2.aruco.CharucoBoard":
+    def charuco_board(self) -> cv2.aruco.CharucoBoard:
         dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, f"DICT_{self.dictionary}"))
         return cv2.aruco.CharucoBoard((self.cols, self.rows), self.square, self.marker, dictionary)
 
     def chessboard_points(self) -> np.ndarray:
         """The inner corners on the board plane (z = 0), row by row, as OpenCV reports them."""
-        grid = np.mgrid[0:self.cols, 0:self.rows].T.reshape(-1, 2)
+        grid = np.mgrid[0 : self.cols, 0 : self.rows].T.reshape(-1, 2)
         return np.column_stack([grid * self.square, np.zeros(len(grid))]).astype(np.float32)
 
 
@@ -165,8 +165,10 @@ def calibrate(files: list[Path], pattern: Pattern, model: str = "standard") -> C
         image_points.append(found[1])
         used.append(path.name)
     if len(used) < MIN_VIEWS or size is None:
-        raise ValueError(f"the pattern was found in {len(used)} image(s); at least {MIN_VIEWS} are needed "
-                         f"(skipped: {', '.join(f'{k}: {v}' for k, v in list(skipped.items())[:5]) or 'none'})")
+        raise ValueError(
+            f"the pattern was found in {len(used)} image(s); at least {MIN_VIEWS} are needed "
+            f"(skipped: {', '.join(f'{k}: {v}' for k, v in list(skipped.items())[:5]) or 'none'})"
+        )
     w, h = size
     # Start from a plausible pinhole so the optimiser never wanders off with few views.
     f0 = max(w, h)

@@ -65,15 +65,29 @@ def _run_tablet(args: argparse.Namespace) -> int:
             raise ValueError("--max-clients must be within [1, 64] and --workers within [1, 16]")
         if not 0 <= args.port <= 65535:
             raise ValueError("--port must be within [0, 65535]")
-        bridge = TabletBridge(namespace=args.namespace or site.name, zenoh_options=options_from(args),
-                              sim_camera=sim_camera, clock=make_clock(args.clock))
+        bridge = TabletBridge(
+            namespace=args.namespace or site.name,
+            zenoh_options=options_from(args),
+            sim_camera=sim_camera,
+            clock=make_clock(args.clock),
+        )
     except (ValueError, FileNotFoundError) as exc:
         log.error("%s", exc)
         return EXIT_USAGE
-    options = ServerOptions(max_fps=args.max_fps, max_clients=args.max_clients, workers=args.workers, detector=args.detector,
-                            allow_origins=list(args.allow_origin or []), default_mode="viewer" if sim_camera else "ar")
-    listen = ListenOptions(host=args.host, port=args.port, public_host=args.public_host, state_dir=args.state_dir, qr=not args.no_qr)
-    return run_tablet(site=site, bridge=bridge, camera_model=CameraModel(calibration, hfov), options=options, listen=listen)
+    options = ServerOptions(
+        max_fps=args.max_fps,
+        max_clients=args.max_clients,
+        workers=args.workers,
+        detector=args.detector,
+        allow_origins=list(args.allow_origin or []),
+        default_mode="viewer" if sim_camera else "ar",
+    )
+    listen = ListenOptions(
+        host=args.host, port=args.port, public_host=args.public_host, state_dir=args.state_dir, qr=not args.no_qr
+    )
+    return run_tablet(
+        site=site, bridge=bridge, camera_model=CameraModel(calibration, hfov), options=options, listen=listen
+    )
 
 
 def _calibrate(args: argparse.Namespace) -> int:
@@ -84,16 +98,24 @@ def _calibrate(args: argparse.Namespace) -> int:
         pattern = Pattern.parse(args.pattern)
         files = image_files(args.images)
         result = calibrate(files, pattern, args.model)
-        write_intrinsics(args.out, result.intrinsics, rms_px=round(result.rms_px, 4), pattern=args.pattern,
-                         model=args.model, images=result.used)
+        write_intrinsics(
+            args.out,
+            result.intrinsics,
+            rms_px=round(result.rms_px, 4),
+            pattern=args.pattern,
+            model=args.model,
+            images=result.used,
+        )
     except (ValueError, FileNotFoundError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     K = result.intrinsics
     for name, why in result.skipped.items():
         print(f"skipped {name}: {why}")
-    print(f"wrote {args.out}: fx {K.fx:.2f} fy {K.fy:.2f} cx {K.cx:.2f} cy {K.cy:.2f} ({K.width}x{K.height}), "
-          f"distortion {' '.join(f'{d:.4f}' for d in K.distortion)}, RMS {result.rms_px:.3f} px from {len(result.used)} image(s)")
+    print(
+        f"wrote {args.out}: fx {K.fx:.2f} fy {K.fy:.2f} cx {K.cx:.2f} cy {K.cy:.2f} ({K.width}x{K.height}), "
+        f"distortion {' '.join(f'{d:.4f}' for d in K.distortion)}, RMS {result.rms_px:.3f} px from {len(result.used)} image(s)"
+    )
     return 0
 
 
@@ -111,32 +133,74 @@ def _ar_subparsers(sub: argparse._SubParsersAction) -> argparse._SubParsersActio
 def register(sub: argparse._SubParsersAction) -> None:
     from . import __doc__ as package_doc
 
-    tablet = sub.add_parser("tablet", help="serve the tablet page: AR over the tablet's camera, feedback buttons, viewer mode",
-                            description=package_doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    tablet = sub.add_parser(
+        "tablet",
+        help="serve the tablet page: AR over the tablet's camera, feedback buttons, viewer mode",
+        description=package_doc,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     add_common_arguments(tablet)
-    tablet.add_argument("--camera-source", default="browser", metavar="SRC",
-                        help="browser (default: each page sends its own camera) or sim:CID (the page URL opens the viewer "
-                             "mode: the sim's camera/<CID>/frame stream with the overlay, and the map)")
+    tablet.add_argument(
+        "--camera-source",
+        default="browser",
+        metavar="SRC",
+        help="browser (default: each page sends its own camera) or sim:CID (the page URL opens the viewer "
+        "mode: the sim's camera/<CID>/frame stream with the overlay, and the map)",
+    )
     tablet.add_argument("--host", default="0.0.0.0", help="address to listen on (default 0.0.0.0: every interface)")
     tablet.add_argument("--port", type=int, default=8443, help="HTTPS port (default 8443; 0: any free port)")
-    tablet.add_argument("--public-host", metavar="NAME", help="host name or address for the printed URL and QR code (default: this machine's addresses)")
-    tablet.add_argument("--state-dir", metavar="DIR", help="where the certificate is kept (default $XDG_STATE_HOME/arroch/tablet)")
-    tablet.add_argument("--intrinsics", metavar="FILE", help="camera calibration from 'arroch ar calibrate' (default: an assumed field of view)")
-    tablet.add_argument("--fov", type=float, metavar="DEG", help="horizontal field of view assumed without --intrinsics (default 62)")
-    tablet.add_argument("--max-fps", type=float, default=15.0, metavar="HZ", help="frames per second a page may send (default 15)")
+    tablet.add_argument(
+        "--public-host",
+        metavar="NAME",
+        help="host name or address for the printed URL and QR code (default: this machine's addresses)",
+    )
+    tablet.add_argument(
+        "--state-dir", metavar="DIR", help="where the certificate is kept (default $XDG_STATE_HOME/arroch/tablet)"
+    )
+    tablet.add_argument(
+        "--intrinsics",
+        metavar="FILE",
+        help="camera calibration from 'arroch ar calibrate' (default: an assumed field of view)",
+    )
+    tablet.add_argument(
+        "--fov", type=float, metavar="DEG", help="horizontal field of view assumed without --intrinsics (default 62)"
+    )
+    tablet.add_argument(
+        "--max-fps", type=float, default=15.0, metavar="HZ", help="frames per second a page may send (default 15)"
+    )
     tablet.add_argument("--max-clients", type=int, default=8, metavar="N", help="pages connected at once (default 8)")
     tablet.add_argument("--workers", type=int, default=2, metavar="N", help="frame-processing threads (default 2)")
-    tablet.add_argument("--detector", choices=("opencv", "apriltag"), default="opencv", help="tag detector (default opencv)")
-    tablet.add_argument("--allow-origin", action="append", metavar="ORIGIN", help="another origin allowed to open the WebSocket (repeatable)")
+    tablet.add_argument(
+        "--detector", choices=("opencv", "apriltag"), default="opencv", help="tag detector (default opencv)"
+    )
+    tablet.add_argument(
+        "--allow-origin",
+        action="append",
+        metavar="ORIGIN",
+        help="another origin allowed to open the WebSocket (repeatable)",
+    )
     tablet.add_argument("--no-qr", action="store_true", help="print the URLs without the QR code")
     tablet.set_defaults(func=_run_tablet)
 
     ar_sub = _ar_subparsers(sub)
-    cal = ar_sub.add_parser("calibrate", help="camera intrinsics from chessboard or ChArUco photos",
-                            description=CALIBRATE_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
-    cal.add_argument("--images", required=True, metavar="DIR", help="folder of photos of the pattern (PNG/JPEG), all one size")
-    cal.add_argument("--pattern", required=True, metavar="SPEC", help="chessboard:9x6:0.025 or charuco:7x5:0.04:0.03[:4X4_50]")
-    cal.add_argument("--model", default="standard", choices=("pinhole", "standard", "full"), help="distortion model (default standard: k1 k2 p1 p2)")
+    cal = ar_sub.add_parser(
+        "calibrate",
+        help="camera intrinsics from chessboard or ChArUco photos",
+        description=CALIBRATE_HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    cal.add_argument(
+        "--images", required=True, metavar="DIR", help="folder of photos of the pattern (PNG/JPEG), all one size"
+    )
+    cal.add_argument(
+        "--pattern", required=True, metavar="SPEC", help="chessboard:9x6:0.025 or charuco:7x5:0.04:0.03[:4X4_50]"
+    )
+    cal.add_argument(
+        "--model",
+        default="standard",
+        choices=("pinhole", "standard", "full"),
+        help="distortion model (default standard: k1 k2 p1 p2)",
+    )
     cal.add_argument("--out", required=True, metavar="intrinsics.json", help="file to write")
     cal.add_argument("--log-level", default=None, choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     cal.set_defaults(func=_calibrate)

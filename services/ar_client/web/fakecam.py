@@ -8,8 +8,8 @@ camera pose is known (frames rendered from the site: sim snapshots or
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 import cv2
 import numpy as np

@@ -31,11 +31,21 @@ import aiohttp
 
 CANDIDATES = ("chromium", "chromium-browser", "google-chrome")
 FLAGS = (
-    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync",
-    "--disable-default-apps", "--mute-audio", "--hide-scrollbars",
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--disable-default-apps",
+    "--mute-audio",
+    "--hide-scrollbars",
     # A foreground page must keep its timers and frames running when nobody looks at it.
-    "--disable-background-timer-throttling", "--disable-renderer-backgrounding", "--disable-backgrounding-occluded-windows",
+    "--disable-background-timer-throttling",
+    "--disable-renderer-backgrounding",
+    "--disable-backgrounding-occluded-windows",
 )
 
 
@@ -64,25 +74,42 @@ def _free_port() -> int:
 class Browser:
     """One headless Chromium with one page, and a synchronous CDP client for that page."""
 
-    def __init__(self, *, fake_camera: str | Path | None = None, window: tuple[int, int] = (1280, 800),
-                 ignore_certificate_errors: bool = True, extra_flags: tuple[str, ...] = ()) -> None:
+    def __init__(
+        self,
+        *,
+        fake_camera: str | Path | None = None,
+        window: tuple[int, int] = (1280, 800),
+        ignore_certificate_errors: bool = True,
+        extra_flags: tuple[str, ...] = (),
+    ) -> None:
         exe = chromium_path()
         if exe is None:
             raise BrowserError("no Chromium on this machine (Debian: apt-get install chromium)")
         self.profile = tempfile.mkdtemp(prefix="arroch-chromium-")
         self.port = _free_port()
-        argv = [exe, *FLAGS, f"--user-data-dir={self.profile}", f"--remote-debugging-port={self.port}",
-                "--remote-debugging-address=127.0.0.1", f"--window-size={window[0]},{window[1]}"]
+        argv = [
+            exe,
+            *FLAGS,
+            f"--user-data-dir={self.profile}",
+            f"--remote-debugging-port={self.port}",
+            "--remote-debugging-address=127.0.0.1",
+            f"--window-size={window[0]},{window[1]}",
+        ]
         if fake_camera is not None:
-            argv += ["--use-fake-device-for-media-stream", "--use-fake-ui-for-media-stream",
-                     f"--use-file-for-fake-video-capture={fake_camera}"]
+            argv += [
+                "--use-fake-device-for-media-stream",
+                "--use-fake-ui-for-media-stream",
+                f"--use-file-for-fake-video-capture={fake_camera}",
+            ]
         if ignore_certificate_errors:
             # The test server's certificate comes from an authority the fresh profile cannot know.
             argv.append("--ignore-certificate-errors")
         argv += [*extra_flags, "about:blank"]
         self.log_path = Path(self.profile) / "chromium.log"
         self._log = self.log_path.open("wb")
-        self.proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=self._log, stderr=subprocess.STDOUT, start_new_session=True)
+        self.proc = subprocess.Popen(
+            argv, stdin=subprocess.DEVNULL, stdout=self._log, stderr=subprocess.STDOUT, start_new_session=True
+        )
         self._loop = asyncio.new_event_loop()
         self._thread = threading.Thread(target=self._loop.run_forever, name="cdp", daemon=True)
         self._thread.start()
@@ -164,7 +191,9 @@ class Browser:
 
     def evaluate(self, expression: str, timeout: float = 30.0) -> Any:
         """The value of a JavaScript expression (promises awaited); BrowserError on an exception."""
-        result = self.call("Runtime.evaluate", timeout=timeout, expression=expression, returnByValue=True, awaitPromise=True)
+        result = self.call(
+            "Runtime.evaluate", timeout=timeout, expression=expression, returnByValue=True, awaitPromise=True
+        )
         if "exceptionDetails" in result:
             details = result["exceptionDetails"]
             text = details.get("exception", {}).get("description") or details.get("text")
@@ -201,8 +230,10 @@ class Browser:
         self.call("Input.dispatchTouchEvent", type="touchEnd", touchPoints=[])
 
     def center_of(self, selector: str) -> tuple[float, float]:
-        box = self.evaluate(f"(() => {{ const r = document.querySelector({json.dumps(selector)}).getBoundingClientRect();"
-                            " return [r.x + r.width / 2, r.y + r.height / 2]; })()")
+        box = self.evaluate(
+            f"(() => {{ const r = document.querySelector({json.dumps(selector)}).getBoundingClientRect();"
+            " return [r.x + r.width / 2, r.y + r.height / 2]; })()"
+        )
         return float(box[0]), float(box[1])
 
     # ------------------------------------------------------------------ shutdown
@@ -238,7 +269,7 @@ class Browser:
         self._log.close()
         shutil.rmtree(self.profile, ignore_errors=True)
 
-    def __enter__(self) -> "Browser":
+    def __enter__(self) -> Browser:
         return self
 
     def __exit__(self, *exc: Any) -> None:

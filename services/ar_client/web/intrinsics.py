@@ -41,7 +41,9 @@ def load_intrinsics(path: str | Path) -> Intrinsics:
     except FileNotFoundError:
         raise
     except (KeyError, TypeError, ValueError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{path}: expected {{\"intrinsics\": [fx, fy, cx, cy, w, h], \"distortion\": [k1, k2, p1, p2, k3]}} ({exc})") from None
+        raise ValueError(
+            f'{path}: expected {{"intrinsics": [fx, fy, cx, cy, w, h], "distortion": [k1, k2, p1, p2, k3]}} ({exc})'
+        ) from None
     if len(values) != 6 or len(distortion) != 5:
         raise ValueError(f"{path}: 'intrinsics' needs 6 numbers and 'distortion' 5")
     return Intrinsics.parse(",".join(repr(v) for v in values + distortion))
@@ -65,9 +67,13 @@ def scaled(calibration: Intrinsics, width: int, height: int) -> Intrinsics | Non
     if abs(sx / sy - 1.0) > ASPECT_TOLERANCE:
         return None
     return Intrinsics(
-        calibration.fx * sx, calibration.fy * sy,
-        (calibration.cx + 0.5) * sx - 0.5, (calibration.cy + 0.5) * sy - 0.5,
-        width, height, calibration.distortion,
+        calibration.fx * sx,
+        calibration.fy * sy,
+        (calibration.cx + 0.5) * sx - 0.5,
+        (calibration.cy + 0.5) * sy - 0.5,
+        width,
+        height,
+        calibration.distortion,
     )
 
 
@@ -99,4 +105,6 @@ class CameraModel:
                 return K, f"calibrated at {self.calibration.width}x{self.calibration.height}"
             why = f"default {self.hfov_deg:g} deg (calibration is {self.calibration.width}x{self.calibration.height}, another aspect)"
             return default_intrinsics(width, height, self.hfov_deg), why
-        return default_intrinsics(width, height, self.hfov_deg), f"default {self.hfov_deg:g} deg field of view (not calibrated)"
+        return default_intrinsics(
+            width, height, self.hfov_deg
+        ), f"default {self.hfov_deg:g} deg field of view (not calibrated)"

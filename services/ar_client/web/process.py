@@ -71,7 +71,9 @@ async def _serve(server: TabletServer, ssl_context, listen: ListenOptions, token
     return 0
 
 
-def run_tablet(*, site, bridge: TabletBridge, camera_model: CameraModel, options: ServerOptions, listen: ListenOptions) -> int:  # noqa: ANN001
+def run_tablet(
+    *, site, bridge: TabletBridge, camera_model: CameraModel, options: ServerOptions, listen: ListenOptions
+) -> int:  # noqa: ANN001
     """Serve until a signal; returns the exit code. ``bridge`` is built but not yet open."""
     from services.supervisor.deployment.certs import CertError
 
@@ -86,10 +88,20 @@ def run_tablet(*, site, bridge: TabletBridge, camera_model: CameraModel, options
     except (CertError, OSError, ValueError) as exc:
         log.error("certificate in %s: %s", state_dir, exc)
         return EXIT_CONFIG
-    log.info("certificate %s (authority %s: install it on a tablet to trust this server)", certificate.cert, certificate.authority)
+    log.info(
+        "certificate %s (authority %s: install it on a tablet to trust this server)",
+        certificate.cert,
+        certificate.authority,
+    )
     token = new_token()
-    server = TabletServer(site=site, bridge=bridge, camera_model=camera_model, token=token,
-                          authority=certificate.authority, options=options)
+    server = TabletServer(
+        site=site,
+        bridge=bridge,
+        camera_model=camera_model,
+        token=token,
+        authority=certificate.authority,
+        options=options,
+    )
     try:
         bridge.open()
     except Exception as exc:

@@ -25,9 +25,9 @@ import re
 import secrets
 import ssl
 import time
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Mapping
 
 log = logging.getLogger("arroch.tablet.security")
 

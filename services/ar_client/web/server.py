@@ -21,10 +21,11 @@ import asyncio
 import json
 import logging
 import time
+from collections.abc import Awaitable, Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Awaitable, Callable
+from typing import Any
 
 import numpy as np
 from aiohttp import web
@@ -72,8 +73,16 @@ class ServerOptions:
 
 
 class TabletServer:
-    def __init__(self, *, site, bridge: TabletBridge, camera_model: CameraModel, token: str,  # noqa: ANN001 (Site)
-                 authority: Path | None = None, options: ServerOptions | None = None) -> None:
+    def __init__(
+        self,
+        *,
+        site,
+        bridge: TabletBridge,
+        camera_model: CameraModel,
+        token: str,  # noqa: ANN001 (Site)
+        authority: Path | None = None,
+        options: ServerOptions | None = None,
+    ) -> None:
         self.site = site
         self.bridge = bridge
         self.camera_model = camera_model
@@ -84,7 +93,13 @@ class TabletServer:
         self.feedback_pool = ThreadPoolExecutor(max_workers=2, thread_name_prefix="tablet-feedback")
         self.clients: dict[int, ClientSession] = {}
         self.colours = OverlayBuilder(site)  # the robots' overlay colours, for the map
-        self.counters: dict[str, int] = {"connections": 0, "refused_token": 0, "refused_origin": 0, "refused_full": 0, "violations": 0}
+        self.counters: dict[str, int] = {
+            "connections": 0,
+            "refused_token": 0,
+            "refused_origin": 0,
+            "refused_full": 0,
+            "violations": 0,
+        }
         self._numbers = 0
         self._violation_log: list[float] = []
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -109,7 +124,9 @@ class TabletServer:
         return app
 
     @web.middleware
-    async def _headers(self, request: web.Request, handler: Callable[[web.Request], Awaitable[web.StreamResponse]]) -> web.StreamResponse:
+    async def _headers(
+        self, request: web.Request, handler: Callable[[web.Request], Awaitable[web.StreamResponse]]
+    ) -> web.StreamResponse:
         try:
             response = await handler(request)
         except web.HTTPException as exc:
@@ -122,7 +139,9 @@ class TabletServer:
         if token_matches(self.token, request.query, request.cookies):
             return True
         self.counters["refused_token"] += 1
-        log.warning("refused %s %s from %s: missing or wrong access token", request.method, request.path, request.remote)
+        log.warning(
+            "refused %s %s from %s: missing or wrong access token", request.method, request.path, request.remote
+        )
         return False
 
     @staticmethod
@@ -157,7 +176,13 @@ class TabletServer:
         origin = request.headers.get("Origin")
         if not origin_allowed(origin, request.host, request.scheme, self.options.allow_origins):
             self.counters["refused_origin"] += 1
-            log.warning("refused a WebSocket from %s: origin %r is not this page's (%s://%s)", request.remote, origin, request.scheme, request.host)
+            log.warning(
+                "refused a WebSocket from %s: origin %r is not this page's (%s://%s)",
+                request.remote,
+                origin,
+                request.scheme,
+                request.host,
+            )
             return self._forbidden("origin not allowed")
         if len(self.clients) >= self.options.max_clients:
             self.counters["refused_full"] += 1
@@ -177,8 +202,13 @@ class TabletServer:
             await session.run()
         finally:
             self.clients.pop(session.number, None)
-            log.info("client %d disconnected (%d frames, %d superseded, %d feedback)", session.number,
-                     session.counters["frames"], session.counters["superseded"], session.counters["feedback"])
+            log.info(
+                "client %d disconnected (%d frames, %d superseded, %d feedback)",
+                session.number,
+                session.counters["frames"],
+                session.counters["superseded"],
+                session.counters["feedback"],
+            )
         return ws
 
     def note_violation(self, session: ClientSession, reason: str) -> None:
@@ -214,7 +244,9 @@ class TabletServer:
     def _constraints_json(msg: ConstraintSet | None) -> dict[str, Any]:
         if msg is None:
             return {"type": "constraints", "version": None, "items": []}
-        items = [{"id": c.id, "kind": c.kind, "params": c.params, "start": c.start, "end": c.end} for c in msg.constraints]
+        items = [
+            {"id": c.id, "kind": c.kind, "params": c.params, "start": c.start, "end": c.end} for c in msg.constraints
+        ]
         return {"type": "constraints", "version": msg.version, "items": items}
 
     def _world(self) -> dict[str, Any]:
@@ -231,7 +263,11 @@ class TabletServer:
             log.debug("could not publish an overlay: %s", exc)
 
     async def _broadcast(self, text: str, *, mode: str | None = None) -> None:
-        sends = [c.send_text(text) for c in list(self.clients.values()) if (mode is None or c.mode == mode) and not c.busy_sending]
+        sends = [
+            c.send_text(text)
+            for c in list(self.clients.values())
+            if (mode is None or c.mode == mode) and not c.busy_sending
+        ]
         if sends:
             await asyncio.gather(*sends)
 
@@ -299,8 +335,13 @@ class TabletServer:
     def _localise_sim_frame(self, msg: CameraFrame) -> str:
         started = time.perf_counter()
         width, height = wire.jpeg_size(msg.jpeg)
-        if (width, height) != (msg.width, msg.height) or len(msg.intrinsics) != 4 or not np.all(np.isfinite(msg.intrinsics)) \
-                or msg.intrinsics[0] <= 0 or msg.intrinsics[1] <= 0:
+        if (
+            (width, height) != (msg.width, msg.height)
+            or len(msg.intrinsics) != 4
+            or not np.all(np.isfinite(msg.intrinsics))
+            or msg.intrinsics[0] <= 0
+            or msg.intrinsics[1] <= 0
+        ):
             raise BadFrame(f"frame {width}x{height} with intrinsics {msg.intrinsics} for {msg.width}x{msg.height}")
         fx, fy, cx, cy = msg.intrinsics
         distortion = tuple(msg.distortion) if len(msg.distortion) == 5 else (0.0,) * 5
@@ -309,11 +350,19 @@ class TabletServer:
             self._viewer_pipeline = self.new_pipeline(msg.camera)
         now = self.bridge.now()
         gravity = msg.gravity or None
-        overlay, _ = self._viewer_pipeline.process(msg.jpeg, K, now, frame_seq=msg.seq, annotate=False, now=now, gravity=gravity)
+        overlay, _ = self._viewer_pipeline.process(
+            msg.jpeg, K, now, frame_seq=msg.seq, annotate=False, now=now, gravity=gravity
+        )
         loc = self._viewer_pipeline.last_localization
         reason = loc.reason if loc is not None and not loc.ok else ""
-        return wire.overlay_json(overlay, reason=reason, intrinsics="from the sim camera", source="sim",
-                                 server_ms=(time.perf_counter() - started) * 1000.0, gravity=gravity)
+        return wire.overlay_json(
+            overlay,
+            reason=reason,
+            intrinsics="from the sim camera",
+            source="sim",
+            server_ms=(time.perf_counter() - started) * 1000.0,
+            gravity=gravity,
+        )
 
     # ------------------------------------------------------------------ lifecycle
 

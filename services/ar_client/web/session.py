@@ -37,7 +37,7 @@ FEEDBACK_PER_MINUTE = 20.0
 
 
 class ClientSession:
-    def __init__(self, server: "TabletServer", ws: web.WebSocketResponse, number: int, mode: str, remote: str) -> None:
+    def __init__(self, server: TabletServer, ws: web.WebSocketResponse, number: int, mode: str, remote: str) -> None:
         self.server = server
         self.ws = ws
         self.number = number
@@ -160,12 +160,19 @@ class ClientSession:
             self.pipeline = self.server.new_pipeline(self.camera_id)
         intrinsics, source = self.server.camera_model.for_size(frame.width, frame.height)
         now = self.server.bridge.now()
-        overlay, _ = self.pipeline.process(frame.jpeg, intrinsics, now, frame_seq=frame.seq, annotate=False, now=now, gravity=frame.gravity)
+        overlay, _ = self.pipeline.process(
+            frame.jpeg, intrinsics, now, frame_seq=frame.seq, annotate=False, now=now, gravity=frame.gravity
+        )
         loc = self.pipeline.last_localization
         reason = loc.reason if loc is not None and not loc.ok else ""
         self.server.publish_overlay(overlay, reason)
-        return wire.overlay_json(overlay, reason=reason, intrinsics=source, server_ms=(time.perf_counter() - started) * 1000.0,
-                                 gravity=frame.gravity)
+        return wire.overlay_json(
+            overlay,
+            reason=reason,
+            intrinsics=source,
+            server_ms=(time.perf_counter() - started) * 1000.0,
+            gravity=frame.gravity,
+        )
 
     # ------------------------------------------------------------------ feedback
 
@@ -180,7 +187,8 @@ class ClientSession:
             self.counters["feedback"] += 1
             try:
                 ack = await asyncio.get_running_loop().run_in_executor(
-                    self.server.feedback_pool, self.server.bridge.send_feedback, request.kind, request.params)
+                    self.server.feedback_pool, self.server.bridge.send_feedback, request.kind, request.params
+                )
             except Exception as exc:  # the Zenoh session closing under us, etc.: tell the page
                 log.warning("client %d: feedback %s failed: %s", self.number, request.kind, exc)
                 answer.update(status="error", reason=str(exc)[:200])
@@ -188,9 +196,20 @@ class ClientSession:
                 if ack is None:
                     answer.update(status="no answer", reason="no restrictor answered in time")
                 else:
-                    answer.update(status="accepted" if ack.accepted else "refused", reason=ack.reason,
-                                  constraint_id=ack.constraint_id, constraints_version=ack.constraints_version)
+                    answer.update(
+                        status="accepted" if ack.accepted else "refused",
+                        reason=ack.reason,
+                        constraint_id=ack.constraint_id,
+                        constraints_version=ack.constraints_version,
+                    )
             finally:
                 self._feedback_pending = False
-            log.info("client %d: feedback %s %s: %s %s", self.number, request.kind, request.params, answer["status"], answer.get("reason", ""))
+            log.info(
+                "client %d: feedback %s %s: %s %s",
+                self.number,
+                request.kind,
+                request.params,
+                answer["status"],
+                answer.get("reason", ""),
+            )
         await self.send_text(json.dumps(answer))

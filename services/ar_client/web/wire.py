@@ -31,8 +31,9 @@ from __future__ import annotations
 import json
 import math
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 from protocol.messages import Overlay
 
@@ -144,7 +145,9 @@ def _gravity(values: tuple[float, float, float]) -> tuple[float, float, float] |
     return (float(values[0]), float(values[1]), float(values[2]))
 
 
-def pack_frame(seq: int, jpeg: bytes, magic: bytes = FRAME_MAGIC, gravity: tuple[float, float, float] | None = None) -> bytes:
+def pack_frame(
+    seq: int, jpeg: bytes, magic: bytes = FRAME_MAGIC, gravity: tuple[float, float, float] | None = None
+) -> bytes:
     """A frame message as the page sends it (``ARF2`` with gravity when given, else ``ARF1``)."""
     if gravity is not None and magic == FRAME_MAGIC:
         return HEADER.pack(GRAVITY_FRAME_MAGIC, seq & 0xFFFFFFFF) + GRAVITY.pack(*gravity) + jpeg
@@ -210,14 +213,27 @@ def _r(value: float) -> float:
     return round(float(value), 1)
 
 
-def overlay_json(overlay: Overlay, *, reason: str = "", intrinsics: str = "", server_ms: float = 0.0, source: str = "browser",
-                 gravity: tuple[float, float, float] | list[float] | None = None) -> str:
+def overlay_json(
+    overlay: Overlay,
+    *,
+    reason: str = "",
+    intrinsics: str = "",
+    server_ms: float = 0.0,
+    source: str = "browser",
+    gravity: tuple[float, float, float] | list[float] | None = None,
+) -> str:
     """An Overlay as the page's ``overlay`` message (primitives rounded to 0.1 px, short keys)."""
     prims = []
     for p in overlay.primitives:
         if p.layer in PAGE_SKIPS_LAYERS:
             continue
-        item: dict[str, Any] = {"k": p.kind, "p": [[_r(x), _r(y)] for x, y in p.points], "c": list(p.color), "w": p.width, "l": p.layer}
+        item: dict[str, Any] = {
+            "k": p.kind,
+            "p": [[_r(x), _r(y)] for x, y in p.points],
+            "c": list(p.color),
+            "w": p.width,
+            "l": p.layer,
+        }
         if p.radius:
             item["r"] = p.radius
         if p.text:
@@ -225,25 +241,28 @@ def overlay_json(overlay: Overlay, *, reason: str = "", intrinsics: str = "", se
         if p.style != "solid":
             item["s"] = p.style
         prims.append(item)
-    return json.dumps({
-        "type": "overlay",
-        "source": source,
-        "camera": overlay.camera,
-        "seq": overlay.frame_seq,
-        "width": overlay.width,
-        "height": overlay.height,
-        "ok": overlay.ok,
-        "position": overlay.position,
-        "quaternion": overlay.quaternion,
-        "tags": overlay.tags,
-        "rmse": round(overlay.reprojection_rmse, 3),
-        "lost_age": round(overlay.lost_age, 2),
-        "reason": reason,
-        "intrinsics": intrinsics,
-        "server_ms": round(server_ms, 1),
-        "gravity": [round(float(v), 3) for v in gravity] if gravity else None,  # what the pose was solved with
-        "primitives": prims,
-    }, separators=(",", ":"))
+    return json.dumps(
+        {
+            "type": "overlay",
+            "source": source,
+            "camera": overlay.camera,
+            "seq": overlay.frame_seq,
+            "width": overlay.width,
+            "height": overlay.height,
+            "ok": overlay.ok,
+            "position": overlay.position,
+            "quaternion": overlay.quaternion,
+            "tags": overlay.tags,
+            "rmse": round(overlay.reprojection_rmse, 3),
+            "lost_age": round(overlay.lost_age, 2),
+            "reason": reason,
+            "intrinsics": intrinsics,
+            "server_ms": round(server_ms, 1),
+            "gravity": [round(float(v), 3) for v in gravity] if gravity else None,  # what the pose was solved with
+            "primitives": prims,
+        },
+        separators=(",", ":"),
+    )
 
 
 def site_json(site) -> dict[str, Any]:  # noqa: ANN001 (protocol.site.Site)
@@ -276,8 +295,16 @@ MAX_MAP_PATH = 200  # points of an intent sent to the map
 def world_json(snapshot, colour: Callable[[str], list[int]]) -> dict[str, Any]:  # noqa: ANN001 (WorldSnapshot)
     """A WorldSnapshot for the map: robots (in their overlay colours), their intents from now on
     (decimated), door states."""
-    robots = {rid: {"x": round(r.x, 3), "y": round(r.y, 3), "theta": round(r.theta, 3), "state": r.state, "color": colour(rid)}
-              for rid, r in snapshot.robots.items()}
+    robots = {
+        rid: {
+            "x": round(r.x, 3),
+            "y": round(r.y, 3),
+            "theta": round(r.theta, 3),
+            "state": r.state,
+            "color": colour(rid),
+        }
+        for rid, r in snapshot.robots.items()
+    }
     intents = {}
     for rid, rows in snapshot.intents.items():
         if len(rows) == 0:

@@ -22,8 +22,8 @@ config, ``arroch deploy acl`` prints it, and the deployment tests check every gu
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Mapping, Sequence
 
 # The roles a certificate common name can stand for, and what each runs.
 ROLES: dict[str, str] = {
@@ -37,8 +37,15 @@ ROLES: dict[str, str] = {
 INFRASTRUCTURE: tuple[str, ...] = ("router",)
 
 ALL_MESSAGES: tuple[str, ...] = (
-    "put", "delete", "declare_subscriber", "query", "reply", "declare_queryable",
-    "liveliness_token", "liveliness_query", "declare_liveliness_subscriber",
+    "put",
+    "delete",
+    "declare_subscriber",
+    "query",
+    "reply",
+    "declare_queryable",
+    "liveliness_token",
+    "liveliness_query",
+    "declare_liveliness_subscriber",
 )
 # Liveliness keys start with a verbatim ``@`` chunk, which ``**`` never matches: list them apart.
 KEY_SPACE: tuple[str, ...] = ("arroch/**", "arroch/*/@liveliness/**")
@@ -65,12 +72,26 @@ class Guard:
 
 
 GUARDS: tuple[Guard, ...] = (
-    Guard("robot/*/command", "only the planner drives the robots, and only robots hear their commands",
-          publishers=("planner",), readers=("sim",)),
-    Guard("feedback", "only the human's devices (AR clients) and the simulated human give feedback",
-          publishers=("ar", "sim"), servers=("restrictor",), queriers=("ar", "sim")),
+    Guard(
+        "robot/*/command",
+        "only the planner drives the robots, and only robots hear their commands",
+        publishers=("planner",),
+        readers=("sim",),
+    ),
+    Guard(
+        "feedback",
+        "only the human's devices (AR clients) and the simulated human give feedback",
+        publishers=("ar", "sim"),
+        servers=("restrictor",),
+        queriers=("ar", "sim"),
+    ),
     Guard("feedback/ack/*", "only the restrictor acknowledges feedback", publishers=("restrictor",)),
-    Guard("constraints", "only the restrictor states the active constraints", publishers=("restrictor",), servers=("restrictor",)),
+    Guard(
+        "constraints",
+        "only the restrictor states the active constraints",
+        publishers=("restrictor",),
+        servers=("restrictor",),
+    ),
     Guard("plan", "only the planner publishes and serves the team plan", publishers=("planner",), servers=("planner",)),
     Guard("intent/*", "only the planner announces robot intents", publishers=("planner",)),
     Guard("robot/*/pose", "robot poses come from the robots (or the simulator)", publishers=("sim",)),
@@ -112,12 +133,19 @@ def _deny(rule_id: str, messages: Sequence[str], flow: str, key_expr: str) -> di
 def rules_with_reasons() -> list[tuple[dict, str, list[str]]]:
     """Each rule, the reason for it, and the roles it applies to."""
     roles = list(ROLES)
-    out: list[tuple[dict, str, list[str]]] = [(
-        {"id": "member", "permission": "allow", "flows": ["ingress", "egress"], "messages": list(ALL_MESSAGES),
-         "key_exprs": list(KEY_SPACE)},
-        "every role may use the ARROCH key space; the deny rules below carve out what it may not",
-        [*roles, *INFRASTRUCTURE],
-    )]
+    out: list[tuple[dict, str, list[str]]] = [
+        (
+            {
+                "id": "member",
+                "permission": "allow",
+                "flows": ["ingress", "egress"],
+                "messages": list(ALL_MESSAGES),
+                "key_exprs": list(KEY_SPACE),
+            },
+            "every role may use the ARROCH key space; the deny rules below carve out what it may not",
+            [*roles, *INFRASTRUCTURE],
+        )
+    ]
     for guard in GUARDS:
         key = guard.key_expr()
         aspects: list[tuple[str, tuple[str, ...], dict]] = [
@@ -125,7 +153,9 @@ def rules_with_reasons() -> list[tuple[dict, str, list[str]]]:
             ("serve", guard.servers, _deny(f"{guard.key} serve", ("declare_queryable", "reply"), "ingress", key)),
         ]
         if guard.readers is not None:
-            aspects.append(("read", guard.readers, _deny(f"{guard.key} read", ("put", "delete", "reply"), "egress", key)))
+            aspects.append(
+                ("read", guard.readers, _deny(f"{guard.key} read", ("put", "delete", "reply"), "egress", key))
+            )
         if guard.queriers is not None:
             aspects.append(("query", guard.queriers, _deny(f"{guard.key} query", ("query",), "ingress", key)))
         for aspect, allowed, rule in aspects:
@@ -163,9 +193,17 @@ def to_json5(extra_cns: Mapping[str, Sequence[str]] | None = None, indent: str =
     ]
     for rule, reason in zip(block["rules"], reasons):
         lines += [f"{i2}// {reason}", f"{i2}{json.dumps(rule)},"]
-    lines += [f"{i1}],", f"{i1}// Roles, by the common name of the TLS client certificate (arroch deploy certs).", f"{i1}subjects: ["]
+    lines += [
+        f"{i1}],",
+        f"{i1}// Roles, by the common name of the TLS client certificate (arroch deploy certs).",
+        f"{i1}subjects: [",
+    ]
     lines += [f"{i2}{json.dumps(subject)}," for subject in block["subjects"]]
-    lines += [f"{i1}],", f"{i1}// Which rules bind which roles (a deny rule binds every role not allowed).", f"{i1}policies: ["]
+    lines += [
+        f"{i1}],",
+        f"{i1}// Which rules bind which roles (a deny rule binds every role not allowed).",
+        f"{i1}policies: [",
+    ]
     lines += [f"{i2}{json.dumps(policy)}," for policy in block["policies"]]
     lines += [f"{i1}],", "}"]
     return "\n".join(lines)

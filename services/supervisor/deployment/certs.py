@@ -94,7 +94,9 @@ def parse_hosts(names: list[str], sans: list[str], *, localhost: bool = True) ->
 def _openssl() -> str:
     path = shutil.which("openssl")
     if path is None:
-        raise CertError("the 'openssl' command is needed to make certificates; install it (Debian: apt-get install openssl)")
+        raise CertError(
+            "the 'openssl' command is needed to make certificates; install it (Debian: apt-get install openssl)"
+        )
     return path
 
 
@@ -115,11 +117,24 @@ def _make_ca(directory: Path, days: int) -> None:
     key, cert = directory / f"{CA_NAME}.key", directory / f"{CA_NAME}.pem"
     _new_key(key)
     _run(
-        "req", "-x509", "-new", "-key", str(key), "-out", str(cert), "-days", str(days), "-sha256",
-        "-subj", f"/CN={CA_COMMON_NAME}",
-        "-addext", "basicConstraints=critical,CA:TRUE,pathlen:0",
-        "-addext", "keyUsage=critical,keyCertSign,cRLSign",
-        "-addext", "subjectKeyIdentifier=hash",
+        "req",
+        "-x509",
+        "-new",
+        "-key",
+        str(key),
+        "-out",
+        str(cert),
+        "-days",
+        str(days),
+        "-sha256",
+        "-subj",
+        f"/CN={CA_COMMON_NAME}",
+        "-addext",
+        "basicConstraints=critical,CA:TRUE,pathlen:0",
+        "-addext",
+        "keyUsage=critical,keyCertSign,cRLSign",
+        "-addext",
+        "subjectKeyIdentifier=hash",
     )
 
 
@@ -129,24 +144,39 @@ def _make_host(directory: Path, host: HostCert, days: int) -> None:
     # rustls (webpki) wants a v3 end-entity certificate: not a CA, the names in subjectAltName
     # (the CN is never used for name checks), and both TLS usages, since a service is a TLS
     # client of the router while the router is a TLS server (and a client of other routers).
-    extensions = "\n".join([
-        "basicConstraints=critical,CA:FALSE",
-        "keyUsage=critical,digitalSignature",
-        "extendedKeyUsage=serverAuth,clientAuth",
-        f"subjectAltName={host.subject_alt_names()}",
-        "subjectKeyIdentifier=hash",
-        "authorityKeyIdentifier=keyid",
-    ])
+    extensions = "\n".join(
+        [
+            "basicConstraints=critical,CA:FALSE",
+            "keyUsage=critical,digitalSignature",
+            "extendedKeyUsage=serverAuth,clientAuth",
+            f"subjectAltName={host.subject_alt_names()}",
+            "subjectKeyIdentifier=hash",
+            "authorityKeyIdentifier=keyid",
+        ]
+    )
     with tempfile.TemporaryDirectory() as tmp:
         csr, ext = Path(tmp) / "host.csr", Path(tmp) / "host.ext"
         ext.write_text(extensions + "\n")
         _run("req", "-new", "-key", str(key), "-out", str(csr), "-subj", f"/CN={host.name}")
         _run(
-            "x509", "-req", "-in", str(csr), "-CA", str(directory / f"{CA_NAME}.pem"),
-            "-CAkey", str(directory / f"{CA_NAME}.key"),
+            "x509",
+            "-req",
+            "-in",
+            str(csr),
+            "-CA",
+            str(directory / f"{CA_NAME}.pem"),
+            "-CAkey",
+            str(directory / f"{CA_NAME}.key"),
             # A random positive 127-bit serial: no serial file to keep next to the authority.
-            "-set_serial", str(int.from_bytes(os.urandom(16), "big") >> 1), "-out", str(cert), "-days", str(days),
-            "-sha256", "-extfile", str(ext),
+            "-set_serial",
+            str(int.from_bytes(os.urandom(16), "big") >> 1),
+            "-out",
+            str(cert),
+            "-days",
+            str(days),
+            "-sha256",
+            "-extfile",
+            str(ext),
         )
     verify(directory, host.name)
 
@@ -160,18 +190,24 @@ def verify(directory: Path, name: str) -> None:
 
 def describe(directory: Path, name: str) -> str:
     """``CN=... ; names ...`` of one certificate, for the summary printed to the operator."""
-    text = _run("x509", "-in", str(directory / f"{name}.pem"), "-noout", "-subject", "-ext", "subjectAltName", "-enddate")
+    text = _run(
+        "x509", "-in", str(directory / f"{name}.pem"), "-noout", "-subject", "-ext", "subjectAltName", "-enddate"
+    )
     lines = [line.strip() for line in text.splitlines() if line.strip() and "X509v3" not in line]
     return "; ".join(lines)
 
 
-def make_certs(directory: Path, hosts: list[HostCert], *, days: int = 825, ca_days: int = 3650, force: bool = False) -> list[str]:
+def make_certs(
+    directory: Path, hosts: list[HostCert], *, days: int = 825, ca_days: int = 3650, force: bool = False
+) -> list[str]:
     """Make (or reuse) the authority and a pair per host; returns one summary line per file set."""
     directory.mkdir(parents=True, exist_ok=True)
     summary: list[str] = []
     ca_key, ca_cert = directory / f"{CA_NAME}.key", directory / f"{CA_NAME}.pem"
     if ca_cert.exists() != ca_key.exists():
-        raise CertError(f"{directory} holds only one of {CA_NAME}.pem and {CA_NAME}.key: restore the other or remove both")
+        raise CertError(
+            f"{directory} holds only one of {CA_NAME}.pem and {CA_NAME}.key: restore the other or remove both"
+        )
     if ca_cert.exists():
         summary.append(f"{ca_cert}: kept the existing authority")
     else:

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from . import acl
 from .certs import CertError, make_certs, parse_hosts
-from .render import PROFILES, KINDS, TEMPLATE_DIR, RenderError, Request, render
+from .render import KINDS, PROFILES, TEMPLATE_DIR, RenderError, Request, render
 
 log = logging.getLogger("arroch.deploy")
 
@@ -55,11 +55,15 @@ def run_render(args: argparse.Namespace) -> int:
         texts = {}
         for role in roles:
             request = Request(
-                profile=args.profile, role=role, kind=None if role == "router" else args.kind,
-                certs=Path(args.certs) if args.certs else None, name=args.name,
+                profile=args.profile,
+                role=role,
+                kind=None if role == "router" else args.kind,
+                certs=Path(args.certs) if args.certs else None,
+                name=args.name,
                 connect=[] if role == "router" else _split(args.router),
                 listen=_split(args.listen) if role == "router" or args.kind == "peer" else [],
-                extra_cns=extra_cns, check_files=not args.no_check_files,
+                extra_cns=extra_cns,
+                check_files=not args.no_check_files,
             )
             texts[role] = render(request, Path(args.templates))
     except (RenderError, ValueError) as exc:
@@ -94,34 +98,80 @@ def run_acl(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser("deploy", help="deployment files: TLS certificates, per-host Zenoh configs, access control",
-                            description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = sub.add_parser(
+        "deploy",
+        help="deployment files: TLS certificates, per-host Zenoh configs, access control",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     parser.add_argument("--log-level", default=None, choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     actions = parser.add_subparsers(dest="deploy_command", metavar="ACTION", required=True)
 
-    certs = actions.add_parser("certs", help="make a CA (or reuse the one in --out) and a certificate + key per identity")
-    certs.add_argument("--out", required=True, metavar="DIR", help="directory for ca.pem/ca.key and <name>.pem/<name>.key")
-    certs.add_argument("--hosts", required=True, metavar="NAMES",
-                       help="comma-separated identities; the name is the certificate's common name, i.e. its role "
-                            f"({', '.join((*acl.ROLES, *acl.INFRASTRUCTURE))}; extra names need --cn when rendering the router)")
-    certs.add_argument("--san", action="append", metavar="NAME=ADDR[,ADDR]",
-                       help="IP addresses or DNS names NAME is reached at (repeatable); the router's must include what clients dial")
+    certs = actions.add_parser(
+        "certs", help="make a CA (or reuse the one in --out) and a certificate + key per identity"
+    )
+    certs.add_argument(
+        "--out", required=True, metavar="DIR", help="directory for ca.pem/ca.key and <name>.pem/<name>.key"
+    )
+    certs.add_argument(
+        "--hosts",
+        required=True,
+        metavar="NAMES",
+        help="comma-separated identities; the name is the certificate's common name, i.e. its role "
+        f"({', '.join((*acl.ROLES, *acl.INFRASTRUCTURE))}; extra names need --cn when rendering the router)",
+    )
+    certs.add_argument(
+        "--san",
+        action="append",
+        metavar="NAME=ADDR[,ADDR]",
+        help="IP addresses or DNS names NAME is reached at (repeatable); the router's must include what clients dial",
+    )
     certs.add_argument("--days", type=int, default=825, help="validity of host certificates in days (default 825)")
-    certs.add_argument("--no-localhost", action="store_true", help="do not add localhost/127.0.0.1 to every certificate")
-    certs.add_argument("--force", action="store_true", help="remake host certificates that exist (the CA is always kept)")
+    certs.add_argument(
+        "--no-localhost", action="store_true", help="do not add localhost/127.0.0.1 to every certificate"
+    )
+    certs.add_argument(
+        "--force", action="store_true", help="remake host certificates that exist (the CA is always kept)"
+    )
     certs.set_defaults(func=run_certs)
 
-    rend = actions.add_parser("render", help="write a checked Zenoh JSON5 config for a role from deploy/zenoh templates")
-    rend.add_argument("--profile", choices=PROFILES, default="secure", help="plain (TCP) or secure (TLS, mTLS, access control); default secure")
-    rend.add_argument("--role", required=True, help="router, planner, restrictor, sim, ar, supervisor; comma-separated, or all")
-    rend.add_argument("--kind", choices=KINDS[1:], default="client", help="Zenoh mode of a service: client (default) or peer")
-    rend.add_argument("--certs", metavar="DIR", help="certificate directory as seen on the target host (secure profile)")
+    rend = actions.add_parser(
+        "render", help="write a checked Zenoh JSON5 config for a role from deploy/zenoh templates"
+    )
+    rend.add_argument(
+        "--profile",
+        choices=PROFILES,
+        default="secure",
+        help="plain (TCP) or secure (TLS, mTLS, access control); default secure",
+    )
+    rend.add_argument(
+        "--role", required=True, help="router, planner, restrictor, sim, ar, supervisor; comma-separated, or all"
+    )
+    rend.add_argument(
+        "--kind", choices=KINDS[1:], default="client", help="Zenoh mode of a service: client (default) or peer"
+    )
+    rend.add_argument(
+        "--certs", metavar="DIR", help="certificate directory as seen on the target host (secure profile)"
+    )
     rend.add_argument("--name", help="certificate to present (default: the role), e.g. ar-2 for a second tablet")
     rend.add_argument("--router", metavar="ENDPOINTS", help="router endpoint(s) services dial, e.g. tls/10.0.0.1:7447")
-    rend.add_argument("--listen", metavar="ENDPOINTS", help="endpoints the router (or a peer) listens on (router default: all interfaces, port 7447)")
-    rend.add_argument("--cn", action="append", metavar="ROLE=NAME[,NAME]", help="more certificate names for a role in the router's rules (repeatable)")
-    rend.add_argument("--no-check-files", action="store_true", help="do not require the certificate files to exist here")
-    rend.add_argument("--templates", default=str(TEMPLATE_DIR), metavar="DIR", help=f"template directory (default {TEMPLATE_DIR})")
+    rend.add_argument(
+        "--listen",
+        metavar="ENDPOINTS",
+        help="endpoints the router (or a peer) listens on (router default: all interfaces, port 7447)",
+    )
+    rend.add_argument(
+        "--cn",
+        action="append",
+        metavar="ROLE=NAME[,NAME]",
+        help="more certificate names for a role in the router's rules (repeatable)",
+    )
+    rend.add_argument(
+        "--no-check-files", action="store_true", help="do not require the certificate files to exist here"
+    )
+    rend.add_argument(
+        "--templates", default=str(TEMPLATE_DIR), metavar="DIR", help=f"template directory (default {TEMPLATE_DIR})"
+    )
     out = rend.add_mutually_exclusive_group()
     out.add_argument("--out", metavar="FILE", help="output file for one role (default: stdout)")
     out.add_argument("--out-dir", metavar="DIR", help="output directory: one <role>.json5 per role")

@@ -79,8 +79,10 @@ def _tls_files(req: Request) -> dict[str, str]:
     if req.check_files:
         missing = [str(path) for path in files.values() if not path.is_file()]
         if missing:
-            raise RenderError(f"missing {', '.join(missing)} (make them with: arroch deploy certs --out {directory} --hosts {name}; "
-                              "or pass --no-check-files when rendering for another machine's layout)")
+            raise RenderError(
+                f"missing {', '.join(missing)} (make them with: arroch deploy certs --out {directory} --hosts {name}; "
+                "or pass --no-check-files when rendering for another machine's layout)"
+            )
         try:
             verify(directory, name)
         except CertError as exc:
@@ -93,8 +95,10 @@ def values_for(req: Request) -> dict[str, object]:
     if req.profile not in PROFILES:
         raise RenderError(f"profile {req.profile!r} is not one of {', '.join(PROFILES)}")
     if req.role not in (*acl.ROLES, *acl.INFRASTRUCTURE):
-        raise RenderError(f"role {req.role!r} is not one of {', '.join((*acl.ROLES, *acl.INFRASTRUCTURE))} "
-                          "(a certificate with another name is chosen with --name)")
+        raise RenderError(
+            f"role {req.role!r} is not one of {', '.join((*acl.ROLES, *acl.INFRASTRUCTURE))} "
+            "(a certificate with another name is chosen with --name)"
+        )
     if req.resolved_kind not in KINDS:
         raise RenderError(f"kind {req.kind!r} is not one of {', '.join(KINDS)}")
     kind = req.resolved_kind
@@ -139,9 +143,13 @@ def render(req: Request, template_dir: Path = TEMPLATE_DIR) -> str:
     try:
         rendered = string.Template(text).substitute(encoded)
     except KeyError as exc:
-        raise RenderError(f"template {template_path(req, template_dir).name} needs {exc} which a {req.resolved_kind} request does not give") from None
+        raise RenderError(
+            f"template {template_path(req, template_dir).name} needs {exc} which a {req.resolved_kind} request does not give"
+        ) from None
     except ValueError as exc:  # a stray '$' in the template
-        raise RenderError(f"template {template_path(req, template_dir).name}: {exc} (write a literal $ as $$)") from None
+        raise RenderError(
+            f"template {template_path(req, template_dir).name}: {exc} (write a literal $ as $$)"
+        ) from None
     check(rendered, req, values)
     return rendered
 
@@ -168,4 +176,6 @@ def check(text: str, req: Request, values: dict[str, object]) -> None:
     for path, want in expected.items():
         got = json.loads(config.get_json(path))
         if got != want:
-            raise RenderError(f"rendered config has {path} = {got!r}, expected {want!r} (template out of step with render.py?)")
+            raise RenderError(
+                f"rendered config has {path} = {got!r}, expected {want!r} (template out of step with render.py?)"
+            )

@@ -221,14 +221,16 @@ class TagDetector:
     def _small(
         self, gray: np.ndarray, rejected: Sequence[np.ndarray], found: list[TagDetection], lens: Lens | None
     ) -> list[TagDetection]:
-        """Small tags read from ArUco's rejected quads (:mod:`smalltags`), away from tags already found."""
-        centres = np.array([d.corners.mean(axis=0) for d in found]).reshape(-1, 2)
-        quads = []
-        for r in rejected:
-            q = r.reshape(4, 2).astype(np.float64)
-            if len(centres) and (np.linalg.norm(centres - q.mean(axis=0), axis=1) < 4.0).any():
-                continue
-            quads.append(q)
+        """Small tags read from ArUco's rejected quads (:mod:`smalltags`), outside the tags already found.
+
+        A candidate centred inside a found tag is a piece of it (on close views most rejected quads
+        are islands of a big tag's data modules), never another tag: dropping those first keeps the
+        decoding's cost to the candidates that can be tags."""
+        quads = [r.reshape(4, 2).astype(np.float64) for r in rejected]
+        if found and quads:
+            centres = np.array([q.mean(axis=0) for q in quads])
+            inside = _inside_any(centres, np.array([d.corners for d in found]))
+            quads = [q for q, drop in zip(quads, inside, strict=True) if not drop]
         return [
             TagDetection(i, opencv_corners(q), "opencv", score)
             for i, q, score in decode_quads(gray, quads, self.known_ids, lens)
@@ -282,6 +284,15 @@ class TagDetector:
                     out.append(TagDetection(d.tag_id, corners, d.detector, d.decision_margin, d.hamming))
                 break
         return out
+
+
+def _inside_any(points: np.ndarray, quads: np.ndarray) -> np.ndarray:
+    """(N,) bool: whether each of ``points`` (N, 2) lies inside any of the convex ``quads`` (M, 4, 2)."""
+    edges = np.roll(quads, -1, axis=1) - quads  # (M, 4, 2)
+    rel = points[:, None, None, :] - quads[None, :, :, :]  # (N, M, 4, 2)
+    cross = edges[None, ..., 0] * rel[..., 1] - edges[None, ..., 1] * rel[..., 0]  # (N, M, 4)
+    # Inside a convex quad: on the same side of all four edges, whichever the winding.
+    return ((cross >= 0).all(axis=2) | (cross <= 0).all(axis=2)).any(axis=1)
 
 
 def _one_per_id(dets: list[TagDetection]) -> list[TagDetection]:

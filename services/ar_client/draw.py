@@ -42,36 +42,46 @@ def _alpha(p: Primitive) -> float:
     return a * XRAY_ALPHA if p.style == "xray" else a
 
 
-def _dashes(points: np.ndarray, width: int, height: int) -> list[np.ndarray]:
-    """A polyline cut into dash segments (pairs of points), the pattern running across joints.
+def _dashes(points: np.ndarray, width: int, height: int) -> np.ndarray:
+    """A polyline cut into dash segments, (K, 2, 2) pairs of points, the pattern running across joints.
 
     Segments are first clipped to the image (plus a margin): a line passing close to the near plane
-    projects to thousands of pixels off-screen, which must not turn into millions of dashes.
+    projects to thousands of pixels off-screen, which must not turn into millions of dashes. Only
+    segments leaving that box are clipped one by one; the dashes of all segments are laid at once.
     """
     period = DASH_ON + DASH_OFF
     margin = 2.0 * period
-    box = (-margin, -margin, width + margin, height + margin)
-    out: list[np.ndarray] = []
-    phase = 0.0  # arc length along the whole polyline, so the pattern runs on across joints
-    for a0, b0 in zip(points[:-1], points[1:]):
-        full = float(np.hypot(*(b0 - a0)))
-        clipped = clip_segment(a0, b0, box) if full > 1e-9 else None
-        if clipped is not None:
-            a, b = clipped
-            s0 = phase + float(np.hypot(*(a - a0)))  # arc length of the visible part's ends
-            s1 = s0 + float(np.hypot(*(b - a)))
-            # Dash k covers [k*period, k*period + DASH_ON) of arc length; intersect with [s0, s1].
-            k = np.arange(np.floor(s0 / period), np.ceil(s1 / period) + 1)
-            lo = np.maximum(k * period, s0)
-            hi = np.minimum(k * period + DASH_ON, s1)
-            keep = hi > lo
-            if keep.any():
-                direction = (b0 - a0) / full
-                starts = a0 + np.outer(lo[keep] - phase, direction)
-                ends = a0 + np.outer(hi[keep] - phase, direction)
-                out.extend(np.stack([starts, ends], axis=1))
-        phase += full
-    return out
+    x0, y0, x1, y1 = box = (-margin, -margin, width + margin, height + margin)
+    a0, b0 = points[:-1], points[1:]
+    full = np.hypot(*(b0 - a0).T)  # (n,) segment lengths
+    phase = np.concatenate([[0.0], np.cumsum(full)[:-1]])  # arc length at each segment's start
+    ends_in = (points[:, 0] >= x0) & (points[:, 0] <= x1) & (points[:, 1] >= y0) & (points[:, 1] <= y1)
+    a, b = a0.copy(), a0 + (b0 - a0)  # what clipping gives a segment wholly inside the box
+    visible = full > 1e-9
+    for i in np.flatnonzero(visible & ~(ends_in[:-1] & ends_in[1:])):
+        clipped = clip_segment(a0[i], b0[i], box)
+        if clipped is None:
+            visible[i] = False
+        else:
+            a[i], b[i] = clipped
+    s0 = phase + np.hypot(*(a - a0).T)  # arc length of each visible part's ends
+    s1 = s0 + np.hypot(*(b - a).T)
+    seg = np.flatnonzero(visible)
+    if not len(seg):
+        return np.zeros((0, 2, 2))
+    # Dash k covers [k*period, k*period + DASH_ON) of arc length; intersect with [s0, s1].
+    first = np.floor(s0[seg] / period)
+    counts = (np.ceil(s1[seg] / period) - first + 1).astype(np.int64)
+    owner = np.repeat(seg, counts)
+    k = np.repeat(first, counts) + (np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts))
+    lo = np.maximum(k * period, s0[owner])
+    hi = np.minimum(k * period + DASH_ON, s1[owner])
+    keep = hi > lo
+    owner, lo, hi = owner[keep], lo[keep], hi[keep]
+    direction = (b0 - a0)[owner] / full[owner, None]
+    starts = a0[owner] + (lo - phase[owner])[:, None] * direction
+    stops = a0[owner] + (hi - phase[owner])[:, None] * direction
+    return np.stack([starts, stops], axis=1)
 
 
 def _int_pts(points: np.ndarray) -> np.ndarray:
@@ -97,8 +107,8 @@ def _draw_one(img: np.ndarray, p: Primitive) -> None:
     if p.kind in ("line", "polyline"):
         if len(pts) < 2:
             return
-        pieces = _dashes(pts, img.shape[1], img.shape[0]) if dashed else [pts]
-        cv2.polylines(img, [_int_pts(q) for q in pieces], False, colour, width, cv2.LINE_AA, shift=4)
+        pieces = list(_int_pts(_dashes(pts, img.shape[1], img.shape[0]))) if dashed else [_int_pts(pts)]
+        cv2.polylines(img, pieces, False, colour, width, cv2.LINE_AA, shift=4)
     elif p.kind == "polygon":
         if len(pts) >= 3:
             cv2.fillPoly(img, [_int_pts(pts)], colour, cv2.LINE_AA, shift=4)

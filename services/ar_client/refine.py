@@ -43,10 +43,26 @@ def refine_corners(
     gray: np.ndarray, quads: list[np.ndarray], passes: int = 1, lens: Lens | None = None
 ) -> list[np.ndarray]:
     """:func:`refine_once` ``passes`` times: a corner far off (a blurred small tag's, 1-2 px) moves
-    up to a module per pass, each pass starting from the previous one's corners."""
-    for _ in range(passes):
-        quads = refine_once(gray, quads, lens)
+    up to a module per pass, each pass starting from the previous one's corners.
+
+    Passes after the first go to small tags only: a tag whose profiles already reach
+    :data:`MAX_REACH_PX` either side of its edges (a module of ``MAX_REACH_PX / REACH_MODULES`` px
+    or more) is found within that reach by the first pass, and a second would move it by noise."""
+    if passes <= 0:
+        return list(quads)
+    quads = refine_once(gray, quads, lens)
+    for _ in range(passes - 1):
+        small = [i for i, q in enumerate(quads) if _module_px(q) * REACH_MODULES < MAX_REACH_PX]
+        if not small:
+            break
+        for i, q in zip(small, refine_once(gray, [quads[i] for i in small], lens), strict=True):
+            quads[i] = q
     return list(quads)
+
+
+def _module_px(quad: np.ndarray) -> float:
+    """A tag's module size in pixels: its mean side over the black square's 8 modules."""
+    return float(np.linalg.norm(np.roll(quad, -1, axis=0) - quad, axis=1).mean()) / 8.0
 
 
 class Lens:

@@ -1,8 +1,8 @@
 """The ``arroch`` command: one sub-command per service or tool.
 
 Each entry of :data:`COMMANDS` is a module exposing ``register(subparsers)``, which adds its
-sub-command(s) and sets ``func`` on the parsed arguments. Modules are imported only when the
-CLI starts, so ``arroch --help`` is the one place that lists everything.
+sub-command(s) and sets ``func`` on the parsed arguments. A command imports only its own
+module(s); ``arroch --help`` imports them all and is the one place that lists everything.
 """
 
 from __future__ import annotations
@@ -13,31 +13,48 @@ import sys
 
 from protocol.runner import setup_logging
 
-COMMANDS: tuple[str, ...] = (
-    "protocol.site.cli",  # arroch site check|show|generate
-    "protocol.router_cli",  # arroch router
-    "protocol.ping",  # arroch ping serve|send (protocol round trip)
-    "services.demo",  # arroch demo
-    "services.planner.cli",  # arroch planner, arroch plan
-    "services.restrictor.cli",  # arroch restrictor, feedback, constraints
-    "services.sim.cli",  # arroch sim, sim snapshot
-    "services.robot.cli",  # arroch robot --ros2
-    "services.ros2.cli",  # arroch ros2 bridge
-    "services.ar_client.cli",  # arroch ar, ar localize|render, tags
-    "services.ar_client.web.cli",  # arroch tablet, ar calibrate
-    "services.supervisor.cli",  # arroch up
-    "services.experiments.cli",  # arroch experiment
-    "services.recorder.cli",  # arroch record, view, replay, runs show
-)
+#: Each module and the top-level commands its ``register`` adds (``ar`` is extended by the tablet's
+#: module with ``ar calibrate``). tests/test_cli_registry.py checks this against the modules.
+COMMANDS: dict[str, tuple[str, ...]] = {
+    "protocol.site.cli": ("site",),  # arroch site check|show|generate
+    "protocol.router_cli": ("router",),
+    "protocol.ping": ("ping",),  # arroch ping serve|send (protocol round trip)
+    "services.demo": ("demo",),
+    "services.planner.cli": ("planner", "plan"),
+    "services.restrictor.cli": ("restrictor", "feedback", "constraints"),
+    "services.sim.cli": ("sim",),  # arroch sim, sim snapshot
+    "services.robot.cli": ("robot",),  # arroch robot --ros2
+    "services.ros2.cli": ("ros2",),  # arroch ros2 bridge
+    "services.ar_client.cli": ("ar", "tags"),  # arroch ar, ar localize|render, tags
+    "services.ar_client.web.cli": ("tablet", "ar"),  # arroch tablet, ar calibrate
+    "services.supervisor.cli": ("up", "deploy"),
+    "services.experiments.cli": ("experiment",),
+    "services.recorder.cli": ("record", "view", "replay", "runs"),
+}
+#: Modules whose ``register`` extends another's commands, with the module they need first.
+REQUIRES: dict[str, str] = {"services.ar_client.web.cli": "services.ar_client.cli"}
 
 
-def build_parser() -> argparse.ArgumentParser:
+def modules_for(argv: list[str]) -> list[str]:
+    """The modules to import for ``argv``: only those of its command when it names one.
+
+    Importing every service's CLI costs ~0.3 s of CPU; a sweep starts several services per trial,
+    each through this dispatcher, so a service's start-up imports only its own command's module.
+    Help, version, options before the command and unknown commands get every module.
+    """
+    command = argv[0] if argv and not argv[0].startswith("-") else None
+    wanted = {m for m, commands in COMMANDS.items() if command in commands}
+    wanted |= {REQUIRES[m] for m in wanted if m in REQUIRES}
+    return [m for m in COMMANDS if m in wanted] or list(COMMANDS)
+
+
+def build_parser(modules: list[str] | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="arroch",
         description="ARROCH: AR for robots collaborating with a human. Services and tools.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for module_name in COMMANDS:
+    for module_name in COMMANDS if modules is None else modules:
         try:
             module = importlib.import_module(module_name)
         except ModuleNotFoundError as exc:
@@ -51,7 +68,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(modules_for(argv))
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()

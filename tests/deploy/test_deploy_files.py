@@ -18,8 +18,8 @@ from cryptography import x509
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from protocol.certs import CertError, make_certs, parse_hosts
+from protocol.launch.catalog import DEFAULT_SERVICES
 from services.cli import build_parser
-from services.supervisor.catalog import DEFAULT_SERVICES
 from services.supervisor.deployment import acl
 from services.supervisor.deployment.render import RenderError, Request, render
 from tests.procs import ROOT, arroch

@@ -20,9 +20,10 @@ from collections.abc import Collection
 from dataclasses import dataclass
 from typing import Any
 
+from protocol.asp_vocabulary import ASP_INT_MAX, ASP_INT_MIN, UnsafeProgram, check_program
+
 from .library import ADD, INT, Library, SiteLike
 from .validate import Refusal, Validated, validate
-from .vocabulary import ASP_INT_MAX, ASP_INT_MIN, UnsafeProgram, check_program
 
 log = logging.getLogger("arroch.restrictor")
 

@@ -115,8 +115,8 @@ def wait_for_library(
 ) -> ConstraintLibrary | None:
     """:func:`fetch_library` again every ``retry`` s until a restrictor answers or ``client`` stops.
 
-    Logs once, at WARNING, that no restrictor answers yet (and what waits for it), then once more
-    when one does. For a background thread of a running service: a closed session ends it (None)."""
+    Logs once, at WARNING, that no restrictor answers yet (and what waits for it), and at INFO
+    the answer that came. For a background thread of a running service: a closed session ends it (None)."""
     key = client.keys.constraint_library()
     warned = False
     while not client.stopping:
@@ -126,10 +126,9 @@ def wait_for_library(
             client.log.debug("library query failed: %s", exc)
             return None
         if library is not None:
-            if warned:
-                client.log.info(
-                    "restrictor %s answered: %d library entries for the %s", library.src, len(library.entries), what
-                )
+            client.log.info(
+                "restrictor %s answered: %d library entries for the %s", library.src, len(library.entries), what
+            )
             return library
         if not warned:
             client.log.warning(

@@ -74,7 +74,7 @@ def test_a_small_frame_still_lays_out_without_overflow():
 @pytest.mark.integration
 def test_the_library_comes_from_the_restrictor_once_one_answers(router, namespace, client, spawn, tmp_path, caplog):
     got: list = []
-    with caplog.at_level(logging.WARNING):
+    with caplog.at_level(logging.INFO):
         waiter = threading.Thread(target=lambda: got.append(wait_for_library(client, retry=0.5, timeout=0.5)))
         waiter.start()
         time.sleep(1.5)  # asked more than once, nobody answered
@@ -84,6 +84,7 @@ def test_the_library_comes_from_the_restrictor_once_one_answers(router, namespac
     assert got and got[0] is not None, "the restrictor's library never arrived"
     assert got[0].site == "office" and got[0].entries == library_for_site(load_site())
     assert "no restrictor answers on" in caplog.text and "constraints/library" in caplog.text
+    assert "answered: 4 library entries" in caplog.text
 
 
 @pytest.mark.integration

@@ -68,6 +68,7 @@ from services.ar_client.pipeline import Pipeline  # noqa: E402
 from services.ar_client.project import Intrinsics  # noqa: E402
 from services.ar_client.synth import render, sample_views  # noqa: E402
 from services.ar_client.world import WorldView  # noqa: E402
+from services.restrictor.library import library_for_site  # noqa: E402
 
 SIZES = ((640, 480), (1280, 720))
 FOV_Y = 50.0
@@ -218,7 +219,7 @@ class Accuracy:
 
 def run_pipeline(site, frames: list[Frame]) -> dict:  # noqa: ANN001
     world = world_for(site)
-    pipeline = Pipeline(site, world, panel=FeedbackPanel.for_site(site))
+    pipeline = Pipeline(site, world, panel=FeedbackPanel(library_for_site(site)))
     stages = {k: [] for k in ("decode", "detect", "pose", "project", "draw", "total")}
     cpu: list[float] = []
     accuracy = Accuracy(site)
@@ -460,7 +461,7 @@ class BucketRate:
 
 
 def hard_ours(site, frames: list[HardFrame], use_gravity: bool) -> dict:  # noqa: ANN001
-    pipeline = Pipeline(site, world_for(site), panel=FeedbackPanel.for_site(site))
+    pipeline = Pipeline(site, world_for(site), panel=FeedbackPanel(library_for_site(site)))
     accuracy, first_pass, final = Accuracy(site), BucketRate(), BucketRate()
     cpu, ambiguous, wall = [], 0, []
     pipeline.process(frames[0].jpeg, frames[0].K, -100.0)

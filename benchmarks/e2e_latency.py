@@ -155,7 +155,7 @@ class Probe:
         raise RuntimeError(f"no plan and localised overlay within {timeout:.0f} s")
 
     def press(self, kind: str, params: dict[str, Any]) -> dict[str, Any]:
-        from services.restrictor.client import send_feedback
+        from protocol.feedback_client import send_feedback
 
         pressed = time.time()
         ack = send_feedback(self.client, kind, params, timeout=10.0)

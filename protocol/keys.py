@@ -62,6 +62,10 @@ class Keys:
     def constraints(self) -> str:
         return self._k("constraints")
 
+    def constraint_library(self) -> str:
+        """Queryable: the constraint library the running restrictor accepts feedback from."""
+        return self._k("constraints", "library")
+
     # cameras and AR
     def camera_frame(self, camera: str = "*") -> str:
         return self._k("camera", camera if camera == "*" else _chunk(camera, "camera id"), "frame")

@@ -1,13 +1,14 @@
 """The feedback panel: the constraint library's entries as on-screen buttons, and sending a press.
 
-The panel shows one button per usable library entry (``services.restrictor.library.library_for_site``)
-with a chip per parameter under it (``Door: d_storage >``). Tapping a chip cycles the parameter
+The panel shows one button per usable entry of the constraint library the running restrictor serves
+(``constraints/library``, :mod:`protocol.constraint_library`; until one answers, a line saying the
+panel waits for it) with a chip per parameter under it (``Door: d_storage >``). Tapping a chip cycles the parameter
 through its choices (the site's doors/rooms, a few durations between the entry's min and max, the
 live constraint ids for "cancel"); tapping the entry's button sends a ``Feedback`` with the shown
 values. The answer — accepted, refused with the restrictor's reason, or no answer — stays on the
 panel's status line.
 
-Sending goes through the restrictor's client contract (``services.restrictor.client.send_feedback``):
+Sending goes through the restrictor's client contract (``protocol.feedback_client.send_feedback``):
 the Feedback is stamped once and its bytes sent as a query on ``feedback`` (the reply is the
 ``FeedbackAck``), re-sent with the same ``src``/``seq`` until an ack arrives either as the reply or on
 ``feedback/ack/<src>``; the restrictor applies a repeated ``(src, seq)`` once. That call blocks, so a
@@ -28,6 +29,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
+from protocol.feedback_client import send_feedback
 from protocol.messages import ConstraintSet, FeedbackAck, Primitive
 
 from .draw import text_width
@@ -73,9 +75,11 @@ class Result:
     at: float = 0.0  # time.monotonic() of the last change
 
 
+WAITING = "Feedback: waiting for the restrictor's library"
+
+
 def restrictor_sender(service, timeout: float = 5.0) -> Sender:  # noqa: ANN001 (an open protocol.service.Service)
     """A sender that talks to the restrictor through ``service``'s Zenoh session."""
-    from services.restrictor.client import send_feedback
 
     def send(kind: str, params: dict[str, Any]) -> FeedbackAck | None:
         return send_feedback(service, kind, params, timeout=timeout)
@@ -84,29 +88,31 @@ def restrictor_sender(service, timeout: float = 5.0) -> Sender:  # noqa: ANN001 
 
 
 class FeedbackPanel:
-    """Library entries as buttons; presses become Feedback sent by ``sender`` on a worker thread."""
+    """Library entries as buttons; presses become Feedback sent by ``sender`` on a worker thread.
 
-    def __init__(self, entries: list[dict[str, Any]], sender: Sender | None = None) -> None:
-        self.entries = [e for e in entries if e.get("usable", True)]
+    ``entries`` None: the library is not known yet (no restrictor has answered); the panel says so
+    until :meth:`set_entries` gives it."""
+
+    def __init__(self, entries: list[dict[str, Any]] | None = None, sender: Sender | None = None) -> None:
         self.sender = sender
         self._lock = threading.Lock()
-        self._values: dict[str, dict[str, Any]] = {}
         self._constraint_ids: list[str] = []
-        for e in self.entries:
-            self._values[e["id"]] = {p["name"]: self._default(p) for p in e["params"]}
+        self.entries: list[dict[str, Any]] = []
+        self._values: dict[str, dict[str, Any]] = {}
+        self.waiting = entries is None
+        if entries is not None:
+            self.set_entries(entries)
         self.result: Result | None = None
         self._thread: threading.Thread | None = None
         self._buttons: list[Button] = []
 
-    @staticmethod
-    def for_site(site, sender: Sender | None = None) -> FeedbackPanel:  # noqa: ANN001
-        """The panel for ``site`` with the packaged constraint library (empty if the restrictor is absent)."""
-        try:
-            from services.restrictor.library import library_for_site
-        except ImportError:
-            log.warning("the restrictor package is not installed: no feedback buttons")
-            return FeedbackPanel([], sender)
-        return FeedbackPanel(library_for_site(site), sender)
+    def set_entries(self, entries: list[dict[str, Any]]) -> None:
+        """Show ``entries`` (the library as the restrictor serves it); values start at their defaults."""
+        usable = [e for e in entries if e.get("usable", True)]
+        with self._lock:
+            self.entries = usable
+            self._values = {e["id"]: {p["name"]: self._default(p) for p in e["params"]} for e in usable}
+            self.waiting = False
 
     # ------------------------------------------------------------------ parameters
 
@@ -237,6 +243,10 @@ class FeedbackPanel:
         prims: list[Primitive] = []
         buttons: list[Button] = []
         pending = self.result is not None and self.result.status == "pending"
+        if self.waiting:
+            rect = (x0, y, x0 + panel_w, y + row)
+            prims += _box(rect, BG_DISABLED)
+            prims.append(_label(rect, _fit(WAITING, panel_w - 2 * pad, text_px * 0.9), text_px * 0.9, FG_DIM))
         for e in self.entries:
             if y + 2 * row > height - 2 * row:
                 break  # no room for more entries on a small frame

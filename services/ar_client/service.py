@@ -3,7 +3,8 @@
 I/O (keys under ``arroch/<namespace>/``):
 
 - subscribes to ``robot/*/pose`` (latest), ``robot/*/status``, ``intent/*``, ``door/*/state`` into a
-  :class:`WorldView`, and to ``constraints`` for the feedback panel's "cancel" choices;
+  :class:`WorldView`, and to ``constraints`` for the feedback panel's "cancel" choices; queries
+  the restrictor's ``constraints/library`` (every second until one answers) for the panel's buttons;
 - with ``--source sim``, subscribes to ``camera/<cid>/frame`` (latest only: a slow frame never queues
   up stale ones); other sources are read on the worker at their frame rate;
 - publishes one ``Overlay`` per processed frame on ``ar/<cid>/overlay`` (when lost, with an extra
@@ -26,6 +27,7 @@ import cv2
 import numpy as np
 
 from protocol.clock import SimClock, WallClock
+from protocol.feedback_client import newest_constraints, wait_for_library
 from protocol.messages import CameraFrame, ConstraintSet, Overlay
 from protocol.service import Service
 from protocol.transport import ZenohOptions
@@ -40,6 +42,7 @@ from .world import WorldView
 
 BAD_FRAME_LOG_INTERVAL = 60.0
 DEFAULT_RECORD_FPS = 10.0
+LIBRARY_RETRY = 1.0  # wall seconds between queries for the restrictor's library until one answers
 MAX_STAMP_SKEW = 10.0  # seconds between a frame's stamp and our clock beyond which the stamp is ignored
 
 
@@ -68,7 +71,7 @@ class ArService(Service):
         # Opening a pull source first reports a missing file or calibration before any Zenoh session.
         self.source = None if source.kind == "sim" else open_source(source, intrinsics, self.clock.now)
         self.world = WorldView()
-        self.panel = FeedbackPanel.for_site(site) if feedback else None
+        self.panel = FeedbackPanel() if feedback else None  # its entries: what the restrictor serves
         self.pipeline = Pipeline(
             site,
             self.world,
@@ -95,8 +98,8 @@ class ArService(Service):
         if self.panel is not None:
             self.panel.sender = restrictor_sender(self)
             self.subscribe(k.constraints(), ConstraintSet, self.panel.on_constraints)
-            # A late joiner asks for the live set; off the worker, since a query blocks.
-            threading.Thread(target=self._fetch_constraints, name="ar-constraints", daemon=True).start()
+            # The library, then the live set (a late joiner's), off the worker, since queries block.
+            threading.Thread(target=self._fetch_panel, name="ar-library", daemon=True).start()
         if self.source is None:
             self.subscribe(k.camera_frame(self.camera), CameraFrame, self._on_frame, latest=True)
             self.log.info("waiting for frames on %s", k.camera_frame(self.camera))
@@ -114,11 +117,13 @@ class ArService(Service):
         if self.snapshots is not None:
             self.log.info("kept %d overlay frame(s) in %s", len(self.snapshots.kept), self.snapshots.directory)
 
-    def _fetch_constraints(self) -> None:
-        from services.restrictor.client import newest_constraints  # on first use: it loads clingo
-
+    def _fetch_panel(self) -> None:
+        library = wait_for_library(self, retry=LIBRARY_RETRY, what="feedback buttons on the overlay")
+        if library is None or self.panel is None:
+            return  # stopping
+        self.panel.set_entries(library.entries)
         newest = newest_constraints(self)
-        if newest is not None and self.panel is not None:
+        if newest is not None:
             self.panel.on_constraints(newest)
 
     # ------------------------------------------------------------------ frames

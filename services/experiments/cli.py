@@ -28,7 +28,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from .design import DEFAULT_COST, DEFAULT_TASK, FOCUS_READINGS, METHODS, SweepSpec, format_p
+from .design import DEFAULT_COST, DEFAULT_P, DEFAULT_TASK, FOCUS_READINGS, METHODS, SweepSpec, format_p
 
 log = logging.getLogger("arroch.experiment")
 
@@ -54,13 +54,6 @@ def _methods(text: str) -> tuple[str, ...]:
     return methods
 
 
-def _default_p() -> float:
-    """The simulator's own default door-opening probability (the robots sweep does not vary it)."""
-    from services.sim.human import HumanConfig
-
-    return HumanConfig().door_probability
-
-
 def _add_sweep_arguments(parser: argparse.ArgumentParser, kind: str) -> None:
     sweep = parser.add_argument_group("sweep (decides the results)")
     if kind == "map":
@@ -84,7 +77,7 @@ def _add_sweep_arguments(parser: argparse.ArgumentParser, kind: str) -> None:
             type=float,
             default=None,
             metavar="P",
-            help=f"the human's door-opening probability (default: the sim's, {format_p(_default_p())})",
+            help=f"the human's door-opening probability (default: the sim's, {format_p(DEFAULT_P)})",
         )
     elif kind == "robots":
         sweep.add_argument(
@@ -99,7 +92,7 @@ def _add_sweep_arguments(parser: argparse.ArgumentParser, kind: str) -> None:
             type=float,
             default=None,
             metavar="P",
-            help=f"the human's door-opening probability (default: the sim's, {format_p(_default_p())})",
+            help=f"the human's door-opening probability (default: the sim's, {format_p(DEFAULT_P)})",
         )
     else:
         sweep.add_argument(
@@ -231,9 +224,9 @@ def _spec(args: argparse.Namespace) -> SweepSpec:
         except OSError as exc:
             raise ValueError(f"--human-config {args.human_config}: {exc.strerror}") from None
     if args.kind == "robots":
-        robots, ps = args.robots, (args.p if args.p is not None else _default_p(),)
+        robots, ps = args.robots, (args.p if args.p is not None else DEFAULT_P,)
     elif args.kind == "map":
-        robots, ps = (args.robots,), (args.p if args.p is not None else _default_p(),)
+        robots, ps = (args.robots,), (args.p if args.p is not None else DEFAULT_P,)
     else:
         robots, ps = (args.robots,), args.p
     if args.kind == "map":

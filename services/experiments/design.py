@@ -30,6 +30,7 @@ METHODS = ("arroch", "no-feedback", "no-comm")  # the sim's --method values, the
 SEED_MASK = 0x7FFFFFFF  # non-negative 31-bit: fits every seed argument down the line
 DEFAULT_TASK = 600.0  # s: the simulator's default mean task length (services/sim/human.py, HumanConfig)
 DEFAULT_COST = 0.0  # s: the simulator's default interruption cost (idem)
+DEFAULT_P = 0.5  # the simulator's default door-opening probability (idem)
 FOCUS_READINGS = ("faithful", "strict")  # the simulator's --focus-reading values (idem)
 
 

@@ -29,9 +29,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from protocol.launch.catalog import RECORDER, RECORDING, SERVICES, Launch, MissionOptions, ServiceSpec, service_argv
+from protocol.launch.children import Child, describe_exit, stop_all
 from protocol.site import generate_site
-from services.supervisor.catalog import RECORDER, RECORDING, SERVICES, Launch, MissionOptions, ServiceSpec, service_argv
-from services.supervisor.children import Child, describe_exit, stop_all
 
 from .design import SweepSpec, TrialKey, format_p
 from .provenance import code_fingerprint

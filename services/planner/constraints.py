@@ -21,8 +21,8 @@ from pathlib import Path
 import clingo
 import clingo.ast as ast
 
+from protocol.asp_vocabulary import UnsafeProgram, check_program
 from protocol.messages import ConstraintSet
-from services.restrictor.vocabulary import UnsafeProgram, check_program
 
 GUARD = "cactive"
 _ROOM_ATOMS = re.compile(r"\b(robot_in|room_forbidden)\s*\(")

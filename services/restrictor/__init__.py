@@ -2,21 +2,16 @@
 
 Modules, one responsibility each:
 
-- :mod:`.vocabulary` the ASP vocabulary shared with the planner, and the check every ASP text passes;
 - :mod:`.library`    the library file (``library.toml``): loading, validation, the site's choices;
 - :mod:`.validate`   checking a client's feedback against the library and the site;
 - :mod:`.compile`    filling templates with validated values and the time window;
 - :mod:`.store`      SQLite persistence of the active set and of the answers given;
 - :mod:`.active`     the active ConstraintSet: apply, withdraw, expire, answer duplicates;
-- :mod:`.service`    the Zenoh process (``arroch restrictor``);
-- :mod:`.client`     sending feedback / fetching the set from a client;
+- :mod:`.service`    the Zenoh process (``arroch restrictor``), which also serves the library;
 - :mod:`.cli`        ``arroch restrictor``, ``arroch feedback send``, ``arroch constraints show|compile|library``.
 
-Other services import :func:`library_for_site` (the library as the tablet shows it) and
-:data:`VOCABULARY` from here.
+What other services share with it lives in ``protocol/``: the ASP vocabulary and its check
+(:mod:`protocol.asp_vocabulary`), the client side of feedback and of the live set
+(:mod:`protocol.feedback_client`) and the library as it is served (:mod:`protocol.constraint_library`).
+No other service imports this package.
 """
-
-from .library import library_for_site, load_library
-from .vocabulary import VOCABULARY, check_program
-
-__all__ = ["VOCABULARY", "check_program", "library_for_site", "load_library"]

@@ -130,7 +130,7 @@ def _typed(param_type: str, text: str) -> int | str:
 
 
 def _feedback_send(args: argparse.Namespace) -> int:
-    from .client import send_feedback
+    from protocol.feedback_client import send_feedback
 
     parser: argparse.ArgumentParser = args.parser
     if not args.kind:
@@ -192,7 +192,7 @@ def _print_ack(ack: FeedbackAck, as_json: bool) -> None:
 
 
 def _constraints_show(args: argparse.Namespace) -> int:
-    from .client import fetch_constraints
+    from protocol.feedback_client import fetch_constraints
 
     try:
         namespace = args.namespace or _load_site(args.site).name

@@ -1,7 +1,7 @@
 """Templates → ASP: a validated choice and the time "now" become one constraint's ASP and window.
 
 Only :class:`validate.Validated` values reach a template, and the result is checked again with
-:func:`vocabulary.check_program` (defence in depth: a library template was checked at load with
+:func:`protocol.asp_vocabulary.check_program` (defence in depth: a library template was checked at load with
 sample values, this checks the real text). No client text is ever substituted.
 
 Windows are absolute integer seconds on the site clock. The human means "from now on, for N
@@ -20,9 +20,10 @@ from collections.abc import Collection
 from dataclasses import dataclass
 from typing import Any
 
+from protocol.asp_vocabulary import ASP_INT_MAX, ASP_INT_MIN, UnsafeProgram, check_program
+
 from .library import ADD, INT, Library, SiteLike
 from .validate import Refusal, Validated, validate
-from .vocabulary import ASP_INT_MAX, ASP_INT_MIN, UnsafeProgram, check_program
 
 log = logging.getLogger("arroch.restrictor")
 

@@ -5,11 +5,12 @@ The library is a TOML file (the packaged ``library.toml``, or a site-specific on
 message names the file, the entry and the field, e.g.
 ``lab.toml: entry[1] (id "forbid_room"): params[1] (name "minutes"): min 5 is above max 3``.
 Templates are checked at load time too: their placeholders must be parameters (or ``t0``/``t1``),
-and a rendering with sample values must pass :func:`vocabulary.check_program`, so a library that
+and a rendering with sample values must pass :func:`protocol.asp_vocabulary.check_program`, so a library that
 loads can only ever produce ASP over the shared vocabulary.
 
-:func:`library_for_site` gives the library with the site's choices filled in, in the JSON shape
-the tablet and the AR client show (``arroch constraints library --json`` prints it).
+:func:`library_for_site` gives the library with the site's choices filled in: what the running
+restrictor serves on ``constraints/library`` for the tablet's and the AR client's buttons
+(``arroch constraints library --json`` prints it).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Protocol
 
-from .vocabulary import ASP_INT_MAX, ASP_INT_MIN, UnsafeProgram, check_program, is_asp_constant
+from protocol.asp_vocabulary import ASP_INT_MAX, ASP_INT_MIN, UnsafeProgram, check_program, is_asp_constant
 
 PACKAGED = "<packaged library>"
 

@@ -9,6 +9,9 @@ I/O (keys under ``arroch/<namespace>/``):
   either way; a retry with the same ``seq`` gets the same answer;
 - publishes ``constraints`` (ConstraintSet) at start-up and on every change, and serves the
   current one on a ``constraints`` queryable for late joiners;
+- serves the constraint library it accepts, with the site's choices resolved, on the
+  ``constraints/library`` queryable (:mod:`protocol.constraint_library`): the feedback buttons
+  of the AR client and the tablet page are built from this answer;
 - drops expired constraints (window end reached on the site clock) and publishes the new version.
 
 In a lockstep mission the restrictor's clock lags the simulator's by however many clock messages
@@ -38,13 +41,14 @@ import zenoh
 
 from protocol.clock import SimClock, WallClock
 from protocol.codec import ENCODING, decode, encode
+from protocol.constraint_library import encode_library
 from protocol.errors import ProtocolError
 from protocol.messages import ConstraintSet, Feedback, FeedbackAck
 from protocol.service import Service
 from protocol.transport import ZenohOptions
 
 from .active import DEFAULT_MAX_ACTIVE, ActiveSet, Outcome
-from .library import Library, SiteLike
+from .library import Library, SiteLike, library_for_site
 from .store import StateStore
 from .validate import quote
 
@@ -70,6 +74,8 @@ class RestrictorService(Service):
         instance: str | None = None,
     ) -> None:
         super().__init__("restrictor", namespace, zenoh_options, clock=clock, instance=instance)
+        # The library never changes while the process runs: its answer is encoded once.
+        self._library_reply = encode_library(self.instance, site.name, library_for_site(site, library))
         # Opening the store first means a bad state directory is reported before any Zenoh session.
         self.store = StateStore(state_dir, site.name)
         try:
@@ -94,9 +100,17 @@ class RestrictorService(Service):
         self.subscribe(self.keys.feedback(), Feedback, self._on_feedback)
         self.serve(self.keys.feedback(), self._take_feedback_query)
         self.serve(self.keys.constraints(), lambda _query: self._current)
+        self.hold(self.session.declare_queryable(self.keys.constraint_library(), self._answer_library))
         self.every(QUERY_POLL, self._answer_queries, first=0.0)
         self.every(EXPIRY_PERIOD, self._expire, first=0.0)
         self._publish_set()  # the restored set, for anyone already listening
+
+    def _answer_library(self, query: zenoh.Query) -> None:
+        try:  # on Zenoh's thread: the reply is ready-made
+            query.reply(self.keys.constraint_library(), self._library_reply, encoding=zenoh.Encoding(ENCODING))
+        except Exception:
+            self.count("handler_errors")
+            self.log.exception("answering a library query failed")
 
     def teardown(self) -> None:
         while True:  # queries still waiting get no reply; dropping them ends them for the querier

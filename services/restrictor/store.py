@@ -23,11 +23,10 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from protocol.asp_vocabulary import UnsafeProgram, check_program
 from protocol.errors import ProtocolError
 from protocol.messages import Constraint
 from protocol.schema import record_from_wire, record_to_wire
-
-from .vocabulary import UnsafeProgram, check_program
 
 SCHEMA = 1
 MAX_ACKS = 10_000

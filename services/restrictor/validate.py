@@ -14,8 +14,9 @@ from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from protocol.asp_vocabulary import is_asp_constant
+
 from .library import CONSTRAINT, DOOR, INT, OPENING, ROOM, Entry, Library, Param, SiteLike, site_choices
-from .vocabulary import is_asp_constant
 
 # Ids the restrictor gives constraints ("c17"); a cancel must name one of that shape.
 CONSTRAINT_ID = re.compile(r"^c[0-9]{1,18}$")

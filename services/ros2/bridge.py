@@ -155,7 +155,7 @@ class BridgeService(Service):
 
     def _send_feedback(self) -> None:
         # Blocking queries (the restrictor's client helper), so on a thread of their own.
-        from services.restrictor.client import send_feedback
+        from protocol.feedback_client import send_feedback
 
         while True:
             request = self._feedback.get()

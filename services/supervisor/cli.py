@@ -26,10 +26,7 @@ import sys
 from pathlib import Path
 
 from protocol.clock import make_clock
-from protocol.runner import LOG_FORMAT, add_common_arguments
-from protocol.transport import DEFAULT_ROUTER, ZenohOptions, free_tcp_port
-
-from .catalog import (
+from protocol.launch.catalog import (
     DEFAULT_SERVICES,
     RECORDER,
     SERVICES,
@@ -40,6 +37,9 @@ from .catalog import (
     parse_child,
     parse_services,
 )
+from protocol.runner import LOG_FORMAT, add_common_arguments
+from protocol.transport import DEFAULT_ROUTER, ZenohOptions, free_tcp_port
+
 from .output import Output, OutputHandler
 from .supervisor import Supervisor, UpConfig
 

@@ -26,13 +26,13 @@ from typing import Any
 import zenoh
 
 from protocol.clock import SimClock, WallClock
+from protocol.launch.catalog import ROUTER, SUPERVISOR_ROLE, Launch, ServiceSpec, router_argv, service_argv
+from protocol.launch.children import CONFIG_ERROR, Child, RestartPolicy, describe_exit, stop_all
 from protocol.messages import Event, RobotStatus
 from protocol.schema import record_to_wire
 from protocol.service import Service
 from protocol.transport import ZenohOptions
 
-from .catalog import ROUTER, SUPERVISOR_ROLE, Launch, ServiceSpec, router_argv, service_argv
-from .children import CONFIG_ERROR, Child, RestartPolicy, describe_exit, stop_all
 from .output import Output
 from .progress import MissionProgress
 from .rundir import RunDir

@@ -1,13 +1,18 @@
-"""Feedback buttons: the panel's layout and taps, and a press reaching a real restrictor process
-over Zenoh with its ack (or refusal) coming back and shown on the panel."""
+"""Feedback buttons: the panel's layout and taps, the library they are built from coming from a
+real restrictor process (asked again until one answers), and a press reaching it over Zenoh with
+its ack (or refusal) coming back and shown on the panel."""
 
 from __future__ import annotations
 
+import logging
+import threading
 import time
 
 import pytest
 
+from protocol.feedback_client import fetch_library, wait_for_library
 from protocol.messages import Constraint, ConstraintSet
+from protocol.site import load_site
 from services.ar_client.feedback import FeedbackPanel, restrictor_sender
 from services.restrictor.library import library_for_site
 from tests.procs import arroch
@@ -16,9 +21,16 @@ OFFICE_DOOR = "d_storage"
 
 
 def _panel(sender=None) -> FeedbackPanel:  # noqa: ANN001
-    from protocol.site import load_site
-
     return FeedbackPanel(library_for_site(load_site()), sender)
+
+
+def _restrictor(spawn, router: str, namespace: str, state):  # noqa: ANN001, ANN202
+    return spawn(
+        arroch(
+            "restrictor", "--namespace", namespace, "--connect", router, "--clock", "wall", "--state-dir", str(state)
+        ),
+        name="restrictor",
+    )
 
 
 def test_every_usable_library_entry_becomes_a_button_with_parameter_chips():
@@ -42,6 +54,16 @@ def test_every_usable_library_entry_becomes_a_button_with_parameter_chips():
     assert panel.press_at(-5, -5) is None
 
 
+def test_a_panel_without_a_library_says_it_waits_and_shows_the_entries_once_given():
+    panel = FeedbackPanel()
+    texts = [p.text for p in panel.primitives(1280, 720) if p.kind == "text"]
+    assert texts == ["Feedback: waiting for the restrictor's library"] and panel._buttons == []
+    panel.set_entries(library_for_site(load_site()))
+    texts = [p.text for p in panel.primitives(1280, 720) if p.kind == "text"]
+    assert "Feedback: waiting for the restrictor's library" not in texts
+    assert {b.action[1] for b in panel._buttons if b.action[0] == "send"} >= {"door_unavailable", "forbid_room"}
+
+
 def test_a_small_frame_still_lays_out_without_overflow():
     prims = _panel().primitives(320, 240)
     for p in prims:
@@ -50,23 +72,28 @@ def test_a_small_frame_still_lays_out_without_overflow():
 
 
 @pytest.mark.integration
+def test_the_library_comes_from_the_restrictor_once_one_answers(router, namespace, client, spawn, tmp_path, caplog):
+    got: list = []
+    with caplog.at_level(logging.INFO):
+        waiter = threading.Thread(target=lambda: got.append(wait_for_library(client, retry=0.5, timeout=0.5)))
+        waiter.start()
+        time.sleep(1.5)  # asked more than once, nobody answered
+        assert not got and waiter.is_alive()
+        _restrictor(spawn, router, namespace, tmp_path / "state").wait_for("up on namespace", timeout=30)
+        waiter.join(15.0)
+    assert got and got[0] is not None, "the restrictor's library never arrived"
+    assert got[0].site == "office" and got[0].entries == library_for_site(load_site())
+    assert "no restrictor answers on" in caplog.text and "constraints/library" in caplog.text
+    assert "answered: 4 library entries" in caplog.text
+
+
+@pytest.mark.integration
 def test_a_press_reaches_the_restrictor_and_its_ack_comes_back(router, namespace, client, spawn, tmp_path):
-    restrictor = spawn(
-        arroch(
-            "restrictor",
-            "--namespace",
-            namespace,
-            "--connect",
-            router,
-            "--clock",
-            "wall",
-            "--state-dir",
-            str(tmp_path / "state"),
-        ),
-        name="restrictor",
-    )
+    restrictor = _restrictor(spawn, router, namespace, tmp_path / "state")
     restrictor.wait_for("up on namespace", timeout=30)
-    panel = _panel(restrictor_sender(client, timeout=10.0))
+    library = fetch_library(client, timeout=5.0)
+    assert library is not None
+    panel = FeedbackPanel(library.entries, restrictor_sender(client, timeout=10.0))
     panel.set_value("door_unavailable", "door", OFFICE_DOOR)
     panel.primitives(1280, 720)  # lay out, so the tap below hits the button
     send = next(b for b in panel._buttons if b.action == ("send", "door_unavailable"))

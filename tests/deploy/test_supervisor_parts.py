@@ -8,8 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from protocol.messages import Event, RobotStatus
-from services.supervisor.catalog import (
+from protocol.launch.catalog import (
     SERVICES,
     Launch,
     MissionOptions,
@@ -18,7 +17,8 @@ from services.supervisor.catalog import (
     router_argv,
     service_argv,
 )
-from services.supervisor.children import RestartPolicy, describe_exit
+from protocol.launch.children import RestartPolicy, describe_exit
+from protocol.messages import Event, RobotStatus
 from services.supervisor.output import Output
 from services.supervisor.progress import MissionProgress
 

@@ -47,11 +47,12 @@ def test_seeds_per_trial_are_paired_across_methods_and_human_parameters() -> Non
 
 
 def test_defaults_are_the_simulators() -> None:
-    from services.experiments.design import DEFAULT_COST, DEFAULT_TASK, FOCUS_READINGS
+    from services.experiments.design import DEFAULT_COST, DEFAULT_P, DEFAULT_TASK, FOCUS_READINGS
     from services.sim.human import FOCUS_READINGS as SIM_READINGS
     from services.sim.human import HumanConfig
 
-    assert (DEFAULT_TASK, DEFAULT_COST) == (HumanConfig().task_mean, HumanConfig().interruption_cost)
+    sim = HumanConfig()
+    assert (DEFAULT_TASK, DEFAULT_COST, DEFAULT_P) == (sim.task_mean, sim.interruption_cost, sim.door_probability)
     assert FOCUS_READINGS == SIM_READINGS
 
 

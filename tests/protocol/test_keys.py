@@ -25,6 +25,7 @@ EXPECTED = {
     "feedback": ((), "feedback"),
     "feedback_ack": (("tablet-3",), "feedback/ack/tablet-3"),
     "constraints": ((), "constraints"),
+    "constraint_library": ((), "constraints/library"),
     "camera_frame": (("tablet",), "camera/tablet/frame"),
     "camera_truth": (("tablet",), "camera/tablet/truth"),
     "overlay": (("tablet",), "ar/tablet/overlay"),

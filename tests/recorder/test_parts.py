@@ -16,6 +16,7 @@ from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
 from protocol.keys import Keys
+from protocol.launch.catalog import RECORDER_NAME, SERVICES, Launch, MissionOptions, service_argv
 from protocol.messages import CameraFrame, Overlay, Primitive, TeamPlan
 from protocol.site import load_site
 from services.cli import main
@@ -26,7 +27,6 @@ from services.recorder.profile import FoxgloveProfile
 from services.recorder.reading import messages
 from services.recorder.scene import DOOR_CLOSED, DOOR_OPEN, SiteScene
 from services.recorder.sink import FoxgloveSink
-from services.supervisor.catalog import RECORDER_NAME, SERVICES, Launch, MissionOptions, service_argv
 from services.supervisor.cli import add_up_arguments, build_config
 from tests.procs import arroch
 

@@ -33,13 +33,13 @@ import numpy as np
 import pytest
 import zenoh
 
+from protocol.asp_vocabulary import check_program
 from protocol.codec import decode, encode
 from protocol.messages import CameraFrame, Clock, ConstraintSet, Event, Feedback, FeedbackAck
 from protocol.service import MAX_KEYED_COUNTERS
 from protocol.site import load_site
 from protocol.transport import free_tcp_port
 from services.restrictor.library import load_library
-from services.restrictor.vocabulary import check_program
 from tests.procs import Proc, arroch
 from tests.reliability.fuzzing import (
     KEY_TYPES,

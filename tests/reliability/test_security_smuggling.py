@@ -17,9 +17,9 @@ from pathlib import Path
 
 import pytest
 
+from protocol.feedback_client import fetch_constraints, send_feedback
 from protocol.site import load_site
 from services.cli import main
-from services.restrictor.client import fetch_constraints, send_feedback
 from services.restrictor.library import load_library
 from tests.procs import arroch
 from tests.reliability.fuzzing import contained, hostile_feedback

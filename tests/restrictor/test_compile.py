@@ -9,10 +9,10 @@ import subprocess
 
 import pytest
 
+from protocol.asp_vocabulary import ASP_INT_MAX
 from services.restrictor.compile import Compiled, compile_feedback, window
 from services.restrictor.library import ADD, load_library
 from services.restrictor.validate import Refusal
-from services.restrictor.vocabulary import ASP_INT_MAX
 from tests.procs import ROOT, arroch
 from tests.restrictor.conftest import HERE, LAB
 from tests.restrictor.helpers import answer_sets, possible, valid_params, values_of

@@ -6,10 +6,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from protocol.asp_vocabulary import check_program
 from services.restrictor.compile import Compiled, compile_feedback
 from services.restrictor.library import CONSTRAINT, INT, site_choices
 from services.restrictor.validate import Refusal, Validated, split_tablet_feedback, validate
-from services.restrictor.vocabulary import check_program
 from tests.restrictor.helpers import valid_params
 
 ACTIVE = ("c1", "c7")

@@ -6,13 +6,15 @@ A :class:`TabletBridge` is a :class:`protocol.service.Service` named ``tablet``.
 - a :class:`WorldView` from ``robot/*/pose`` (latest), ``robot/*/status``, ``intent/*`` and
   ``door/*/state`` — read by every page's pipeline and by the map view;
 - the live ``constraints`` (and a query for them at start), for the "cancel" choices of the pages;
+- the constraint library the running restrictor serves (``constraints/library``, asked every
+  second until one answers), which the pages build their feedback buttons from;
 - with a sim camera (``--camera-source sim:CID``), the newest ``camera/<CID>/frame`` for viewer pages.
 
-The last two are handed to the web server's event loop through the ``on_constraints`` /
-``on_sim_frame`` callbacks (called on the worker; the server makes them thread-safe).
+The last three are handed to the web server's event loop through the ``on_constraints`` /
+``on_library`` / ``on_sim_frame`` callbacks (called on the worker; the server makes them thread-safe).
 
 Outwards: each page's Overlays on ``ar/<cid>/overlay`` (for recorders) and feedback to the
-restrictor with :func:`services.restrictor.client.send_feedback` (query with ack, retried until
+restrictor with :func:`protocol.feedback_client.send_feedback` (query with ack, retried until
 answered), which blocks and so runs on the server's feedback threads, never on the worker.
 """
 
@@ -23,6 +25,7 @@ from collections.abc import Callable
 from typing import Any
 
 from protocol.clock import SimClock, WallClock
+from protocol.feedback_client import newest_constraints, send_feedback, wait_for_library
 from protocol.messages import CameraFrame, ConstraintSet, FeedbackAck, Overlay
 from protocol.service import Service
 from protocol.transport import ZenohOptions
@@ -30,6 +33,7 @@ from protocol.transport import ZenohOptions
 from ..world import WorldView
 
 FEEDBACK_TIMEOUT = 8.0  # seconds a page waits for the restrictor's answer
+LIBRARY_RETRY = 1.0  # wall seconds between queries for the restrictor's library until one answers
 
 
 class TabletBridge(Service):
@@ -48,7 +52,9 @@ class TabletBridge(Service):
         self.sim_camera = sim_camera
         self.world = WorldView()
         self.constraints: ConstraintSet | None = None
+        self.library: list[dict[str, Any]] | None = None  # None until a restrictor answers
         self.on_constraints: Callable[[ConstraintSet], None] = lambda msg: None
+        self.on_library: Callable[[list[dict[str, Any]]], None] = lambda entries: None
         self.on_sim_frame: Callable[[CameraFrame], None] = lambda msg: None
         self._constraints_lock = threading.Lock()
 
@@ -61,8 +67,10 @@ class TabletBridge(Service):
                 k.camera_frame(self.sim_camera), CameraFrame, lambda msg, key: self.on_sim_frame(msg), latest=True
             )
             self.log.info("viewer stream from %s", k.camera_frame(self.sim_camera))
-        # A late joiner asks for the live set; off the worker, since a query blocks.
+        # A late joiner asks for the live set, and every page needs the library; off the worker,
+        # since queries block.
         threading.Thread(target=self._fetch_constraints, name="tablet-constraints", daemon=True).start()
+        threading.Thread(target=self._fetch_library, name="tablet-library", daemon=True).start()
 
     def _constraints(self, msg: ConstraintSet, _key: str = "") -> None:
         with self._constraints_lock:
@@ -72,11 +80,15 @@ class TabletBridge(Service):
         self.on_constraints(msg)
 
     def _fetch_constraints(self) -> None:
-        from services.restrictor.client import newest_constraints  # on first use: it loads clingo
-
         newest = newest_constraints(self)
         if newest is not None:
             self._constraints(newest)
+
+    def _fetch_library(self) -> None:
+        library = wait_for_library(self, retry=LIBRARY_RETRY, what="feedback buttons on the tablet pages")
+        if library is not None:
+            self.library = library.entries
+            self.on_library(library.entries)
 
     def now(self) -> float:
         """Site-clock time for drawing (before the sim's first clock message: wall time)."""
@@ -89,6 +101,4 @@ class TabletBridge(Service):
 
     def send_feedback(self, kind: str, params: dict[str, Any]) -> FeedbackAck | None:
         """Blocks until the restrictor answers or :data:`FEEDBACK_TIMEOUT` passes (None)."""
-        from services.restrictor.client import send_feedback
-
         return send_feedback(self, kind, params, timeout=FEEDBACK_TIMEOUT, retry=1.0)

@@ -5,7 +5,7 @@
   (HttpOnly, Secure, SameSite=Strict), compared in constant time. Without it: HTTP 403.
 - **HTTPS**: browsers give the camera only to secure origins (localhost aside), so the server always
   speaks TLS. The certificate is made on first run in the state directory by the deployment's
-  certificate helper (:mod:`services.supervisor.deployment.certs`): a small authority ``ca.pem``
+  certificate helper (:mod:`protocol.certs`): a small authority ``ca.pem``
   (install it on a tablet once to silence the browser's warning for good) and ``tablet.pem`` signed
   by it, naming every address the server announces. Later runs reuse both; the tablet certificate
   alone is remade when an address is new or it is about to expire, so a tablet that trusts the
@@ -21,13 +21,14 @@ from __future__ import annotations
 import hmac
 import logging
 import os
-import re
 import secrets
 import ssl
 import time
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+
+from protocol.certs import HostCert, ensure_host_certificate
 
 log = logging.getLogger("arroch.tablet.security")
 
@@ -96,45 +97,23 @@ class Certificate:
     made: bool  # True when this run (re)made the tablet certificate
 
 
-def _names_and_expiry(directory: Path) -> tuple[set[str], float]:
-    from services.supervisor.deployment.certs import describe
-
-    text = describe(directory, CERT_NAME)
-    names = set(re.findall(r"DNS:([^,;\s]+)", text)) | set(re.findall(r"IP Address:([^,;\s]+)", text))
-    match = re.search(r"notAfter=([^;]+)", text)
-    expiry = ssl.cert_time_to_seconds(match.group(1).strip()) if match else 0.0
-    return names, float(expiry)
-
-
 def ensure_certificate(directory: Path, dns: Iterable[str], ips: Iterable[str]) -> Certificate:
     """The tablet certificate in ``directory`` naming ``dns`` and ``ips``, made or remade as needed.
 
-    Raises :class:`services.supervisor.deployment.certs.CertError` when ``openssl`` fails.
+    Raises :class:`protocol.certs.CertError` when the files cannot be made or read.
     """
-    from services.supervisor.deployment.certs import HostCert, make_certs
-
     directory = Path(directory)
     dns_names = list(dict.fromkeys(["localhost", *dns]))
     ip_names = list(dict.fromkeys(["127.0.0.1", *ips]))
-    host = HostCert(CERT_NAME, dns=dns_names, ips=ip_names)
-    cert = directory / f"{CERT_NAME}.pem"
-    force = False
-    if cert.exists():
-        try:
-            names, expiry = _names_and_expiry(directory)
-        except Exception as exc:  # unreadable: make a new one rather than serve a broken file
-            log.warning("%s cannot be read (%s); making a new certificate", cert, exc)
-            force = True
-        else:
-            missing = set(dns_names + ip_names) - names
-            if missing or expiry - time.time() < RENEW_BEFORE:
-                why = f"it does not name {', '.join(sorted(missing))}" if missing else "it expires soon"
-                log.info("remaking %s: %s", cert, why)
-                force = True
-    made = force or not cert.exists()
-    for line in make_certs(directory, [host], force=force):
-        log.debug("%s", line)
-    return Certificate(cert=cert, key=directory / f"{CERT_NAME}.key", authority=directory / "ca.pem", made=made)
+    made = ensure_host_certificate(
+        directory, HostCert(CERT_NAME, dns=dns_names, ips=ip_names), renew_before=RENEW_BEFORE
+    )
+    return Certificate(
+        cert=directory / f"{CERT_NAME}.pem",
+        key=directory / f"{CERT_NAME}.key",
+        authority=directory / "ca.pem",
+        made=made,
+    )
 
 
 def server_ssl_context(certificate: Certificate) -> ssl.SSLContext:

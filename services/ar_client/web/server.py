@@ -223,8 +223,6 @@ class TabletServer:
     # ------------------------------------------------------------------ what pages get
 
     def hello(self, session: ClientSession) -> dict[str, Any]:
-        from services.restrictor.library import library_for_site
-
         return {
             "type": "hello",
             "client": session.number,
@@ -235,7 +233,7 @@ class TabletServer:
             "max_side": wire.MAX_SIDE,
             "max_frame_bytes": wire.MAX_FRAME_BYTES,
             "site": wire.site_json(self.site),
-            "library": library_for_site(self.site),
+            "library": self.bridge.library,  # None until a restrictor answers: then a "library" message
             "constraints": self._constraints_json(self.bridge.constraints),
             "world": self._world(),
         }
@@ -300,6 +298,10 @@ class TabletServer:
 
     def _constraints_changed(self, msg: ConstraintSet) -> None:
         text = json.dumps(self._constraints_json(msg), separators=(",", ":"))
+        asyncio.get_running_loop().create_task(self._broadcast(text))
+
+    def _library_arrived(self, entries: list[dict[str, Any]]) -> None:
+        text = json.dumps({"type": "library", "entries": entries}, separators=(",", ":"))
         asyncio.get_running_loop().create_task(self._broadcast(text))
 
     def _sim_frame_arrived(self, msg: CameraFrame) -> None:
@@ -369,6 +371,7 @@ class TabletServer:
     async def _on_startup(self, app: web.Application) -> None:
         self._loop = asyncio.get_running_loop()
         self.bridge.on_constraints = lambda msg: self._from_worker(self._constraints_changed, msg)
+        self.bridge.on_library = lambda entries: self._from_worker(self._library_arrived, entries)
         self.bridge.on_sim_frame = lambda msg: self._from_worker(self._sim_frame_arrived, msg)
         self._world_task = self._loop.create_task(self._world_updates())
 
@@ -376,6 +379,7 @@ class TabletServer:
         if self._world_task is not None:
             self._world_task.cancel()
         self.bridge.on_constraints = lambda msg: None
+        self.bridge.on_library = lambda entries: None
         self.bridge.on_sim_frame = lambda msg: None
         for client in list(self.clients.values()):
             await client.ws.close(code=1001, message=b"server stopping")

@@ -15,7 +15,8 @@ Page → server:
 Server → page:
 
 - ``hello`` once: the client's camera id, its mode, the site's geometry for the map, the constraint
-  library (:func:`services.restrictor.library.library_for_site`), the live constraints, frame limits;
+  library the running restrictor serves (null until one answers; then a ``{"type": "library", "entries"}``
+  message), the live constraints, frame limits;
 - ``overlay`` per processed frame (its ``seq``; pose quality; the primitives in frame pixels);
 - ``ack`` per feedback (``status`` accepted / refused / no answer, the restrictor's ``reason``);
 - ``world`` a few times a second (robots, intents, doors: the map view) and ``constraints`` on change;

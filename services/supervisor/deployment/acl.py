@@ -92,6 +92,12 @@ GUARDS: tuple[Guard, ...] = (
         publishers=("restrictor",),
         servers=("restrictor",),
     ),
+    Guard(
+        "constraints/library",
+        "only the restrictor serves the constraint library the feedback buttons are built from",
+        publishers=("restrictor",),
+        servers=("restrictor",),
+    ),
     Guard("plan", "only the planner publishes and serves the team plan", publishers=("planner",), servers=("planner",)),
     Guard("intent/*", "only the planner announces robot intents", publishers=("planner",)),
     Guard("robot/*/pose", "robot poses come from the robots (or the simulator)", publishers=("sim",)),

@@ -15,8 +15,9 @@ import logging
 import sys
 from pathlib import Path
 
+from protocol.certs import CertError, make_certs, parse_hosts
+
 from . import acl
-from .certs import CertError, make_certs, parse_hosts
 from .render import KINDS, PROFILES, TEMPLATE_DIR, RenderError, Request, render
 
 log = logging.getLogger("arroch.deploy")

@@ -15,8 +15,9 @@ from pathlib import Path
 
 import zenoh
 
+from protocol.certs import CA_NAME, CertError, verify
+
 from . import acl
-from .certs import CA_NAME, CertError, verify
 
 PROFILES = ("plain", "secure")
 KINDS = ("router", "peer", "client")

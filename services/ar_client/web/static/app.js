@@ -98,6 +98,7 @@ function onText(msg) {
       panel.setNow(msg.now);
       return renderMap();
     case "constraints": return panel.setConstraints(msg.items);
+    case "library": return panel.setLibrary(msg.entries);
     case "ack": return panel.onAck(msg);
     default: return undefined;
   }

@@ -1,4 +1,5 @@
-// Feedback buttons built from the constraint library (services/restrictor library_for_site):
+// Feedback buttons built from the constraint library the running restrictor serves (null until one
+// answers: the panel then says it waits, and the server sends the library when it comes):
 // one card per entry with a picker per parameter — minutes for "int" parameters, the site's doors,
 // rooms or openings, the live constraints for a cancel — and a Send button. The answer (accepted
 // with what the restrictor did, refused with its reason, or no answer) stays on the card.
@@ -37,7 +38,12 @@ export class FeedbackPanel {
   setLibrary(library) {
     this.root.replaceChildren();
     this.cards.clear();
-    for (const entry of library) {
+    this.library = library;
+    if (!library) {
+      this.root.append(el("div", { class: "help", id: "library-waiting", role: "status",
+        text: "Waiting for the restrictor: the feedback buttons appear as soon as it answers." }));
+    }
+    for (const entry of library || []) {
       const card = el("div", { class: "card", id: `entry-${entry.id}` });
       card.append(el("div", { class: "label", text: entry.label }));
       if (entry.help) card.append(el("div", { class: "help", text: entry.help }));

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from services.restrictor.vocabulary import VOCABULARY, UnsafeProgram, check_program, is_asp_constant
+from protocol.asp_vocabulary import VOCABULARY, UnsafeProgram, check_program, is_asp_constant
 
 ACCEPTED = [
     (

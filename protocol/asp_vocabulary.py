@@ -1,5 +1,7 @@
 """The ASP vocabulary shared by the restrictor and the planner, and the check that enforces it.
 
+The restrictor checks every ASP text it emits with it, and the planner re-checks what it receives.
+
 ``docs/architecture.md`` ("ASP vocabulary shared by restrictor and planner") fixes the atoms the
 planner's encoding defines and the facts the restrictor may state. Every piece of ASP the
 restrictor hands to the solver, library templates at load time and each compiled constraint

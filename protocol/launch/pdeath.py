@@ -1,4 +1,4 @@
-"""Exec wrapper for ``arroch up``'s children: ``python launch.py SUPERVISOR_PID -- COMMAND...``.
+"""Exec wrapper for ``arroch up``'s children: ``python pdeath.py SUPERVISOR_PID -- COMMAND...``.
 
 On Linux it asks the kernel to send SIGTERM to this process when its parent dies
 (``PR_SET_PDEATHSIG``), then replaces itself with COMMAND (the setting survives ``exec``). So even
@@ -24,12 +24,12 @@ def _die_with_parent() -> None:
 
     libc = ctypes.CDLL(None, use_errno=True)
     if libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0) != 0:
-        print(f"launch: prctl(PR_SET_PDEATHSIG) failed: {os.strerror(ctypes.get_errno())}", file=sys.stderr)
+        print(f"pdeath: prctl(PR_SET_PDEATHSIG) failed: {os.strerror(ctypes.get_errno())}", file=sys.stderr)
 
 
 def main(argv: list[str]) -> int:
     if len(argv) < 3 or argv[1] != "--":
-        print("usage: launch.py SUPERVISOR_PID -- COMMAND [ARG...]", file=sys.stderr)
+        print("usage: pdeath.py SUPERVISOR_PID -- COMMAND [ARG...]", file=sys.stderr)
         return 2
     supervisor = int(argv[0])
     command = argv[2:]
@@ -40,7 +40,7 @@ def main(argv: list[str]) -> int:
     try:
         os.execvp(command[0], command)
     except OSError as exc:
-        print(f"launch: cannot run {command[0]}: {exc}", file=sys.stderr)
+        print(f"pdeath: cannot run {command[0]}: {exc}", file=sys.stderr)
         return 127
     return 0  # not reached
 

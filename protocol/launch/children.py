@@ -2,7 +2,7 @@
 
 Each child runs in its own process group (``start_new_session``), so a terminal's Ctrl-C reaches
 only the supervisor, which then stops the children in order, and a signal sent to the group also
-reaches anything the child started. Children are started through :mod:`.launch`, which asks the
+reaches anything the child started. Children are started through :mod:`.pdeath`, which asks the
 kernel to SIGTERM them if the supervisor dies without cleaning up (even by SIGKILL).
 """
 
@@ -100,14 +100,14 @@ class Child:
 
     def start(self, ready_text: str | None = None) -> None:
         """Start (or restart). ``ready_text``: a line marking readiness (sets :attr:`ready`)."""
-        from . import launch  # the wrapper module, run as a script in the child
+        from . import pdeath  # the wrapper module, run as a script in the child
 
         env = dict(os.environ)
         env["PYTHONUNBUFFERED"] = "1"  # lines as they happen, not when a buffer fills
         env.update(self.env)
         self._ready_text = ready_text
         self.ready.clear()
-        wrapped = [sys.executable, launch.__file__, str(os.getpid()), "--", *self.argv]
+        wrapped = [sys.executable, pdeath.__file__, str(os.getpid()), "--", *self.argv]
         self.popen = subprocess.Popen(
             wrapped,
             cwd=self.cwd,

@@ -1,8 +1,9 @@
-"""Client side of the restrictor's contract: send feedback and wait for its ack; fetch the live set.
+"""Client side of the restrictor's contract: send feedback and wait for its ack; fetch the live
+set; fetch the constraint library the running restrictor serves.
 
-Used by ``arroch feedback send`` and ``arroch constraints show``, and by anything else that talks
-to a restrictor from a blocking context (the calls block up to their timeout, so do not make
-them from a service's worker thread).
+Used by ``arroch feedback send`` and ``arroch constraints show``, the AR client, the tablet page, the
+simulated human and the ROS 2 bridge: anything that talks to a restrictor from a blocking context
+(the calls block up to their timeout, so do not make them from a service's worker thread).
 
 Sending is at-least-once with exactly-once effect: the Feedback is stamped once and the same
 bytes (same ``src`` and ``seq``) are re-sent until an ack arrives, either as the reply to the
@@ -20,6 +21,8 @@ from typing import Any
 import zenoh
 
 from protocol.codec import encode
+from protocol.constraint_library import ConstraintLibrary, decode_library
+from protocol.errors import ProtocolError
 from protocol.messages import ConstraintSet, Feedback, FeedbackAck
 from protocol.service import Service
 
@@ -89,3 +92,50 @@ def newest_constraints(client: Service, *, timeout: float = 2.0) -> ConstraintSe
     except Exception as exc:  # the session closed while asking: nothing to do
         client.log.debug("constraints query failed: %s", exc)
         return None
+
+
+def fetch_library(client: Service, *, timeout: float = 2.0) -> ConstraintLibrary | None:
+    """The constraint library a running restrictor serves, or None when none answers in ``timeout`` s.
+
+    A reply that is not a valid library is counted as a bad message of the key and skipped."""
+    key = client.keys.constraint_library()
+    for reply in client.session.get(key, timeout=timeout):
+        if reply.ok is None:
+            continue
+        payload = reply.ok.payload.to_bytes()
+        try:
+            return decode_library(payload)
+        except ProtocolError as exc:
+            client.note_bad_message(key, payload, exc)
+    return None
+
+
+def wait_for_library(
+    client: Service, *, retry: float = 2.0, timeout: float = 2.0, what: str = "feedback buttons"
+) -> ConstraintLibrary | None:
+    """:func:`fetch_library` again every ``retry`` s until a restrictor answers or ``client`` stops.
+
+    Logs once, at WARNING, that no restrictor answers yet (and what waits for it), and at INFO
+    the answer that came. For a background thread of a running service: a closed session ends it (None)."""
+    key = client.keys.constraint_library()
+    warned = False
+    while not client.stopping:
+        try:
+            library = fetch_library(client, timeout=timeout)
+        except Exception as exc:  # the session closed while asking
+            client.log.debug("library query failed: %s", exc)
+            return None
+        if library is not None:
+            client.log.info(
+                "restrictor %s answered: %d library entries for the %s", library.src, len(library.entries), what
+            )
+            return library
+        if not warned:
+            client.log.warning(
+                "no restrictor answers on %s yet: no %s until one does (asking every %g s)", key, what, retry
+            )
+            warned = True
+        deadline = time.monotonic() + retry
+        while not client.stopping and time.monotonic() < deadline:
+            time.sleep(0.1)
+    return None

@@ -179,12 +179,20 @@ def _tags_sheet(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- registration
 
 
+def detector_option(name: str) -> str:
+    """``--detector``'s type: a known back end whose library is installed (else a usage error naming the extra)."""
+    from .detect import detector_method  # OpenCV: loaded only when a command that detects tags runs
+
+    return detector_method(name)
+
+
 def _add_detector(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--detector",
-        choices=("opencv", "apriltag"),
+        type=detector_option,
         default="opencv",
-        help="tag detector: OpenCV ArUco + edge-fit corners (default), or the AprilTag 3 library (pupil-apriltags)",
+        metavar="{opencv,apriltag}",
+        help="tag detector: OpenCV ArUco + edge-fit corners (default), or the AprilTag 3 library (the arroch[apriltag] extra)",
     )
 
 

@@ -12,6 +12,8 @@ import sys
 
 from protocol.runner import add_common_arguments
 
+from ..cli import detector_option
+
 log = logging.getLogger("arroch.tablet")
 
 EXIT_USAGE = 2
@@ -171,7 +173,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     tablet.add_argument("--max-clients", type=int, default=8, metavar="N", help="pages connected at once (default 8)")
     tablet.add_argument("--workers", type=int, default=2, metavar="N", help="frame-processing threads (default 2)")
     tablet.add_argument(
-        "--detector", choices=("opencv", "apriltag"), default="opencv", help="tag detector (default opencv)"
+        "--detector",
+        type=detector_option,
+        default="opencv",
+        metavar="{opencv,apriltag}",
+        help="tag detector (default opencv; apriltag needs the arroch[apriltag] extra)",
     )
     tablet.add_argument(
         "--allow-origin",

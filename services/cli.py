@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from importlib.metadata import PackageNotFoundError, version
 
 from protocol.runner import setup_logging
 
@@ -31,11 +32,20 @@ COMMANDS: tuple[str, ...] = (
 )
 
 
+def installed_version() -> str:
+    """The installed distribution's version (``pip install -e .`` included)."""
+    try:
+        return version("arroch")
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        return "unknown (not installed: pip install -e .)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="arroch",
         description="ARROCH: AR for robots collaborating with a human. Services and tools.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {installed_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for module_name in COMMANDS:
         try:

@@ -43,7 +43,10 @@ def summary(site: Site) -> str:
     return "\n".join(lines)
 
 
-def _load_or_report(path: str) -> Site | None:
+SITE_FILE_HELP = "site file (TOML); default: the packaged 'office' site, as for every other command"
+
+
+def _load_or_report(path: str | None) -> Site | None:
     try:
         return load_site(path)
     except SiteError as exc:
@@ -104,11 +107,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     check = sub.add_parser(
         "check", help="validate a site file and print a summary (exit 1 with the reason if it is refused)"
     )
-    check.add_argument("file", help="site file (TOML)")
+    check.add_argument("file", nargs="?", help=SITE_FILE_HELP)
     check.set_defaults(func=cmd_check)
 
     show = sub.add_parser("show", help="draw a site top-down into a PNG")
-    show.add_argument("file", help="site file (TOML)")
+    show.add_argument("file", nargs="?", help=SITE_FILE_HELP)
     show.add_argument("--png", required=True, metavar="OUT", help="PNG file to write")
     show.add_argument("--dpi", type=int, default=150, help=f"resolution, {MIN_DPI} to {MAX_DPI} (default 150)")
     show.set_defaults(func=cmd_show)

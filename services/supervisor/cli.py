@@ -103,6 +103,8 @@ def build_config(args: argparse.Namespace) -> tuple[UpConfig, ZenohOptions]:
             )
     if args.rate is not None and args.rate <= 0:
         raise ValueError(f"--rate must be positive, got {args.rate}")
+    if args.linger and not args.until_done:
+        raise ValueError("--linger keeps a run up after its mission: it goes with --until-done")
     if args.rate is not None and args.mode not in (None, "rate", "lockstep"):
         raise ValueError(
             f"--rate K runs the simulation K times faster (at most, in lockstep); it does not go with --mode {args.mode}"
@@ -150,6 +152,7 @@ def build_config(args: argparse.Namespace) -> tuple[UpConfig, ZenohOptions]:
         start_router=args.router,
         router_listen=router_listen,
         until_done=args.until_done,
+        linger=args.linger,
         timeout=args.timeout,
         run_base=Path(args.run_dir),
         progress_interval=args.progress_interval or (0.5 if args.progress == "bar" else 5.0),
@@ -235,7 +238,15 @@ def add_up_arguments(parser: argparse.ArgumentParser) -> None:
     run.add_argument(
         "--until-done", action="store_true", help="stop when the mission_done event arrives and print its metrics"
     )
-    run.add_argument("--timeout", type=float, metavar="S", help="give up (exit 1) after S seconds")
+    run.add_argument(
+        "--linger",
+        action="store_true",
+        help="with --until-done: after the mission, print its metrics and keep everything up (the tablet page "
+        "included) until Ctrl-C",
+    )
+    run.add_argument(
+        "--timeout", type=float, metavar="S", help="give up (exit 1) after S seconds (not once --linger holds a run)"
+    )
     run.add_argument(
         "--run-dir", default="runs", metavar="DIR", help="where runs/<timestamp>/ folders go (default ./runs)"
     )

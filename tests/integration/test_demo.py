@@ -2,12 +2,14 @@
 AR client and the tablet page; the page's URL and token printed and the page really served; the run
 folder with the metrics, the event log and a few overlay frames that are real drawings over the
 camera's images, taken at the sim's held instants (lockstep: a frame every ``--camera-hold`` site
-seconds, time held until its overlay came back), so how many are kept does not depend on the load."""
+seconds, time held until its overlay came back), so how many are kept does not depend on the load.
+With ``--linger`` the page stays up after the mission until Ctrl-C, the metrics printed as a table."""
 
 from __future__ import annotations
 
 import json
 import re
+import signal
 import ssl
 import time
 import urllib.request
@@ -56,7 +58,11 @@ def drawn_fraction(image: np.ndarray, primitives: list[dict]) -> tuple[int, floa
 
 def test_demo_runs_the_mission_serves_the_tablet_page_and_keeps_overlay_frames(spawn, tmp_path: Path):
     state = tmp_path / "state"  # the tablet's certificate goes to $XDG_STATE_HOME/arroch/tablet
-    proc = spawn(arroch("demo", "--run-dir", str(tmp_path / "runs")), env={"XDG_STATE_HOME": str(state)}, name="demo")
+    proc = spawn(
+        arroch("demo", "--run-dir", str(tmp_path / "runs"), "--linger"),
+        env={"XDG_STATE_HOME": str(state)},
+        name="demo",
+    )
 
     # The URL and the token, said clearly while the mission runs, and the page really there.
     proc.wait_for("==> tablet page", timeout=60)
@@ -67,6 +73,17 @@ def test_demo_runs_the_mission_serves_the_tablet_page_and_keeps_overlay_frames(s
     context = ssl.create_default_context(cafile=str(state / "arroch" / "tablet" / "ca.pem"))
     with urllib.request.urlopen(url, context=context, timeout=10) as page:
         assert page.status == 200 and b"<html" in page.read().lower()
+
+    # --linger: after the mission, its metrics as a table, and the page still served until Ctrl-C.
+    proc.wait_for("stay up until Ctrl-C", timeout=TIMEOUT)
+    for row in ("[up] completed ", "[up] human door openings ", "[up] door openings, all ", "the paper's measure"):
+        assert row in proc.output, row
+    assert re.search(r"\[up\] team completion time +\d+\.\d  s ", proc.output), proc.output[-3000:]
+    time.sleep(1.0)
+    assert proc.alive()
+    with urllib.request.urlopen(url, context=context, timeout=10) as page:
+        assert page.status == 200
+    proc.signal(signal.SIGINT)  # what a terminal's Ctrl-C sends to the foreground group
 
     deadline = time.monotonic() + TIMEOUT
     while proc.alive() and time.monotonic() < deadline:

@@ -38,7 +38,8 @@ def summary(site: Site) -> str:
         f"  objects ({len(site.objects)}): "
         + "; ".join(f"{rid}: {', '.join(objs) or '-'}" for rid, objs in by_robot.items()),
         f"  human: in {site.human.room} at ({site.human.position[0]:g}, {site.human.position[1]:g})",
-        f"  walls: {len(site.walls)} segments, {site.params.wall_thickness:g} m thick, {site.params.wall_height:g} m high",
+        f"  walls: {len(site.walls)} segments, {site.params.wall_thickness:g} m thick, {site.params.wall_height:g} m "
+        "high",
     ]
     return "\n".join(lines)
 

@@ -147,7 +147,8 @@ def _render(args: argparse.Namespace) -> int:
     loc = pipeline.last_localization
     if overlay.ok:
         print(
-            f"wrote {args.out}: pose from tags {overlay.tags}, RMSE {overlay.reprojection_rmse:.3f} px, {len(overlay.primitives)} primitives"
+            f"wrote {args.out}: pose from tags {overlay.tags}, RMSE {overlay.reprojection_rmse:.3f} px, "
+            f"{len(overlay.primitives)} primitives"
         )
     else:
         print(f"wrote {args.out}: no pose ({loc.reason if loc else 'lost'}); only the status is drawn")
@@ -171,7 +172,8 @@ def _tags_sheet(args: argparse.Namespace) -> int:
     except (ValueError, FileNotFoundError) as exc:
         return _error(exc)
     print(
-        f"wrote {len(site.landmarks)} tag page(s) to {', '.join(str(f) for f in files[:3])}{' ...' if len(files) > 3 else ''}"
+        f"wrote {len(site.landmarks)} tag page(s) to "
+        f"{', '.join(str(f) for f in files[:3])}{' ...' if len(files) > 3 else ''}"
     )
     return 0
 
@@ -192,7 +194,8 @@ def _add_detector(parser: argparse.ArgumentParser) -> None:
         type=detector_option,
         default="opencv",
         metavar="{opencv,apriltag}",
-        help="tag detector: OpenCV ArUco + edge-fit corners (default), or the AprilTag 3 library (the arroch[apriltag] extra)",
+        help="tag detector: OpenCV ArUco + edge-fit corners (default), or the AprilTag 3 library (the arroch[apriltag] "
+        "extra)",
     )
 
 
@@ -261,7 +264,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--gravity",
         metavar="GX,GY,GZ",
         help="gravity measured at capture, in the camera frame (OpenCV axes: x right, "
-        "y down, z forward; pointing down, any unit): picks a single tag's right planar solution, adds gravity_error_deg",
+        "y down, z forward; pointing down, any unit): picks a single tag's right planar solution, adds "
+        "gravity_error_deg",
     )
     loc.set_defaults(func=_localize)
 

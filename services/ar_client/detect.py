@@ -225,11 +225,13 @@ class TagDetector:
         else:
             corners, ids, rejected = self._aruco.detectMarkers(gray)
             if ids is not None:
-                kept = [(int(i), opencv_corners(c)) for c, i in zip(corners, ids.ravel()) if self._keep(int(i))]
+                kept = [
+                    (int(i), opencv_corners(c)) for c, i in zip(corners, ids.ravel(), strict=True) if self._keep(int(i))
+                ]
                 quads = [q for _, q in kept]
                 if self.refine == "edges":
                     quads = refine_corners(gray, quads, self.refine_passes, lens)
-                out += [TagDetection(i, q, "opencv") for (i, _), q in zip(kept, quads)]
+                out += [TagDetection(i, q, "opencv") for (i, _), q in zip(kept, quads, strict=True)]
             if self.small_tags and rejected:
                 out += self._small(gray, rejected, out, lens)
         return out

@@ -17,6 +17,7 @@ opacity.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from itertools import pairwise
 
 import cv2
 import numpy as np
@@ -53,7 +54,7 @@ def _dashes(points: np.ndarray, width: int, height: int) -> list[np.ndarray]:
     box = (-margin, -margin, width + margin, height + margin)
     out: list[np.ndarray] = []
     phase = 0.0  # arc length along the whole polyline, so the pattern runs on across joints
-    for a0, b0 in zip(points[:-1], points[1:]):
+    for a0, b0 in pairwise(points):
         full = float(np.hypot(*(b0 - a0)))
         clipped = clip_segment(a0, b0, box) if full > 1e-9 else None
         if clipped is not None:

@@ -107,7 +107,8 @@ def build_config(args: argparse.Namespace) -> tuple[UpConfig, ZenohOptions]:
         raise ValueError("--linger keeps a run up after its mission: it goes with --until-done")
     if args.rate is not None and args.mode not in (None, "rate", "lockstep"):
         raise ValueError(
-            f"--rate K runs the simulation K times faster (at most, in lockstep); it does not go with --mode {args.mode}"
+            "--rate K runs the simulation K times faster (at most, in lockstep); it does not go with --mode "
+            f"{args.mode}"
         )
     router_listen = args.router_listen
     if args.router and router_listen is None and config_dir is None:
@@ -207,7 +208,8 @@ def add_up_arguments(parser: argparse.ArgumentParser) -> None:
     mission.add_argument(
         "--mode",
         choices=("realtime", "rate", "lockstep"),
-        help="simulation clock: realtime, rate (with --rate) or lockstep (time advances only when every request is answered)",
+        help="simulation clock: realtime, rate (with --rate) or lockstep (time advances only when every request is "
+        "answered)",
     )
     mission.add_argument(
         "--rate", type=float, metavar="K", help="simulate at K times real time (with --mode lockstep: at most)"
@@ -278,7 +280,8 @@ def add_up_arguments(parser: argparse.ArgumentParser) -> None:
         type=float,
         default=60.0,
         metavar="S",
-        help="seconds a service waits for those it starts after (the sim for the planner and restrictor) before starting anyway (default 60)",
+        help="seconds a service waits for those it starts after (the sim for the planner and restrictor) before "
+        "starting anyway (default 60)",
     )
     net = parser.add_argument_group("zenoh")
     net.add_argument(

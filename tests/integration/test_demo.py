@@ -13,6 +13,7 @@ import signal
 import ssl
 import time
 import urllib.request
+from itertools import pairwise
 from pathlib import Path
 
 import cv2
@@ -46,7 +47,7 @@ def drawn_fraction(image: np.ndarray, primitives: list[dict]) -> tuple[int, floa
             continue
         rgb = np.array(prim["color"][:3], dtype=float)
         points = np.asarray(prim["points"], dtype=float)
-        for a, b in zip(points[:-1], points[1:]):
+        for a, b in pairwise(points):
             steps = max(int(np.hypot(*(b - a)) / 3.0), 1)
             for s in np.linspace(0.0, 1.0, steps + 1):
                 u, v = np.round(a + s * (b - a)).astype(int)
@@ -114,8 +115,8 @@ def test_demo_runs_the_mission_serves_the_tablet_page_and_keeps_overlay_frames(s
         layers = {p["layer"] for p in record["primitives"]}
         assert (
             record["ok"]
-            and any(l.startswith("robot:") for l in layers)
-            and any(l.startswith("intent:") for l in layers)
+            and any(layer.startswith("robot:") for layer in layers)
+            and any(layer.startswith("intent:") for layer in layers)
         ), layers
         samples, fraction = drawn_fraction(image, record["primitives"])
         assert samples >= 20 and fraction >= 0.3, (

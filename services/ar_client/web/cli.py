@@ -116,7 +116,8 @@ def _calibrate(args: argparse.Namespace) -> int:
         print(f"skipped {name}: {why}")
     print(
         f"wrote {args.out}: fx {K.fx:.2f} fy {K.fy:.2f} cx {K.cx:.2f} cy {K.cy:.2f} ({K.width}x{K.height}), "
-        f"distortion {' '.join(f'{d:.4f}' for d in K.distortion)}, RMS {result.rms_px:.3f} px from {len(result.used)} image(s)"
+        f"distortion {' '.join(f'{d:.4f}' for d in K.distortion)}, RMS {result.rms_px:.3f} px from {len(result.used)} "
+        "image(s)"
     )
     return 0
 

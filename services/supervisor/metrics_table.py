@@ -5,7 +5,8 @@ nests per-agent and per-door figures and carries every parameter of the run; pri
 wall of Python dicts. Here each figure is one row: name, value (seconds to 0.1 s), unit and meaning.
 Two door counts are told apart: the paper's measure is the doors the *human* opened, while the
 progress line's "door openings" counts every opening, robots' automatic doors included.
-Figures this table does not know are listed after it, as they are, so nothing is hidden.
+Figures this table does not know, or whose shape it does not expect (another sim, an older file),
+are listed after it as they are, so nothing is hidden and nothing unexpected stops the supervisor.
 """
 
 from __future__ import annotations
@@ -13,28 +14,44 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-#: Figures shown by :func:`metrics_rows` (the rest of the map is listed under "other figures").
-SHOWN = (
-    "completed",
-    "time",
-    "team_completion_time",
-    "agent_completion_times",
-    "human_door_openings",
-    "door_openings",
-    "feedback",
-    "actions",
-    "closed_door_crossings",
-    "world_versions",
-    "robots",
-    "human",
-    "params",
-)
-
 Row = tuple[str, str, str, str]  # figure, value, unit, meaning
+
+_NUMBER = (int, float)
+#: The shape each known figure must have to be shown in the table (None: may be missing/null).
+SHAPES: dict[str, tuple[type, ...]] = {
+    "completed": (bool, type(None)),
+    "time": (*_NUMBER, type(None)),
+    "team_completion_time": (*_NUMBER, type(None)),
+    "agent_completion_times": (Mapping,),
+    "human_door_openings": (int, type(None)),
+    "door_openings": (Mapping,),
+    "feedback": (Mapping,),
+    "actions": (Mapping,),
+    "closed_door_crossings": (int,),
+    "world_versions": (int,),
+    "robots": (Mapping,),
+    "human": (Mapping,),
+    "params": (Mapping,),
+}
+
+
+def _fits(key: str, value: Any) -> bool:
+    """The figure has the shape the table reads (nested maps checked one level down)."""
+    if not isinstance(value, SHAPES[key]):
+        return False
+    if key == "door_openings":
+        return all(isinstance(by, Mapping) and all(isinstance(n, int) for n in by.values()) for by in value.values())
+    if key == "agent_completion_times":
+        return all(isinstance(t, (*_NUMBER, type(None))) for t in value.values())
+    if key == "robots":
+        return all(isinstance(robot, Mapping) for robot in value.values())
+    return True
 
 
 def _seconds(value: Any) -> str:
-    return "-" if value is None else f"{float(value):.1f}"
+    if value is None:
+        return "-"
+    return f"{value:.1f}" if isinstance(value, _NUMBER) else str(value)
 
 
 def _count(value: Any) -> str:
@@ -149,13 +166,14 @@ def metrics_table(metrics: Mapping[str, Any]) -> str:
     """The whole table as text, one row a line, columns aligned; params summed up in one line."""
     if not metrics:
         return "(no metrics)"
-    rows = [("figure", "value", "unit", "meaning"), *metrics_rows(metrics)]
+    known = {k: v for k, v in metrics.items() if k in SHAPES and _fits(k, v)}
+    rows = [("figure", "value", "unit", "meaning"), *metrics_rows(known)]
     widths = [max(len(row[i]) for row in rows) for i in range(3)]
     lines = [f"{a:<{widths[0]}}  {b:>{widths[1]}}  {c:<{widths[2]}}  {d}".rstrip() for a, b, c, d in rows]
-    params = metrics.get("params")
-    if isinstance(params, Mapping) and params:
+    params = known.get("params")
+    if params:
         lines.append(f"run: {_params_line(params)} (every parameter in metrics.json)")
-    others = {k: v for k, v in metrics.items() if k not in SHOWN}
+    others = {k: v for k, v in metrics.items() if k not in known}
     if others:
         lines.append("other figures:")
         lines.extend(f"  {k}: {_other(v)}" for k, v in others.items())

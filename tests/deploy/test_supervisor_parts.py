@@ -141,6 +141,9 @@ def test_the_final_metrics_are_a_rounded_table_with_units_and_meanings():
     assert "run: site office, method arroch, seed 1" in table
     assert "other figures:\n  makespan: 1.235" in table  # what the table does not know is still shown
     assert metrics_table({}) == "(no metrics)"
+    # Figures in shapes the table does not expect are listed as they are, never a crash.
+    odd = metrics_table({"door_openings": 3, "robots": ["r0"], "time": "late", "feedback": {"sent": "x"}})
+    assert "  door_openings: 3" in odd and "  robots: ['r0']" in odd and "  time: late" in odd
 
 
 def test_the_demo_lingers_only_for_a_terminal_unless_told():

@@ -295,7 +295,9 @@ def compare_detectors(site, frames: list[Frame]) -> dict:  # noqa: ANN001
 
 
 def floors(size_key: str, pipe: dict, ref: dict) -> dict:
-    both = [(p, r) for p, r in zip(pipe["_per_frame"], ref["_per_frame"]) if p is not None and r is not None]
+    both = [
+        (p, r) for p, r in zip(pipe["_per_frame"], ref["_per_frame"], strict=True) if p is not None and r is not None
+    ]
     p_pos = [p[0] for p, _ in both]
     r_pos = [r[0] for _, r in both]
     out = {
@@ -369,7 +371,8 @@ def hard_site():  # noqa: ANN201
         for k, along in enumerate(np.arange(1.6, length - 1.0, 2.4)):
             z = 1.25 if k % 2 == 0 else 1.55
             lines.append(
-                f"[[landmarks]]\ntag = {tag}\nsize = 0.16\nposition = [{x0 + dx * along:.3f}, {y0 + dy * along:.3f}, {z}]\nyaw = {yaw!r}\n"
+                f"[[landmarks]]\ntag = {tag}\nsize = 0.16\nposition = [{x0 + dx * along:.3f}, {y0 + dy * along:.3f}, "
+                f"{z}]\nyaw = {yaw!r}\n"
             )
             tag += 1
     with tempfile.NamedTemporaryFile("w", suffix=".toml", delete=False) as fh:
@@ -575,7 +578,7 @@ def hard_plot(result: dict, path: str) -> None:
             "ours_without_gravity": "ours",
             "apriltag3": "AprilTag 3 + SQPnP",
         }
-        for i, (name, label) in enumerate(names.items()):
+        for i, name in enumerate(names):
             st = e[name]["position_error_fraction_of_distance"]
             ax.bar(
                 [i - 0.2, i + 0.2],

@@ -223,7 +223,8 @@ def measure(args: argparse.Namespace) -> dict:
             )
         )
         log(
-            f"load: {args.robots} robots at {args.pose_rate:g} Hz, camera at {args.fps:g} frames/s; warming up {args.warmup:g} s"
+            f"load: {args.robots} robots at {args.pose_rate:g} Hz, camera at {args.fps:g} frames/s; warming up "
+            f"{args.warmup:g} s"
         )
         deadline = time.monotonic() + 60
         while observer.received == 0:  # the camera process renders its snapshots first

@@ -115,9 +115,10 @@ def bench_codec(quick: bool) -> dict:
         payload = encode(msg)
         assert decode(payload, cls) == msg
         repeat = 7 if quick else 31
-        enc = _per_call_us(lambda: encode(msg), number, repeat)
-        dec = _per_call_us(lambda: decode(payload, cls), number, repeat)
-        both = _per_call_us(lambda: decode(encode(msg), cls), number, repeat)
+        # Default arguments bind this round's message (a closure would see the loop's later values).
+        enc = _per_call_us(lambda msg=msg: encode(msg), number, repeat)
+        dec = _per_call_us(lambda payload=payload, cls=cls: decode(payload, cls), number, repeat)
+        both = _per_call_us(lambda msg=msg, cls=cls: decode(encode(msg), cls), number, repeat)
         out[name] = {
             "bytes": len(payload),
             "encode_us": round(enc, 2),
@@ -262,7 +263,7 @@ class Run:
 
     def paired(self, name: str) -> list[float]:
         """Per round: this variant's batch median over raw's batch median in the same round."""
-        return [a / b for a, b in zip(self.batch_p50[name], self.batch_p50["raw"]) if b > 0]
+        return [a / b for a, b in zip(self.batch_p50[name], self.batch_p50["raw"], strict=True) if b > 0]
 
 
 def one_run(args: argparse.Namespace, index: int, rounds: int) -> tuple[Run, dict]:
@@ -386,7 +387,7 @@ def bench_latency(args: argparse.Namespace) -> dict:
         result[f"{name}_over_raw_p50_paired"] = round(
             statistics.median([r for run in runs for r in run.paired(name)]), 3
         )
-        for figures, run in zip(per_run, runs):
+        for figures, run in zip(per_run, runs, strict=True):
             figures[f"{name}_over_raw_p50_paired"] = round(statistics.median(run.paired(name)), 3)
         result[f"{name}_over_raw_p50_runs_median"] = round(
             statistics.median(f[f"{name}_over_raw_p50_paired"] for f in per_run), 3
@@ -447,7 +448,9 @@ def main(argv: list[str] | None = None) -> int:
     floors = {
         "protocol_over_raw_p50_max": FLOOR_RATIO,
         "protocol_over_raw_p50": ratio,
-        "protocol_over_raw_p50_basis": "median over runs of the per-round paired p50 ratio (latency.protocol_over_raw_p50_runs_median)",
+        "protocol_over_raw_p50_basis": (
+            "median over runs of the per-round paired p50 ratio (latency.protocol_over_raw_p50_runs_median)"
+        ),
         "protocol_over_raw_p50_pooled": latency["protocol_over_raw_p50"],
         "ratio_met": ratio <= FLOOR_RATIO,
         "pose_encode_decode_us_max": FLOOR_POSE_CODEC_US,

@@ -68,8 +68,10 @@ def codec_figures() -> dict:
         n = 20 if "Marker" in name or "Path" in name else 200
         out[name] = {
             "bytes": len(payload),
-            "encode_us": round(micro(lambda: ros.serialize(msg, typename), n), 1),
-            "decode_us": round(micro(lambda: ros.deserialize(payload, typename), n), 1),
+            "encode_us": round(micro(lambda msg=msg, typename=typename: ros.serialize(msg, typename), n), 1),
+            "decode_us": round(
+                micro(lambda payload=payload, typename=typename: ros.deserialize(payload, typename), n), 1
+            ),
         }
     return out
 
@@ -123,7 +125,7 @@ def main() -> int:
                     twists = [tw.site_time for tw in base.twists if tw.site_time > moving]
                 sent = [t for t in base.odometry_sent if twists and moving < t < twists[-1]]
                 # Each odometry's answer: the first Twist after it (before the next odometry).
-                for a, b in zip(sent, sent[1:] + [float("inf")]):
+                for a, b in zip(sent, sent[1:] + [float("inf")], strict=True):
                     reply = next((tw for tw in twists if tw > a), None)
                     if reply is not None and reply < b:
                         answers.append(reply - a)

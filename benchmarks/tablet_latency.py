@@ -131,7 +131,9 @@ def main() -> int:
         json.dumps(
             {
                 "benchmark": "tablet_latency",
-                "what": "page: camera frame captured/sent -> its overlay drawn, localhost, performance.now() in the page",
+                "what": (
+                    "page: camera frame captured/sent -> its overlay drawn, localhost, performance.now() in the page"
+                ),
                 "machine": {"python": platform.python_version(), "cpus": __import__("os").cpu_count()},
                 "chromium": chromium_path(),
                 "results": results,

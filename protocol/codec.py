@@ -184,7 +184,8 @@ def _generate_decoder(cls: type[M], *, build: bool) -> Callable[[Any], Any]:
         "    if type(data) is not dict or data.get('type') != TYPE:",
         "        return checked(payload, cls)",
         "    version = data.get('v')",
-        "    if type(version) is not int or not 0 < version <= VERSION or 'src' not in data or 'seq' not in data or 'stamp' not in data:",
+        "    if type(version) is not int or not 0 < version <= VERSION or 'src' not in data or 'seq' not in data or "
+        "'stamp' not in data:",
         "        return checked(payload, cls)",
         "    prefix = ''",
         "    try:",

@@ -11,6 +11,7 @@ destination room). Who may load what (ownership, capacity) belongs to whoever tr
 from __future__ import annotations
 
 import math
+from itertools import pairwise
 
 from .messages import RobotCommand
 from .plane import segment_intersection
@@ -37,13 +38,13 @@ def command_problem(site: Site, x: float, y: float, cmd: RobotCommand, start_tol
     if gap > start_tolerance:
         return f"trajectory starts {gap:.2f} m from the robot (more than {start_tolerance} m)"
     points = [(x, y)] + [(row[1], row[2]) for row in cmd.trajectory]
-    for a, b in zip(points, points[1:]):
+    for a, b in pairwise(points):
         for wall in site.walls:
             if segment_intersection(a, b, wall.a, wall.b) is not None:
                 return f"trajectory segment {_fmt(a)}->{_fmt(b)} crosses a wall"
     if cmd.action == "gothrough":
         ea, eb = site.opening(target).endpoints
-        if not any(segment_intersection(a, b, ea, eb) is not None for a, b in zip(points, points[1:])):
+        if not any(segment_intersection(a, b, ea, eb) is not None for a, b in pairwise(points)):
             return f"gothrough: trajectory does not cross {target!r}"
     return ""
 

@@ -276,7 +276,8 @@ def run_send(args: argparse.Namespace) -> int:
         print(json.dumps(summary.to_dict()))
     else:
         print(
-            f"ping {summary.extra['namespace']}: {summary.received}/{summary.sent} echoes of a {payload_len}-byte RobotPose; "
+            f"ping {summary.extra['namespace']}: {summary.received}/{summary.sent} echoes of a {payload_len}-byte "
+            "RobotPose; "
             f"round trip p50 {summary.p50_us:.0f} µs, p90 {summary.p90_us:.0f} µs, p99 {summary.p99_us:.0f} µs "
             f"(min {summary.min_us:.0f}, max {summary.max_us:.0f})"
         )
@@ -313,7 +314,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=int,
         default=0,
         metavar="N",
-        help="pad each ping with a field receivers ignore, to N bytes on the wire (an inline server's echoes come back padded too)",
+        help="pad each ping with a field receivers ignore, to N bytes on the wire (an inline server's echoes come back "
+        "padded too)",
     )
     send.add_argument("--robot", default="ping", help="robot id in the pose key robot/<id>/pose (default ping)")
     send.add_argument("--timeout", type=float, default=1.0, help="seconds before a ping counts as lost (default 1)")

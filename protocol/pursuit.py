@@ -19,6 +19,7 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass
+from itertools import pairwise
 
 from .plane import segment_intersection, wrap
 
@@ -46,7 +47,7 @@ class Path:
         self.points = points
         self.final_theta = float(rows[-1][3]) if rows else 0.0
         self.s = [0.0]
-        for a, b in zip(points, points[1:]):
+        for a, b in pairwise(points):
             self.s.append(self.s[-1] + math.hypot(b[0] - a[0], b[1] - a[1]))
 
     @property

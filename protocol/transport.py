@@ -74,7 +74,8 @@ def add_zenoh_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--connect",
         metavar="ENDPOINTS",
-        help=f"comma-separated endpoints to connect to (default {DEFAULT_ROUTER} in client mode; env ARROCH_ZENOH_CONNECT)",
+        help=f"comma-separated endpoints to connect to (default {DEFAULT_ROUTER} in client mode; env "
+        "ARROCH_ZENOH_CONNECT)",
     )
     group.add_argument(
         "--listen", metavar="ENDPOINTS", help="comma-separated endpoints to listen on (env ARROCH_ZENOH_LISTEN)"

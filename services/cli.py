@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
+from importlib.metadata import PackageNotFoundError, version
 
 from protocol.runner import setup_logging
 
@@ -48,11 +49,20 @@ def modules_for(argv: list[str]) -> list[str]:
     return [m for m in COMMANDS if m in wanted] or list(COMMANDS)
 
 
+def installed_version() -> str:
+    """The installed distribution's version (``pip install -e .`` included)."""
+    try:
+        return version("arroch")
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        return "unknown (not installed: pip install -e .)"
+
+
 def build_parser(modules: list[str] | None = None) -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="arroch",
         description="ARROCH: AR for robots collaborating with a human. Services and tools.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {installed_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for module_name in COMMANDS if modules is None else modules:
         try:

@@ -5,7 +5,9 @@ It checks and draws the site, then runs one whole mission under the supervisor
 simulated human and the virtual tablet camera (the human's tablet), the AR client drawing the robots
 and their intents over that camera's frames, and the tablet page (viewer mode: the camera with its
 overlay, and a map), whose URL and access token are printed as soon as it serves. The mission runs
-in lockstep, so it takes seconds of wall time instead of the ~12 minutes it lasts on the site clock.
+in lockstep, so it takes seconds of wall time instead of the ~10 minutes it lasts on the site clock.
+On a terminal (or with ``--linger``) the page and the services stay up after the mission, its
+metrics printed, until Ctrl-C; elsewhere (CI, a pipe, ``--no-linger``) the demo ends with the mission.
 
 Lockstep and the camera: site time only advances while the sim is not waiting for the planner, and
 then many times faster than wall time, so a frame taken at a wall instant would be drawn over robots
@@ -18,7 +20,9 @@ the same site times for the same mission (``services/ar_client/snapshots.py``). 
 (a render and the AR client's turn each) replace the ~15 wall-rate frames and cost the demo about 3
 wall seconds. ``arroch up ... --mode realtime`` shows the mission at its own pace.
 
-The supervisor prints progress and the final metrics and leaves a run folder (metrics.json,
+The supervisor prints progress and the final metrics (a table: rounded, with units and what each
+count means; the progress line's "door openings" are every door's, the paper's measure is the
+human's) and leaves a run folder (metrics.json,
 events.jsonl, the merged log, ``overlays/`` with a few overlay frames, ``run.mcap``: the recording of
 the whole run, unless ``--no-record``); the site picture goes there too. Everything it starts is
 stopped before it returns.
@@ -94,6 +98,11 @@ def relay(lines: Iterable[str], out: TextIO, announcement: TabletAnnouncement) -
     announcement.announce()
 
 
+def lingers(args: argparse.Namespace, out: TextIO = sys.stdout) -> bool:
+    """``--linger`` as asked, else only for a person at a terminal (CI, tests and pipes end with the mission)."""
+    return args.linger if args.linger is not None else out.isatty()
+
+
 def run_demo(args: argparse.Namespace) -> int:
     site_file = args.site or str(default_site_path())
     run_root = Path(args.run_dir)
@@ -131,6 +140,7 @@ def run_demo(args: argparse.Namespace) -> int:
         "--log-level",
         args.log_level or "WARNING",
         "--record" if args.record else "--no-record",
+        *(["--linger"] if lingers(args) else []),
         *(["--view", "--view-port", str(args.view_port)] if args.view else []),
     )
     # Line by line through us, so the tablet's URL can be repeated where it is seen; the supervisor
@@ -191,5 +201,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--view", action="store_true", help="serve the run live to Foxglove (ws://127.0.0.1:--view-port)"
     )
     parser.add_argument("--view-port", type=int, default=8765, help="with --view: the port (default 8765)")
+    parser.add_argument(
+        "--linger",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="after the mission, keep the tablet page and the services up until Ctrl-C "
+        "(default: when the output is a terminal; --no-linger ends with the mission)",
+    )
     parser.add_argument("--log-level", default=None, choices=("DEBUG", "INFO", "WARNING", "ERROR"))
     parser.set_defaults(func=run_demo)

@@ -18,6 +18,30 @@ from tests.procs import Proc, arroch
 
 M = TypeVar("M", bound=Message)
 
+_SKIPPED = pytest.StashKey[dict[str, int]]()
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:
+    """Note why tests were skipped; :func:`pytest_unconfigure` says it as the run's very last lines."""
+    reasons: dict[str, int] = {}
+    for report in terminalreporter.stats.get("skipped", []):
+        reason = report.longrepr[2] if isinstance(report.longrepr, tuple) else str(report.longrepr)
+        reason = reason.removeprefix("Skipped: ")
+        reasons[reason] = reasons.get(reason, 0) + 1
+    terminalreporter.config.stash[_SKIPPED] = reasons
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    """After the summary line, loudly: a passing run that skipped tests did not test everything."""
+    reasons = config.stash.get(_SKIPPED, {})
+    reporter = config.pluginmanager.get_plugin("terminalreporter")
+    if not reasons or reporter is None:
+        return
+    total = sum(reasons.values())
+    reporter.write_sep("!", f"SKIPPED {total} test(s): these parts were NOT tested", red=True, bold=True)
+    for reason, count in sorted(reasons.items(), key=lambda item: -item[1]):
+        reporter.write_line(f"  {count} x {reason}", red=True, bold=True)
+
 
 @pytest.fixture
 def spawn() -> Iterator[Callable[..., Proc]]:

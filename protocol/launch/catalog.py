@@ -40,26 +40,26 @@ class MissionOptions:
 
 # How each option is spelled on a service's command line (the services' own flags).
 OPTION_FLAGS: dict[str, Callable[[Launch], list[str]]] = {
-    "method": lambda l: ["--method", l.mission.method] if l.mission.method else [],
-    "mode": lambda l: ["--mode", l.mission.mode] if l.mission.mode else [],
-    "rate": lambda l: ["--rate", f"{l.mission.rate:g}"] if l.mission.rate is not None else [],
-    "seed": lambda l: ["--seed", str(l.mission.seed)] if l.mission.seed is not None else [],
+    "method": lambda launch: ["--method", launch.mission.method] if launch.mission.method else [],
+    "mode": lambda launch: ["--mode", launch.mission.mode] if launch.mission.mode else [],
+    "rate": lambda launch: ["--rate", f"{launch.mission.rate:g}"] if launch.mission.rate is not None else [],
+    "seed": lambda launch: ["--seed", str(launch.mission.seed)] if launch.mission.seed is not None else [],
     # Persisted state of this run only: a new run must not inherit the last run's constraints,
     # while a restarted service within the run must find its own.
-    "state": lambda l: ["--state-dir", str(l.run_dir / "state")] if l.run_dir else [],
+    "state": lambda launch: ["--state-dir", str(launch.run_dir / "state")] if launch.run_dir else [],
     # The sim renders the camera; the AR client (default source: that camera) and the tablet page
     # (viewer mode on it) show it. Without a camera the page uses each browser's own camera.
-    "camera": lambda l: ["--camera", l.mission.camera] if l.mission.camera else [],
-    "camera_source": lambda l: ["--camera-source", f"sim:{SIM_CAMERA_ID}"] if l.mission.camera else [],
+    "camera": lambda launch: ["--camera", launch.mission.camera] if launch.mission.camera else [],
+    "camera_source": lambda launch: ["--camera-source", f"sim:{SIM_CAMERA_ID}"] if launch.mission.camera else [],
     # A few overlay frames spread over the run, kept with its other records.
-    "snapshots": lambda l: ["--snapshots", str(l.run_dir / OVERLAY_FOLDER)] if l.run_dir else [],
+    "snapshots": lambda launch: ["--snapshots", str(launch.run_dir / OVERLAY_FOLDER)] if launch.run_dir else [],
     # The run's recording, with the merged log's lines, and (arroch up --view) the live Foxglove view.
-    "recording": lambda l: (
-        (["--out", str(l.run_dir / RECORDING)] if l.run_dir else [])
-        + _logs(l)
-        + (["--view", "--view-port", str(l.mission.view_port)] if l.mission.view_port is not None else [])
+    "recording": lambda launch: (
+        (["--out", str(launch.run_dir / RECORDING)] if launch.run_dir else [])
+        + _logs(launch)
+        + (["--view", "--view-port", str(launch.mission.view_port)] if launch.mission.view_port is not None else [])
     ),
-    "view": lambda l: ["--port", str(l.mission.view_port)] + _logs(l),
+    "view": lambda launch: ["--port", str(launch.mission.view_port)] + _logs(launch),
 }
 RECORDING = "run.mcap"
 

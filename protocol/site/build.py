@@ -111,13 +111,15 @@ class _Builder:
         if abs(across - edge.coord) > EPS or not edge.lo - EPS <= along <= edge.hi + EPS:
             raise self.fail(
                 e,
-                f"center {_fmt(cx, cy)} {where} (their shared edge is {_edge_text(edge.axis, edge.coord, edge.lo, edge.hi)})",
+                f"center {_fmt(cx, cy)} {where} (their shared edge is "
+                f"{_edge_text(edge.axis, edge.coord, edge.lo, edge.hi)})",
             )
         lo, hi = along - width / 2.0, along + width / 2.0
         if lo < edge.lo - EPS or hi > edge.hi + EPS:
             raise self.fail(
                 e,
-                f'width {width:g} at center {_fmt(cx, cy)} does not fit on the edge shared by rooms "{a_id}" and "{b_id}" '
+                f'width {width:g} at center {_fmt(cx, cy)} does not fit on the edge shared by rooms "{a_id}" and '
+                f'"{b_id}" '
                 f"({_edge_text(edge.axis, edge.coord, edge.lo, edge.hi)}): its whole width must lie on it",
             )
         half = self.params.wall_thickness / 2.0
@@ -131,7 +133,8 @@ class _Builder:
         if width <= needed:
             raise self.fail(
                 e,
-                f"width {width:g} is too narrow for a robot of radius {self.params.robot_radius:g} (needs more than {needed:g})",
+                f"width {width:g} is too narrow for a robot of radius {self.params.robot_radius:g} (needs more than "
+                f"{needed:g})",
             )
         normals = ((a_id, normal_into(a, edge.axis, edge.coord)), (b_id, normal_into(b, edge.axis, edge.coord)))
         return Opening(
@@ -157,7 +160,8 @@ class _Builder:
                     if opening_line(other) == opening_line(o) and min(hi, ohi) - max(lo, olo) > -EPS:
                         raise self.fail(
                             e,
-                            f"its gap [{lo:g}, {hi:g}] overlaps or touches {entries[other.id].label} [{olo:g}, {ohi:g}] on the same wall",
+                            f"its gap [{lo:g}, {hi:g}] overlaps or touches {entries[other.id].label} [{olo:g}, "
+                            f"{ohi:g}] on the same wall",
                         )
                 openings[o.id] = o
                 entries[o.id] = e
@@ -230,13 +234,16 @@ class _Builder:
             if behind:
                 raise self.fail(
                     e,
-                    f"faces into the wall at {name} = {behind[0]:g} (yaw {lm.yaw:g} points away from the room it should face)",
+                    f"faces into the wall at {name} = {behind[0]:g} (yaw {lm.yaw:g} points away from the room it "
+                    "should face)",
                 )
             nearest = min((abs(across - coord), coord) for (ax, coord) in lines if ax == axis)
             raise self.fail(
                 e,
-                f"position {_fmt(px, py, pz)} is not on a wall: the nearest wall parallel to its face ({name} = {nearest[1]:g}) "
-                f"is {nearest[0]:.3g} m away; a tag must be within {max_offset:g} m of a wall's centre line, on the side it faces",
+                f"position {_fmt(px, py, pz)} is not on a wall: the nearest wall parallel to its face ({name} = "
+                f"{nearest[1]:g}) "
+                f"is {nearest[0]:.3g} m away; a tag must be within {max_offset:g} m of a wall's centre line, on the "
+                "side it faces",
             )
         _, coord = front[0]
         half = lm.printed_size / 2.0
@@ -247,7 +254,8 @@ class _Builder:
                 if min(hi, ghi) - max(lo, glo) > EPS:
                     raise self.fail(
                         e,
-                        f"is over {opening_entries[o.id].label}: the printed tag spans [{lo:g}, {hi:g}], the gap [{glo:g}, {ghi:g}]",
+                        f"is over {opening_entries[o.id].label}: the printed tag spans [{lo:g}, {hi:g}], the gap "
+                        f"[{glo:g}, {ghi:g}]",
                     )
         if not any(ilo - EPS <= lo and hi <= ihi + EPS for ilo, ihi in lines[(axis, coord)]):
             raise self.fail(e, f"extends past the end of the wall (the printed tag spans [{lo:g}, {hi:g}])")
@@ -269,7 +277,8 @@ class _Builder:
             if alo - EPS <= across <= ahi + EPS and min(hi, lhi) - max(lo, llo) > EPS:
                 raise self.fail(
                     e,
-                    f'is covered by door "{leaf.door}"\'s leaf when it is open (the leaf spans [{llo:g}, {lhi:g}] along this wall)',
+                    f'is covered by door "{leaf.door}"\'s leaf when it is open (the leaf spans [{llo:g}, {lhi:g}] '
+                    "along this wall)",
                 )
         if pz - half < 0.0 or pz + half > self.params.wall_height + EPS:
             raise self.fail(
@@ -308,7 +317,8 @@ class _Builder:
             if in_swing(leaf, x, y, clearance):
                 raise self.fail(
                     e,
-                    f'{key} {_fmt(x, y)} is where door "{leaf.door}"\'s leaf swings (hinge {_fmt(*leaf.hinge)}, length {leaf.length:g})',
+                    f'{key} {_fmt(x, y)} is where door "{leaf.door}"\'s leaf swings (hinge {_fmt(*leaf.hinge)}, length '
+                    f"{leaf.length:g})",
                 )
         return room
 
@@ -322,7 +332,8 @@ class _Builder:
                 if math.dist((x, y), other.start[:2]) < 2.0 * r - EPS:
                     raise self.fail(
                         e,
-                        f'start {_fmt(x, y)} overlaps robot "{other.id}" at {_fmt(*other.start[:2])} (robots are {2 * r:g} m wide)',
+                        f'start {_fmt(x, y)} overlaps robot "{other.id}" at {_fmt(*other.start[:2])} (robots are '
+                        f"{2 * r:g} m wide)",
                     )
             robots[e["id"]] = RobotSpec(id=e["id"], start=(x, y, theta), room=room.id)
         return robots

@@ -38,12 +38,16 @@ def summary(site: Site) -> str:
         f"  objects ({len(site.objects)}): "
         + "; ".join(f"{rid}: {', '.join(objs) or '-'}" for rid, objs in by_robot.items()),
         f"  human: in {site.human.room} at ({site.human.position[0]:g}, {site.human.position[1]:g})",
-        f"  walls: {len(site.walls)} segments, {site.params.wall_thickness:g} m thick, {site.params.wall_height:g} m high",
+        f"  walls: {len(site.walls)} segments, {site.params.wall_thickness:g} m thick, {site.params.wall_height:g} m "
+        "high",
     ]
     return "\n".join(lines)
 
 
-def _load_or_report(path: str) -> Site | None:
+SITE_FILE_HELP = "site file (TOML); default: the packaged 'office' site, as for every other command"
+
+
+def _load_or_report(path: str | None) -> Site | None:
     try:
         return load_site(path)
     except SiteError as exc:
@@ -104,11 +108,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     check = sub.add_parser(
         "check", help="validate a site file and print a summary (exit 1 with the reason if it is refused)"
     )
-    check.add_argument("file", help="site file (TOML)")
+    check.add_argument("file", nargs="?", help=SITE_FILE_HELP)
     check.set_defaults(func=cmd_check)
 
     show = sub.add_parser("show", help="draw a site top-down into a PNG")
-    show.add_argument("file", help="site file (TOML)")
+    show.add_argument("file", nargs="?", help=SITE_FILE_HELP)
     show.add_argument("--png", required=True, metavar="OUT", help="PNG file to write")
     show.add_argument("--dpi", type=int, default=150, help=f"resolution, {MIN_DPI} to {MAX_DPI} (default 150)")
     show.set_defaults(func=cmd_show)

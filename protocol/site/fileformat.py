@@ -113,7 +113,8 @@ def ident(v: Any) -> str:
     s = string(v)
     if not ID_RE.match(s) or s in ASP_KEYWORDS or len(s) > ID_MAX:
         raise Bad(
-            f"{_describe(s)} is not a valid lower-case ASP constant (^[a-z][a-z0-9_]*$, at most {ID_MAX} characters, not 'not')"
+            f"{_describe(s)} is not a valid lower-case ASP constant (^[a-z][a-z0-9_]*$, at most {ID_MAX} characters, "
+            "not 'not')"
         )
     return s
 

@@ -35,6 +35,7 @@ import dataclasses
 import math
 import random
 from dataclasses import dataclass
+from itertools import pairwise
 from typing import Any
 
 from .geometry import box_distance, in_swing
@@ -78,7 +79,8 @@ def _split_options(options: dict[str, Any]) -> tuple[Layout, dict[str, Any]]:
             params[key] = value
         else:
             raise TypeError(
-                f"generate_site: unknown option {key!r} (layout: {', '.join(sorted(layout_fields))}; params: {', '.join(sorted(param_fields))})"
+                f"generate_site: unknown option {key!r} (layout: {', '.join(sorted(layout_fields))}; params: "
+                f"{', '.join(sorted(param_fields))})"
             )
     return Layout(**layout_opts), params
 
@@ -146,7 +148,7 @@ def _structure(n_robots: int, layout: Layout, params: dict[str, Any], name: str,
         entry["width"] = width
     for side in ("north", "south"):
         row = [r for r in rooms if r["id"].startswith(side)]
-        for west, east in zip(row, row[1:]):
+        for west, east in pairwise(row):
             if west["rect"][2] != east["rect"][0] or rng.random() >= layout.side_passage_probability:
                 continue  # storage between them, or no passage this time
             y0, y1 = west["rect"][1], west["rect"][3]
@@ -196,7 +198,8 @@ def _place_objects(site: Site, n_robots: int, per_robot: int, rng: random.Random
             break
         else:
             raise ValueError(
-                f"generate_site: no free place for object o{i} after {PLACEMENT_TRIES} tries (rooms too small for {n_robots * per_robot} objects)"
+                f"generate_site: no free place for object o{i} after {PLACEMENT_TRIES} tries (rooms too small for "
+                f"{n_robots * per_robot} objects)"
             )
         placed.append((x, y))
         objects.append({"id": f"o{i}", "position": [x, y], "deliver_to": "storage", "robot": f"r{i // per_robot}"})

@@ -100,7 +100,8 @@ def build_grid(site: Site, resolution: float, open_doors: frozenset[str], inflat
     unknown = sorted(d for d in open_doors if d not in site.door_leaves)
     if unknown:
         raise ValueError(
-            f"occupancy_grid: open_doors: unknown door(s) {', '.join(unknown)} (doors are {', '.join(site.door_leaves)})"
+            f"occupancy_grid: open_doors: unknown door(s) {', '.join(unknown)} (doors are "
+            f"{', '.join(site.door_leaves)})"
         )
     bx0, by0, bx1, by1 = site.bounds
     margin = site.params.wall_thickness / 2.0 + resolution

@@ -156,7 +156,8 @@ def place_room_tags(
     for z in heights:
         if z - size / 2.0 < view.camera_height - reach or z + size / 2.0 > view.camera_height + reach:
             raise ValueError(
-                f"tags at {z:g} m are out of the vertical view ({view.camera_height - reach:.2f}..{view.camera_height + reach:.2f} m)"
+                f"tags at {z:g} m are out of the vertical view "
+                f"({view.camera_height - reach:.2f}..{view.camera_height + reach:.2f} m)"
             )
     openings, leaves = list(openings), list(leaves)
     out: list[dict] = []

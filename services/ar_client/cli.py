@@ -147,7 +147,8 @@ def _render(args: argparse.Namespace) -> int:
     loc = pipeline.last_localization
     if overlay.ok:
         print(
-            f"wrote {args.out}: pose from tags {overlay.tags}, RMSE {overlay.reprojection_rmse:.3f} px, {len(overlay.primitives)} primitives"
+            f"wrote {args.out}: pose from tags {overlay.tags}, RMSE {overlay.reprojection_rmse:.3f} px, "
+            f"{len(overlay.primitives)} primitives"
         )
     else:
         print(f"wrote {args.out}: no pose ({loc.reason if loc else 'lost'}); only the status is drawn")
@@ -171,7 +172,8 @@ def _tags_sheet(args: argparse.Namespace) -> int:
     except (ValueError, FileNotFoundError) as exc:
         return _error(exc)
     print(
-        f"wrote {len(site.landmarks)} tag page(s) to {', '.join(str(f) for f in files[:3])}{' ...' if len(files) > 3 else ''}"
+        f"wrote {len(site.landmarks)} tag page(s) to "
+        f"{', '.join(str(f) for f in files[:3])}{' ...' if len(files) > 3 else ''}"
     )
     return 0
 
@@ -179,12 +181,21 @@ def _tags_sheet(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- registration
 
 
+def detector_option(name: str) -> str:
+    """``--detector``'s type: a known back end whose library is installed (else a usage error naming the extra)."""
+    from .detect import detector_method  # OpenCV: loaded only when a command that detects tags runs
+
+    return detector_method(name)
+
+
 def _add_detector(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--detector",
-        choices=("opencv", "apriltag"),
+        type=detector_option,
         default="opencv",
-        help="tag detector: OpenCV ArUco + edge-fit corners (default), or the AprilTag 3 library (pupil-apriltags)",
+        metavar="{opencv,apriltag}",
+        help="tag detector: OpenCV ArUco + edge-fit corners (default), or the AprilTag 3 library (the arroch[apriltag] "
+        "extra)",
     )
 
 
@@ -253,7 +264,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         "--gravity",
         metavar="GX,GY,GZ",
         help="gravity measured at capture, in the camera frame (OpenCV axes: x right, "
-        "y down, z forward; pointing down, any unit): picks a single tag's right planar solution, adds gravity_error_deg",
+        "y down, z forward; pointing down, any unit): picks a single tag's right planar solution, adds "
+        "gravity_error_deg",
     )
     loc.set_defaults(func=_localize)
 

@@ -5,7 +5,8 @@ Two back ends, both returning :class:`TagDetection` with corners already reorder
 
 * ``opencv`` (default) — OpenCV's ArUco detector with ``DICT_APRILTAG_36h11``, its corners then
   refined by fitting the tag's four edges (:mod:`refine`).
-* ``apriltag`` — the AprilTag 3 C library through ``pupil-apriltags``. One detector lives per
+* ``apriltag`` — the AprilTag 3 C library through ``pupil-apriltags`` (the ``arroch[apriltag]``
+  extra: asking for it without the library is an error naming the extra). One detector lives per
   process (:func:`apriltag_detector`), released at exit in the right order (the package's own
   teardown frees in the wrong order and can crash the process).
 
@@ -29,6 +30,7 @@ run off the image too.
 
 from __future__ import annotations
 
+import argparse
 import atexit
 import logging
 import threading
@@ -51,6 +53,8 @@ BORDER_MARGIN_PX = 2.0
 FULL_RES_MAX_PIXELS = 500_000
 #: Edge-fit passes over ArUco's corners (a second pass re-centres the profiles on small tags' edges).
 REFINE_PASSES = 2
+#: The back ends ``--detector`` accepts.
+DETECTORS = ("opencv", "apriltag")
 #: Crops whose predicted tag is smaller than this (pixels across) are upscaled ×2 before the search.
 UPSCALE_BELOW_PX = 40.0
 
@@ -109,6 +113,21 @@ def apriltag_available() -> bool:
     return True
 
 
+APRILTAG_MISSING = (
+    "--detector apriltag needs the AprilTag 3 library (pupil-apriltags), which is not installed: "
+    "pip install 'arroch[apriltag]'"
+)
+
+
+def detector_method(name: str) -> str:
+    """``--detector`` value check: a known back end whose library is installed (argparse ``type``)."""
+    if name not in DETECTORS:
+        raise argparse.ArgumentTypeError(f"unknown detector {name!r} (expected one of: {', '.join(DETECTORS)})")
+    if name == "apriltag" and not apriltag_available():
+        raise argparse.ArgumentTypeError(APRILTAG_MISSING)
+    return name
+
+
 def touches_border(corners: np.ndarray, width: int, height: int, margin: float = BORDER_MARGIN_PX) -> bool:
     """True when any corner lies within ``margin`` pixels of the image edge (or outside it)."""
     u, v = corners[:, 0], corners[:, 1]
@@ -143,13 +162,10 @@ class TagDetector:
         opencv_refine: str = "edges",
         small_tags: bool = True,
     ) -> None:
-        if method not in ("apriltag", "opencv"):
+        if method not in DETECTORS:
             raise ValueError(f"unknown detector {method!r} (expected 'apriltag' or 'opencv')")
         if method == "apriltag" and not apriltag_available():
-            log.warning(
-                "pupil-apriltags is not installed: falling back to OpenCV's ArUco detector (less accurate corners)"
-            )
-            method = "opencv"
+            raise ValueError(APRILTAG_MISSING)
         self.method = method
         self.known_ids = None if known_ids is None else frozenset(int(i) for i in known_ids)
         self.decimate = decimate
@@ -209,11 +225,13 @@ class TagDetector:
         else:
             corners, ids, rejected = self._aruco.detectMarkers(gray)
             if ids is not None:
-                kept = [(int(i), opencv_corners(c)) for c, i in zip(corners, ids.ravel()) if self._keep(int(i))]
+                kept = [
+                    (int(i), opencv_corners(c)) for c, i in zip(corners, ids.ravel(), strict=True) if self._keep(int(i))
+                ]
                 quads = [q for _, q in kept]
                 if self.refine == "edges":
                     quads = refine_corners(gray, quads, self.refine_passes, lens)
-                out += [TagDetection(i, q, "opencv") for (i, _), q in zip(kept, quads)]
+                out += [TagDetection(i, q, "opencv") for (i, _), q in zip(kept, quads, strict=True)]
             if self.small_tags and rejected:
                 out += self._small(gray, rejected, out, lens)
         return out

@@ -234,7 +234,8 @@ class Pipeline:
         image = self.decode(frame, colour=annotate)
         if intrinsics.width != image.shape[1] or intrinsics.height != image.shape[0]:
             raise BadFrame(
-                f"frame is {image.shape[1]}x{image.shape[0]} but its intrinsics say {intrinsics.width}x{intrinsics.height}"
+                f"frame is {image.shape[1]}x{image.shape[0]} but its intrinsics say "
+                f"{intrinsics.width}x{intrinsics.height}"
             )
         gray = to_gray(image)
         t_decoded = time.perf_counter()

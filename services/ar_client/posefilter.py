@@ -23,6 +23,7 @@ else (a fast turn, the filter started on a wrong pose): the filter restarts ther
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import pairwise
 
 import cv2
 import numpy as np
@@ -137,7 +138,7 @@ def _share(alpha: float, ratio: float) -> float:
 
 def _consistent(run: list[tuple[CameraPose, float]], o: FilterOptions) -> bool:
     """Consecutive rejected poses agree with one another (each within the gates of the one before)."""
-    for (a, ta), (b, tb) in zip(run, run[1:]):
+    for (a, ta), (b, tb) in pairwise(run):
         dt = max(tb - ta, 0.0)
         if np.linalg.norm(b.position - a.position) > o.gate_m + o.speed_m_s * dt:
             return False

@@ -9,6 +9,7 @@ Distortion (OpenCV's k1 k2 p1 p2 k3) is applied in numpy: ~4× cheaper than ``cv
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from itertools import pairwise
 
 import numpy as np
 
@@ -118,7 +119,7 @@ class Projector:
         pieces: list[np.ndarray] = []
         current: list[np.ndarray] = []
         near = self.near
-        for a, b in zip(pc[:-1], pc[1:]):
+        for a, b in pairwise(pc):
             za, zb = a[2], b[2]
             if za >= near and zb >= near:
                 if not current:
@@ -186,7 +187,7 @@ def clip_polyline(points: np.ndarray, box: tuple[float, float, float, float]) ->
         return [pts] if len(pts) >= 2 else []
     pieces: list[np.ndarray] = []
     current: list[np.ndarray] = []
-    for a, b in zip(pts[:-1], pts[1:]):
+    for a, b in pairwise(pts):
         clipped = clip_segment(a, b, box)
         if clipped is None:
             if len(current) >= 2:

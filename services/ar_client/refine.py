@@ -13,7 +13,8 @@ precisely and intersecting the lines — the idea behind the AprilTag library's 
    which is symmetric about the true edge);
 4. fit a line to each edge's crossings (weighted total least squares) and intersect neighbours.
 
-All tags of a frame are processed together (one ``remap`` call, batched numpy), so this costs a\nfraction of a millisecond.
+All tags of a frame are processed together (one ``remap`` call, batched numpy), so this costs a
+fraction of a millisecond.
 With lens distortion (:class:`Lens`) the same runs in undistorted coordinates, where the edges are
 straight. A corner that moves implausibly far (more than :data:`MAX_SHIFT_MODULES` of a module) keeps its
 original position: a refinement must never make a detection worse.

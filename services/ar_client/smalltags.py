@@ -132,7 +132,8 @@ def decode_quads(
     uv = np.where(np.isfinite(uv), uv, -10.0)
     values = sample_bilinear(gray, uv).reshape(len(kept), len(_POINTS), 4).mean(axis=-1)  # (Q, P)
     grid, frame, quiet = values[:, :36].reshape(-1, 6, 6), values[:, 36:64], values[:, 64:]
-    # Corner order rolled by k (corner k first) <=> the grid turned by np.rot90(..., k) (pinned by tests/ar/test_smalltags.py).
+    # Corner order rolled by k (corner k first) <=> the grid turned by np.rot90(..., k)
+    # (pinned by tests/ar/test_smalltags.py).
     data = np.stack([np.rot90(grid, k, axes=(1, 2)).reshape(-1, 36) for k in range(4)], axis=1)  # (Q, 4, 36)
     rolls = np.stack([np.roll(quads_arr, -k, axis=1) for k in range(4)], axis=1)  # (Q, 4, 4, 2)
     black, white = np.median(frame, axis=-1), np.median(quiet, axis=-1)

@@ -42,7 +42,11 @@ MAX_LATENCY = 0.5  # site seconds from capture to drawing beyond which the drawi
 def shows_world(overlay: Overlay) -> bool:
     """A pose, at least one robot avatar and at least one intent path are drawn."""
     layers = {p.layer for p in overlay.primitives}
-    return overlay.ok and any(l.startswith("robot:") for l in layers) and any(l.startswith("intent:") for l in layers)
+    return (
+        overlay.ok
+        and any(layer.startswith("robot:") for layer in layers)
+        and any(layer.startswith("intent:") for layer in layers)
+    )
 
 
 def least_needed(times: list[float]) -> int:

@@ -86,7 +86,8 @@ def _page(site, lm):  # noqa: ANN001, ANN202
     fig.text(
         0.5,
         1.0 - 0.95 / page_h,
-        f"black square {lm.size * 1000:.0f} mm, with white border {quad_edge(lm.size, 1) * 1000:.0f} mm - print at 100 % (actual size)",
+        f"black square {lm.size * 1000:.0f} mm, with white border {quad_edge(lm.size, 1) * 1000:.0f} mm - print at 100 "
+        "% (actual size)",
         ha="center",
         va="top",
         fontsize=10,

@@ -100,7 +100,7 @@ def split_runs(points: np.ndarray, hidden: np.ndarray) -> list[tuple[bool, np.nd
     change = np.flatnonzero(hidden[1:] != hidden[:-1]) + 1
     starts = np.concatenate([[0], change])
     ends = np.concatenate([change, [len(points)]])
-    for s, e in zip(starts, ends):
+    for s, e in zip(starts, ends, strict=True):
         piece = points[s : min(e + 1, len(points))]
         if len(piece) >= 2:
             runs.append((bool(hidden[s]), piece))

@@ -91,7 +91,7 @@ class ClusterPool:
             )
             for key in keys
         ]
-        remaining = dict(zip(self._futures, keys))
+        remaining = dict(zip(self._futures, keys, strict=True))
         while remaining:
             if cancelled():
                 self.cancel()

@@ -128,7 +128,8 @@ class Test:
         if r.n < 2:
             return f"vs {self.baseline}: no data ({r.n} complete pair{'s' if r.n != 1 else ''})"
         return (
-            f"vs {self.baseline}: {self.verdict}, Δ {r.mean_diff:+.{d}f}{self.metric.suffix} [{r.ci_low:+.{d}f}, {r.ci_high:+.{d}f}], "
+            f"vs {self.baseline}: {self.verdict}, Δ {r.mean_diff:+.{d}f}{self.metric.suffix} [{r.ci_low:+.{d}f}, "
+            f"{r.ci_high:+.{d}f}], "
             f"{self.metric.primary_test} Holm p = {format_p_value(self.primary_p_holm)}, "
             f"TOST Holm p = {format_p_value(self.tost_p_holm)}, {r.n} pairs"
         )
@@ -153,7 +154,10 @@ def family(results: Results, metric: Metric) -> list[Test]:
             )
     primary = holm([(r.perm_p if metric.count else r.wilcoxon.p) for _, _, r in raw])
     equivalence = holm([r.tost_p for _, _, r in raw])
-    return [Test(metric, level, baseline, r, hp, ht) for (level, baseline, r), hp, ht in zip(raw, primary, equivalence)]
+    return [
+        Test(metric, level, baseline, r, hp, ht)
+        for (level, baseline, r), hp, ht in zip(raw, primary, equivalence, strict=True)
+    ]
 
 
 def families(results: Results, metrics: Iterable[Metric] = TESTED) -> dict[str, list[Test]]:

@@ -88,7 +88,7 @@ def plot_map(results: Results, metric: Metric, tests: list[Test], out: Path) -> 
     image = None
     unit = f" ({metric.unit})" if metric.unit else ""
     d = metric.digits
-    for ax, b in zip(axes[0], panels):
+    for ax, b in zip(axes[0], panels, strict=True):
         image = ax.imshow(np.ma.masked_invalid(grids[b]), cmap=cmap, norm=norm, origin="lower", aspect="auto")
         for (task, cost), t in _by_cell(tests, b).items():
             i, j = tasks.index(task), costs.index(cost)
@@ -205,7 +205,8 @@ def map_section(results: Results, tested: dict[str, list[Test]]) -> list[str]:
     out = [
         "## Map: where feedback pays",
         "",
-        "ARROCH − baseline per cell (task length × interruption cost), mean of the paired differences with its 95 % CI; "
+        "ARROCH − baseline per cell (task length × interruption cost), mean of the paired differences with its 95 % "
+        "CI; "
         "verdicts from the Holm-adjusted p-values over each metric's family (all cells × baselines), as in the tests "
         "above. Negative: ARROCH lower.",
         "",

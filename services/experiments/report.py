@@ -234,17 +234,25 @@ def _section_design() -> list[str]:
     return [
         "## Design",
         "",
-        "Paired trials (common random numbers): for one trial index every method meets the same site and the same human "
+        "Paired trials (common random numbers): for one trial index every method meets the same site and the same "
+        "human "
         "draws (task time, focus intervals, each decision), so methods are compared trial by trial on the differences "
-        "ARROCH − baseline; a trial that did not complete in one method drops that pair. Per level and baseline: the mean "
-        "difference with its 95 % t interval, the paired t-test, the Wilcoxon signed-rank test (zero differences dropped; "
+        "ARROCH − baseline; a trial that did not complete in one method drops that pair. Per level and baseline: the "
+        "mean "
+        "difference with its 95 % t interval, the paired t-test, the Wilcoxon signed-rank test (zero differences "
+        "dropped; "
         "exact for small samples) — the primary test for times — and for counts a sign-flip permutation test on the "
         f"differences (exact up to {EXACT_FLIPS_MAX} nonzero differences, otherwise {resamples} random flips "
-        f"with the fixed seed {PERMUTATION_SEED}) — the primary test for counts; d_z = mean / sd of the differences (n/a "
-        f"without spread); equivalence by two one-sided paired t-tests (TOST) against the margins {margins} (chosen before "
-        "the runs: 30 s is 5 % of the 600 s task and half the sd of her task draw; 10 s is about one door trip; half an "
-        "opening is less than one door per trial). Holm's correction over each metric's family (all levels × baselines), "
-        f"separately for the primary and the TOST p-values; every verdict uses the Holm-adjusted values at α = {ALPHA:g}. "
+        f"with the fixed seed {PERMUTATION_SEED}) — the primary test for counts; d_z = mean / sd of the differences "
+        "(n/a "
+        f"without spread); equivalence by two one-sided paired t-tests (TOST) against the margins {margins} (chosen "
+        "before "
+        "the runs: 30 s is 5 % of the 600 s task and half the sd of her task draw; 10 s is about one door trip; half "
+        "an "
+        "opening is less than one door per trial). Holm's correction over each metric's family (all levels × "
+        "baselines), "
+        "separately for the primary and the TOST p-values; every verdict uses the Holm-adjusted values at α = "
+        f"{ALPHA:g}. "
         "Conventions in detail: `services/experiments/stats.py` and `comparisons.py`.",
         "",
     ]
@@ -372,7 +380,8 @@ def _section_summary(results: Results) -> list[str]:
         "",
         *_summary_table(results, HUMAN_COLUMNS, slowest=False),
         "",
-        "*time away*: walking to doors and opening them; *interruptions*: walks to a door begun during one of her focus "
+        "*time away*: walking to doors and opening them; *interruptions*: walks to a door begun during one of her "
+        "focus "
         "intervals; *time lost*: her task time lost to them (the interruption cost each).",
         "",
     ]
@@ -389,7 +398,8 @@ def _section_tests(results: Results, tested: dict[str, list[Test]]) -> list[str]
     out = [
         "## ARROCH against each baseline (paired)",
         "",
-        "Δ = ARROCH − baseline over the pairs (negative: ARROCH lower). Holm: over all levels and baselines of one metric. "
+        "Δ = ARROCH − baseline over the pairs (negative: ARROCH lower). Holm: over all levels and baselines of one "
+        "metric. "
         "The verdict reads the Holm-adjusted p-values only (Design).",
         "",
     ]
@@ -437,8 +447,10 @@ def _section_claims(claims: list[Claim]) -> list[str]:
     out = [
         "## The paper's claims",
         "",
-        "Each (level, baseline) is *lower (significant)* when the primary test's Holm-adjusted p < 0.05 and ARROCH's mean "
-        "difference is negative; *higher (significant)* likewise with a positive one; *equivalent* when the Holm-adjusted "
+        "Each (level, baseline) is *lower (significant)* when the primary test's Holm-adjusted p < 0.05 and ARROCH's "
+        "mean "
+        "difference is negative; *higher (significant)* likewise with a positive one; *equivalent* when the "
+        "Holm-adjusted "
         "TOST p < 0.05; otherwise *not significant*. A claim is confirmed only when every (level, baseline) is lower "
         "(significant); partly confirmed when some are.",
         "",
@@ -459,7 +471,7 @@ def _section_drivers(results: Results) -> list[str]:
         if not mine:
             continue
 
-        def mean(metric: str) -> str:
+        def mean(metric: str, mine: list = mine) -> str:  # this method's trials, bound now
             return _mean_ci(summarize([t.values[metric] for t in mine if t.values.get(metric) is not None]))
 
         lines.append(
@@ -538,7 +550,8 @@ def _section_time(results: Results) -> list[str]:
             for level, g in groups.items()
         ]
         lines += [
-            "Per trial, mean (from timing.csv; trials ran in parallel, so the sweep's wall time is about the sum / jobs). "
+            "Per trial, mean (from timing.csv; trials ran in parallel, so the sweep's wall time is about the sum / "
+            "jobs). "
             "*ms per world version*: mission wall time over the world versions the planner had to answer, i.e. "
             "the cost of one lockstep round trip including the replan.",
             "",
@@ -585,7 +598,8 @@ def build_report(folder: Path) -> list[Path]:
     lines = [
         f"# Experiment: {TITLES.get(results.kind, results.kind)}",
         "",
-        "Paper §V-A. Each trial ran the real planner, restrictor and sim (with its human model) as separate processes over "
+        "Paper §V-A. Each trial ran the real planner, restrictor and sim (with its human model) as separate processes "
+        "over "
         "Zenoh in lockstep mode on a generated site. Rebuilt from `trials.csv` by `arroch experiment report`.",
         "",
     ]

@@ -17,7 +17,7 @@ import json
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol, Union
+from typing import Any, Protocol
 
 from .design import METHODS, SweepSpec, TrialKey, format_p
 from .record import TIMING_FIELDS, TRIAL_FIELDS
@@ -54,7 +54,7 @@ COUNTS = frozenset(
     }
 )  # the others are times (s)
 
-Level = Union[int, float, tuple[float, float]]  # robots; door-opening probability; (task mean, interruption cost)
+Level = int | float | tuple[float, float]  # robots; door-opening probability; (task mean, interruption cost)
 
 
 class ReportError(ValueError):

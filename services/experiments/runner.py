@@ -39,7 +39,7 @@ from protocol.signals import StopSignals, restore
 from .design import SweepSpec, TrialKey
 from .params import write_params
 from .progress import Progress, ProgressLogHandler
-from .provenance import code_fingerprint
+from .provenance import code_fingerprint, dependency_versions
 from .record import DONE, TIMING_FIELDS, TRIAL_FIELDS, key_cells, key_of, timing_row, trial_row
 from .routers import ROUTER_MODES, Router, RouterError
 from .store import CsvStore, JsonlStore
@@ -352,6 +352,7 @@ class Sweep:
                 "ended": ending,
                 "cpu_count": os.cpu_count(),
                 "code_at_end": code_fingerprint(),
+                "versions": dependency_versions(),
             }
         )
         path.write_text(json.dumps(sessions, indent=2) + "\n", encoding="utf-8")

@@ -72,7 +72,7 @@ class CsvStore:
         for number, cells in enumerate(reader, start=2):
             if len(cells) != len(self.fields):
                 raise StoreError(f"{self.path}: line {number} has {len(cells)} cells, expected {len(self.fields)}")
-            rows.append(dict(zip(self.fields, cells)))
+            rows.append(dict(zip(self.fields, cells, strict=True)))
         return rows
 
     def rewrite(self, rows: Iterable[dict[str, str]]) -> None:

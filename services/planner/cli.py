@@ -38,7 +38,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     one = subparsers.add_parser(
         "plan",
         help="compute one plan for a site's start and print it",
-        description="Plan once for the site's initial state (every robot at its start, nothing delivered) and print the plan.",
+        description="Plan once for the site's initial state (every robot at its start, nothing delivered) "
+        "and print the plan.",
     )
     one.add_argument(
         "--site", "--config", dest="site", metavar="FILE", help="site file (TOML); default: the packaged 'office' site"
@@ -159,7 +160,8 @@ def _run_plan(args: argparse.Namespace) -> int:
         return 0
     print(
         f"{result.method}: makespan {result.makespan} s, {result.door_openings} door openings, "
-        f"{result.iterations} rounds, {result.solve_time:.2f} s{' (time limit hit)' if result.status == 'timeout' else ''}"
+        f"{result.iterations} rounds, {result.solve_time:.2f} "
+        f"s{' (time limit hit)' if result.status == 'timeout' else ''}"
     )
     for o in result.openings:
         print(f"  human opens {o.door} at {result.absolute(o.start)} for {', '.join(o.robots)}")

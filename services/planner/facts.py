@@ -87,7 +87,8 @@ def robot_facts(p: RobotProblem) -> str:
     lines += [f"stop({r},{key})." for key in p.stops]
     for leg in p.legs:
         lines.append(
-            f"leg({r},{leg.origin},{leg.stop},{leg.id}). ncross({leg.id},{len(leg.crossings)}). tail({leg.id},{leg.room},{leg.tail})."
+            f"leg({r},{leg.origin},{leg.stop},{leg.id}). ncross({leg.id},{len(leg.crossings)}). "
+            f"tail({leg.id},{leg.room},{leg.tail})."
         )
         rest = leg.tail
         for k in range(len(leg.crossings), 0, -1):
@@ -135,7 +136,8 @@ def context_facts(ctx: Context, group: str) -> str:
     program); ``grp(R,Q)`` facts put robots in it."""
     q = group
     lines = [
-        f"horizon({q},{ctx.horizon if ctx.horizon is not None else NO_HORIZON}). syncwait({q},{ctx.syncwait}). clearwait({q},{ctx.clearwait})."
+        f"horizon({q},{ctx.horizon if ctx.horizon is not None else NO_HORIZON}). syncwait({q},{ctx.syncwait}). "
+        f"clearwait({q},{ctx.clearwait})."
     ]
     lines += [f"given_open({q},{d},{t})." for d, t in sorted(set(ctx.given_open))]
     lines += [f"blocked_open({q},{d},{t})." for d, t in sorted(set(ctx.blocked_open))]

@@ -291,8 +291,8 @@ def _in_turn(
 ) -> dict[str, RobotPlan]:
     """Plan the robots in ``order`` one after the other, each against the ``kept`` plans, those
     already placed, and what the rest are in the middle of; in a warm start each first in its current
-    order of stops (a small program: only timing and openings change), then with every order. The rest's current plans are
-    left out on purpose: made before the world changed, they may overlap the new ones, and a crowded
+    order of stops (a small program: only timing and openings change), then with every order. The rest's
+    current plans are left out on purpose: made before the world changed, they may overlap the new ones, and a crowded
     door would then leave the robot only very long waits."""
     placed: dict[str, RobotPlan] = {}
     kept = kept or {}

@@ -26,7 +26,7 @@ def hint_facts(hints: dict[str, RobotPlan]) -> str:
     lines: list[str] = []
     points: set[tuple[str, int]] = set()
     for rid, plan in sorted(hints.items()):
-        for pos, (stop, leg) in enumerate(zip(plan.order, plan.legs), start=1):
+        for pos, (stop, leg) in enumerate(zip(plan.order, plan.legs, strict=True), start=1):
             lines.append(f"hint_at({rid},{pos},{stop}). hint_use({rid},{pos},{leg}).")
         for p in plan.passes:
             points |= {(p.opening, p.start), (p.opening, p.end)}

@@ -18,6 +18,7 @@ import heapq
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 
@@ -172,7 +173,7 @@ class MotionPlanner:
             raise NoPath(f"no path from ({a[0]:.2f}, {a[1]:.2f}) to ({b[0]:.2f}, {b[1]:.2f})")
         pts = [a] + [self.grid.cell_to_world(r, c) for r, c in cells[1:-1]] + [b]
         pts = self._shorten(pts)
-        return Path(tuple(pts), sum(math.dist(p, q) for p, q in zip(pts, pts[1:])))
+        return Path(tuple(pts), sum(math.dist(p, q) for p, q in pairwise(pts)))
 
     def _search(
         self, start: tuple[int, int], goal: tuple[int, int], window: tuple[int, int, int, int]
@@ -254,7 +255,7 @@ class MotionPlanner:
         rows: list[list[float]] = []
         t = t0
         heading = theta0
-        for a, b in zip(points, points[1:]):
+        for a, b in pairwise(points):
             length = math.dist(a, b)
             if length < 1e-9:
                 continue
@@ -276,7 +277,7 @@ def polyline_distance(p: Point, rows: Sequence[Sequence[float]]) -> float:
         return math.dist(p, (rows[0][1], rows[0][2]))
     best = math.inf
     px, py = p
-    for a, b in zip(rows, rows[1:]):
+    for a, b in pairwise(rows):
         ax, ay, bx, by = a[1], a[2], b[1], b[2]
         dx, dy = bx - ax, by - ay
         seg2 = dx * dx + dy * dy

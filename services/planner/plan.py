@@ -221,7 +221,8 @@ def contested(windows: set[tuple[str, int]], hold: int) -> set[tuple[str, int]]:
     """Windows that overlap an earlier kept window of the same door (a door cannot be opened while open).
 
     Windows are kept greedily by start time: the earliest stays, any window overlapping the last
-    kept one (or starting the second it closes) is contested. Robots may share the kept windows and must move off contested ones."""
+    kept one (or starting the second it closes) is contested. Robots may share the kept windows and must
+    move off contested ones."""
     out: set[tuple[str, int]] = set()
     by_door: dict[str, list[int]] = {}
     for door, t in windows:
@@ -252,8 +253,8 @@ def count_conflicts(plans, hold: int) -> int:
     n = 0
     for items in passes.values():
         items.sort()
-        for i, (s1, e1, r1) in enumerate(items):
-            for s2, e2, r2 in items[i + 1 :]:
+        for i, (_s1, e1, r1) in enumerate(items):
+            for s2, _e2, r2 in items[i + 1 :]:
                 if s2 >= e1:
                     break
                 if r1 != r2:

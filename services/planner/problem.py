@@ -115,7 +115,7 @@ class RobotProblem:
         wanted = [s for s in order if s in self.stops]
         if sorted(wanted) != sorted(self.stops):
             return None
-        route_of = {s: r for s, r in zip(order, routes)}
+        route_of = dict(zip(order, routes, strict=False))  # routes: () when none is on offer any more
         keep: list[Leg] = []
         origin = "start"
         for stop in wanted:

@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from itertools import pairwise
 
 import clingo
 
@@ -207,7 +208,7 @@ def validate(
     _check_openings(errors, site, openings, windows, existing, hold)
     for opening, items in passes.items():
         items.sort()
-        for (s1, e1, r1), (s2, e2, r2) in zip(items, items[1:]):
+        for (_s1, e1, r1), (s2, _e2, r2) in pairwise(items):
             if r1 != r2 and s2 < e1 - 1e-6:
                 errors.append(f"{r1} and {r2} are both in the doorway of {opening} at {s2:g}")
     for room, t0, t1 in windows.forbidden:
@@ -226,7 +227,7 @@ def _check_openings(
     hold: float,
 ) -> None:
     by_door: dict[str, list[float]] = {}
-    for door, start, end in openings:
+    for door, start, _end in openings:
         opening = site.openings.get(door)
         if opening is None or opening.kind != "door" or not opening.human_operated:
             errors.append(f"opening of {door} at {start:g}: not a human-operated door")
@@ -238,7 +239,7 @@ def _check_openings(
                 errors.append(f"opening of {door} at {start:g}: the human is unavailable in [{t0}, {t1})")
     for door, starts in by_door.items():
         starts.sort()
-        for a, b in zip(starts, starts[1:]):
+        for a, b in pairwise(starts):
             if b < a + math.floor(hold) - 1e-6:
                 errors.append(f"openings of {door} at {a:g} and {b:g} overlap (hold {hold:g} s)")
 

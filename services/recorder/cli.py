@@ -81,7 +81,9 @@ def run_view(args: argparse.Namespace) -> int:
         try:
             Path(args.write_layout).write_text(layout_json(), encoding="utf-8")
         except OSError as exc:
-            print(f"arroch view: cannot write the layout to {args.write_layout}: {exc.strerror or exc}", file=sys.stderr)
+            print(
+                f"arroch view: cannot write the layout to {args.write_layout}: {exc.strerror or exc}", file=sys.stderr
+            )
             return 2
         print(f"Foxglove layout written to {args.write_layout} (Foxglove: Layouts -> Import from file)")
         return 0
@@ -123,7 +125,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         type=float,
         default=1.0,
         metavar="F",
-        help="keep camera frames scaled by F (0 < F <= 1; JPEG re-encoded, calibration and overlay scaled alike; default 1)",
+        help="keep camera frames scaled by F (0 < F <= 1; JPEG re-encoded, calibration and overlay scaled alike; "
+        "default 1)",
     )
     record.add_argument(
         "--logs", metavar="FILE", help="also record the lines of this log (arroch up's supervisor.log) as it grows"

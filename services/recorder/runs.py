@@ -114,7 +114,8 @@ def show(run: Path, out: TextIO | None = None, png: Path | None = None) -> int:
     widths = [max(len(r[i]) for r in rows) for i in range(5)]
     for r in rows:
         print(
-            f"  {r[0]:<{widths[0]}}  {r[1]:<{widths[1]}}  {r[2]:>{widths[2]}}  {r[3]:>{widths[3]}}  {r[4]:>{widths[4]}}",
+            f"  {r[0]:<{widths[0]}}  {r[1]:<{widths[1]}}  {r[2]:>{widths[2]}}  {r[3]:>{widths[3]}}  "
+            f"{r[4]:>{widths[4]}}",
             file=out,
         )
     picture = draw_timeline(timeline, png or folder / "timeline.png", title=f"timeline of {folder.name}")

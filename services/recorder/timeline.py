@@ -3,7 +3,8 @@
 Rows: each robot (moving, waiting at a door — which one —, loading/unloading, idle/done), the human
 (focus intervals, declarations she sent, doors she opened) and each door (open intervals, who opened
 it). Intervals come from the recorded ``RobotStatus`` and ``DoorState`` messages, declarations from
-``Feedback`` (or the simulated human's ``feedback_sent`` events, as her feedback travels as queries), focus intervals from the mission's metrics.
+``Feedback`` (or the simulated human's ``feedback_sent`` events, as her feedback travels as queries),
+focus intervals from the mission's metrics.
 """
 
 from __future__ import annotations

@@ -137,7 +137,10 @@ class ActiveSet:
                     origin=feedback.src,
                 )
             )
-            reason = f"added {constraint_id}: {describe(entry.id, validated.values)} during [{compiled.start}, {compiled.end})"
+            reason = (
+                f"added {constraint_id}: {describe(entry.id, validated.values)} during [{compiled.start}, "
+                f"{compiled.end})"
+            )
             if removed:
                 reason += f"; withdrew {', '.join(removed)}"
         record = self._record(feedback, digest, True, reason, constraint_id=constraint_id, version=self.version + 1)

@@ -297,9 +297,8 @@ def _constraints_library(args: argparse.Namespace) -> int:
             print(f"  --{param['name']} ({param['type']}): {values}  {param['label']}")
         window = entry["window"]
         if window:
-            print(
-                f"  window: {'--' + window['param'] + ' minutes' if 'param' in window else str(window['minutes']) + ' minutes'} from now"
-            )
+            minutes = f"--{window['param']}" if "param" in window else str(window["minutes"])
+            print(f"  window: {minutes} minutes from now")
     return 0
 
 

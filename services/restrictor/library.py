@@ -345,7 +345,8 @@ def _add_entry(
             where.fail(f"window_param: {window_param!r} is not an int parameter of this entry")
         if param.min < 1 or param.max > MAX_WINDOW_MINUTES:
             where.fail(
-                f"window_param: {window_param} must range within [1, {MAX_WINDOW_MINUTES}] minutes, not [{param.min}, {param.max}]"
+                f"window_param: {window_param} must range within [1, {MAX_WINDOW_MINUTES}] minutes, not [{param.min}, "
+                f"{param.max}]"
             )
     elif not 1 <= window_minutes <= MAX_WINDOW_MINUTES:
         where.fail(f"window_minutes: {window_minutes} is outside [1, {MAX_WINDOW_MINUTES}]")

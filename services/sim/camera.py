@@ -77,7 +77,8 @@ class CameraSpec:
             )
         if max(self.width, self.height) * self.supersample > MAX_SIDE:
             raise ValueError(
-                f"camera image {self.width}x{self.height} supersampled {self.supersample}x exceeds {MAX_SIDE} pixels a side"
+                f"camera image {self.width}x{self.height} supersampled {self.supersample}x exceeds {MAX_SIDE} pixels a "
+                "side"
             )
         # Plain Python numbers from here on (numpy scalars would leak into messages and JSON).
         object.__setattr__(self, "position", tuple(float(v) for v in self.position))

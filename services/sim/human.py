@@ -253,7 +253,7 @@ class HumanModel:
         free = duration - sum(lengths)
         cuts = sorted(float(u) * free for u in rng.random(size=len(lengths)))
         out, offset = [], 0.0
-        for cut, length in zip(cuts, lengths):
+        for cut, length in zip(cuts, lengths, strict=True):
             start = cut + offset
             out.append(FocusInterval(start, start + length))
             offset += length
@@ -448,5 +448,5 @@ class HumanModel:
     def focus_report(self) -> list[dict[str, Any]]:
         return [
             {"start": f.start, "end": f.end, "minutes": f.minutes, "declared": declared}
-            for f, declared in zip(self.focus, self.declared)
+            for f, declared in zip(self.focus, self.declared, strict=True)
         ]

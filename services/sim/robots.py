@@ -137,7 +137,8 @@ class RobotExecutor:
                     raise CommandError(f"load: object {target!r} belongs to robot {obj.spec.robot!r}")
                 if obj.delivered or obj.carrier is not None:
                     raise CommandError(
-                        f"load: object {target!r} is {'delivered' if obj.delivered else 'carried by ' + str(obj.carrier)}"
+                        f"load: object {target!r} is "
+                        f"{'delivered' if obj.delivered else 'carried by ' + str(obj.carrier)}"
                     )
                 if len(robot.carrying) >= self.config.capacity:
                     raise CommandError(f"load: robot is full ({self.config.capacity} object(s))")

@@ -65,7 +65,8 @@ def add_snapshot_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="X,Y,Z,YAW,PITCH",
         help="camera position in metres (world frame: x east, y north, z up) and its direction in DEGREES: "
         "YAW = viewing direction counter-clockwise from +x (0 east, 90 north), PITCH > 0 looks up; no roll "
-        "(the same convention as 'arroch sim --camera X,Y,Z,YAW,PITCH'). E.g. 8.0,2.0,1.3,-70,5 (inside storage, facing its south wall)",
+        "(the same convention as 'arroch sim --camera X,Y,Z,YAW,PITCH'). E.g. 8.0,2.0,1.3,-70,5 (inside storage, "
+        "facing its south wall)",
     )
     parser.add_argument(
         "--size", type=_image_size, default=(640, 480), metavar="WxH", help="image size in pixels (default 640x480)"

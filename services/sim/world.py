@@ -334,7 +334,8 @@ class World:
             bx0, by0, bx1, by1 = wall.box
             if bx0 < x < bx1 and by0 < y < by1 and 0.0 < z < wall.height:
                 log.warning(
-                    "landmark tag %d at (%.3f, %.3f, %.3f) lies inside wall %d's thickness (box %s): the camera cannot see it; "
+                    "landmark tag %d at (%.3f, %.3f, %.3f) lies inside wall %d's thickness (box %s): the camera cannot "
+                    "see it; "
                     "put it just in front of the wall's face",
                     landmark.tag,
                     x,

@@ -103,9 +103,12 @@ def build_config(args: argparse.Namespace) -> tuple[UpConfig, ZenohOptions]:
             )
     if args.rate is not None and args.rate <= 0:
         raise ValueError(f"--rate must be positive, got {args.rate}")
+    if args.linger and not args.until_done:
+        raise ValueError("--linger keeps a run up after its mission: it goes with --until-done")
     if args.rate is not None and args.mode not in (None, "rate", "lockstep"):
         raise ValueError(
-            f"--rate K runs the simulation K times faster (at most, in lockstep); it does not go with --mode {args.mode}"
+            "--rate K runs the simulation K times faster (at most, in lockstep); it does not go with --mode "
+            f"{args.mode}"
         )
     router_listen = args.router_listen
     if args.router and router_listen is None and config_dir is None:
@@ -150,6 +153,7 @@ def build_config(args: argparse.Namespace) -> tuple[UpConfig, ZenohOptions]:
         start_router=args.router,
         router_listen=router_listen,
         until_done=args.until_done,
+        linger=args.linger,
         timeout=args.timeout,
         run_base=Path(args.run_dir),
         progress_interval=args.progress_interval or (0.5 if args.progress == "bar" else 5.0),
@@ -204,7 +208,8 @@ def add_up_arguments(parser: argparse.ArgumentParser) -> None:
     mission.add_argument(
         "--mode",
         choices=("realtime", "rate", "lockstep"),
-        help="simulation clock: realtime, rate (with --rate) or lockstep (time advances only when every request is answered)",
+        help="simulation clock: realtime, rate (with --rate) or lockstep (time advances only when every request is "
+        "answered)",
     )
     mission.add_argument(
         "--rate", type=float, metavar="K", help="simulate at K times real time (with --mode lockstep: at most)"
@@ -235,7 +240,15 @@ def add_up_arguments(parser: argparse.ArgumentParser) -> None:
     run.add_argument(
         "--until-done", action="store_true", help="stop when the mission_done event arrives and print its metrics"
     )
-    run.add_argument("--timeout", type=float, metavar="S", help="give up (exit 1) after S seconds")
+    run.add_argument(
+        "--linger",
+        action="store_true",
+        help="with --until-done: after the mission, print its metrics and keep everything up (the tablet page "
+        "included) until Ctrl-C",
+    )
+    run.add_argument(
+        "--timeout", type=float, metavar="S", help="give up (exit 1) after S seconds (not once --linger holds a run)"
+    )
     run.add_argument(
         "--run-dir", default="runs", metavar="DIR", help="where runs/<timestamp>/ folders go (default ./runs)"
     )
@@ -267,7 +280,8 @@ def add_up_arguments(parser: argparse.ArgumentParser) -> None:
         type=float,
         default=60.0,
         metavar="S",
-        help="seconds a service waits for those it starts after (the sim for the planner and restrictor) before starting anyway (default 60)",
+        help="seconds a service waits for those it starts after (the sim for the planner and restrictor) before "
+        "starting anyway (default 60)",
     )
     net = parser.add_argument_group("zenoh")
     net.add_argument(

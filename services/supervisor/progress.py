@@ -1,9 +1,10 @@
 """Mission progress as the supervisor sees it from ``event`` and ``robot/*/status`` messages.
 
 Deliveries per robot (from ``delivered`` events and the ``delivered`` lists in statuses, so a
-missed message is made up by the next status), door openings, plan conflicts, the site-clock time,
-and the final metrics carried by the ``mission_done`` event. Rendering is kept apart from the
-bookkeeping so both the one-line and the bar form show the same numbers.
+missed message is made up by the next status), door openings (all, and the human's among them),
+plan conflicts, the site-clock time, and the final metrics carried by the ``mission_done`` event.
+Rendering is kept apart from the bookkeeping so both the one-line and the bar form show the same
+numbers; the final metrics are rendered by :mod:`.metrics_table`.
 """
 
 from __future__ import annotations
@@ -12,6 +13,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from protocol.messages import Event, RobotStatus
+
+from .metrics_table import metrics_table
 
 
 @dataclass
@@ -25,7 +28,8 @@ class RobotProgress:
 class MissionProgress:
     def __init__(self, totals: dict[str, int] | None = None) -> None:
         self.robots: dict[str, RobotProgress] = {rid: RobotProgress(total=n) for rid, n in (totals or {}).items()}
-        self.door_openings = 0
+        self.door_openings = 0  # every door_opened event: robots' automatic doors and the human's
+        self.human_door_openings = 0  # those the human opened (the paper's measure)
         self.doors: dict[str, int] = {}
         self.conflicts = 0
         self.events = 0
@@ -53,6 +57,7 @@ class MissionProgress:
             self._robot(msg.robot).delivered.add(msg.object or f"#{len(self._robot(msg.robot).delivered)}")
         elif msg.kind == "door_opened":
             self.door_openings += 1
+            self.human_door_openings += isinstance(msg.data, dict) and msg.data.get("by") == "human"
             if msg.door:
                 self.doors[msg.door] = self.doors.get(msg.door, 0) + 1
         elif msg.kind == "plan_conflict":
@@ -87,7 +92,8 @@ class MissionProgress:
         done, total = self.delivered()
         delivered = f"{done}/{total}" if total is not None else str(done)
         text = (
-            f"t={self.sim_time:.1f}s delivered {delivered} [{self._robots_text()}] door openings {self.door_openings}"
+            f"t={self.sim_time:.1f}s delivered {delivered} [{self._robots_text()}] "
+            f"door openings {self.door_openings} (by the human {self.human_door_openings})"
         )
         if self.conflicts:
             text += f" plan conflicts {self.conflicts}"
@@ -103,14 +109,5 @@ class MissionProgress:
         return f"{gauge} | t={self.sim_time:.0f}s | doors {self.door_openings} | {self._robots_text()}"
 
     def metrics_text(self) -> str:
-        """The final metrics, one ``name: value`` per line."""
-        if not self.metrics:
-            return "(no metrics)"
-        width = max(len(str(k)) for k in self.metrics)
-        return "\n".join(f"{str(k):<{width}}  {_fmt(v)}" for k, v in self.metrics.items())
-
-
-def _fmt(value: Any) -> str:
-    if isinstance(value, float):
-        return f"{value:.3f}"
-    return str(value)
+        """The final metrics as a table: rounded, with units and what each figure means."""
+        return metrics_table(self.metrics or {})

@@ -51,6 +51,7 @@ class UpConfig:
     start_router: bool = True
     router_listen: str | None = None
     until_done: bool = False
+    linger: bool = False  # with until_done: after the mission, keep everything up until a signal
     timeout: float | None = None
     run_base: Path = Path("runs")
     progress_interval: float = 5.0
@@ -77,6 +78,7 @@ class Supervisor(Service):
         self._signal_taken = False
         self._started = time.monotonic()
         self._mission_reported = False
+        self._metrics_printed = False
         self._waiting: dict[str, tuple[str, ...]] = {}  # child name -> services it still waits for
         self._alive: dict[str, set[str]] = {}  # service name -> instances with a liveliness token
         self._alive_lock = threading.Lock()
@@ -133,7 +135,10 @@ class Supervisor(Service):
             self._mission_reported = True
             path = self.run_dir.write_json("metrics.json", self.progress.metrics or {}) if self.run_dir else None
             log.info("mission done at t=%.1f s (from %s); metrics in %s", msg.stamp, msg.src, path)
-            if self.config.until_done:
+            if self.config.until_done and self.config.linger:
+                self._print_metrics()
+                self.output.line("up", "mission done: the services and the tablet page stay up until Ctrl-C (--linger)")
+            elif self.config.until_done:
                 self.stop_reason = "mission done"
                 self.stop()
 
@@ -159,6 +164,8 @@ class Supervisor(Service):
             return bool(self._alive.get(service))
 
     def _show_progress(self) -> None:
+        if self._metrics_printed:  # lingering after the mission: its final state is on screen already
+            return
         if getattr(self.clock, "synced", False):
             self.progress.on_time(self.clock.now())
         self.output.progress(self.progress.bar() if self.output.bar else self.progress.line())
@@ -233,7 +240,9 @@ class Supervisor(Service):
             self._start_waiting(now)
         for child in ([self.router] if self.router else []) + self.children:
             self._watch(child, now)
-        if self.config.timeout is not None and now - self._started > self.config.timeout and not self.stopping:
+        lingering = self.config.linger and self.progress.done  # the mission ended: nothing left to time out
+        expired = self.config.timeout is not None and now - self._started > self.config.timeout
+        if expired and not lingering and not self.stopping:
             log.error("the mission did not end within %.0f s (--timeout)", self.config.timeout)
             self._fail(f"timeout after {self.config.timeout:.0f} s")
 
@@ -286,6 +295,16 @@ class Supervisor(Service):
         self.stop_reason = reason
         self.stop()
 
+    def _print_metrics(self) -> None:
+        """The final progress line and the metrics table, once, when the mission has ended."""
+        if not self.progress.done or self._metrics_printed:
+            return
+        self._metrics_printed = True
+        self.output.end_progress()
+        self.output.line("up", "final progress " + self.progress.line())
+        for line in ["mission metrics:", *self.progress.metrics_text().splitlines()]:
+            self.output.line("up", line)
+
     # ------------------------------------------------------------------ the whole run
 
     def main(self) -> int:
@@ -336,10 +355,7 @@ class Supervisor(Service):
         everyone = ([self.router] if self.router else []) + self.children
         log.info("stopped (%s)", self.stop_reason or "done")
         self.output.end_progress()
-        if self.progress.done:
-            self.output.line("up", "final progress " + self.progress.line())
-            for line in ["mission metrics:", *self.progress.metrics_text().splitlines()]:
-                self.output.line("up", line)
+        self._print_metrics()
         if self.run_dir is not None:
             self.run_dir.write_json(
                 "run.json",

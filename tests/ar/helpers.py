@@ -39,7 +39,8 @@ def only_tags(name: str, tags: tuple[int, ...]):  # noqa: ANN201
 def view_of(
     target: np.ndarray, facing_yaw: float, distance: float, obliquity_deg: float, height: float = 1.2
 ) -> CameraPose:
-    """A camera ``distance`` m from ``target`` (horizontally), ``obliquity_deg`` off the wall normal ``facing_yaw``, aimed at it."""
+    """A camera ``distance`` m from ``target`` (horizontally), ``obliquity_deg`` off the wall normal
+    ``facing_yaw``, aimed at it."""
     a = facing_yaw + np.radians(obliquity_deg)
     xy = target[:2] + distance * np.array([np.cos(a), np.sin(a)])
     return look_at([xy[0], xy[1], height], target)

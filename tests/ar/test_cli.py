@@ -164,3 +164,17 @@ def test_localize_takes_gravity_and_picks_a_single_tags_right_solution(tmp_path)
     )
     bad = _run(*common, "--gravity", "1,2")
     assert bad.returncode == 2 and "gravity" in bad.stderr
+
+
+def test_apriltag_detector_without_its_library_is_a_usage_error_naming_the_extra(monkeypatch, capsys):
+    import sys
+
+    from services.cli import main
+
+    monkeypatch.setitem(sys.modules, "pupil_apriltags", None)  # `import pupil_apriltags` now fails
+    with pytest.raises(SystemExit) as exited:
+        main(["ar", "localize", "--image", "x.png", "--detector", "apriltag"])
+    assert exited.value.code == 2
+    assert "pip install 'arroch[apriltag]'" in capsys.readouterr().err
+    with pytest.raises(ValueError, match=r"arroch\[apriltag\]"):
+        TagDetector("apriltag")

@@ -16,7 +16,8 @@ FPS = 15.0
 
 
 def pan(k: int) -> CameraPose:
-    """A tablet walking slowly (0.3 m/s) past the hall's west-wall cluster, 2.5 m from it, turning to keep it in view."""
+    """A tablet walking slowly (0.3 m/s) past the hall's west-wall cluster, 2.5 m from it, turning to
+    keep it in view."""
     t = k / FPS
     position = [2.5, 3.8 + 0.3 * t, 1.35]
     return look_at(position, CLUSTER_CENTRE + [0.0, 0.2 * t, 0.0])

@@ -129,7 +129,7 @@ def test_a_folder_of_images_is_processed_recorded_and_the_service_ends(router, n
     while len(got) < 4 and time.monotonic() < deadline:
         got.append(wait_for_message(overlays, timeout=5))
     assert [m.ok for m in got] == [True] * 4
-    for m, pose in zip(got, poses):
+    for m, pose in zip(got, poses, strict=True):
         assert np.linalg.norm(np.array(m.position) - pose.position) < 0.02
     video = cv2.VideoCapture(str(out))
     frames = 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from itertools import pairwise
 from pathlib import Path
 
 import cv2
@@ -62,7 +63,7 @@ def test_the_kept_frames_stay_spread_from_the_first_to_the_newest(tmp_path: Path
         assert keep.offer(overlay(seq), IMAGE, t) is not None
     times = [t for t, _ in keep.kept]
     assert times[0] == 0.0 and times[-1] == 640.0 and len(times) == 4
-    assert min(b - a for a, b in zip(times, times[1:])) >= 100.0, times
+    assert min(b - a for a, b in pairwise(times)) >= 100.0, times
     on_disk = sorted(p.name for p in tmp_path.iterdir())
     assert on_disk == sorted([p.name for p in keep.paths] + [p.with_suffix(".json").name for p in keep.paths])
 

@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from protocol.transport import free_tcp_port
+from tests.deploy.netns import Lan, require_netns
 from tests.deploy.secure import RoleClient, make_pki, render_configs, role_clients
 from tests.procs import Proc, arroch
 
@@ -17,6 +18,14 @@ def pytest_configure(config: pytest.Config) -> None:
         "markers",
         "netns: builds Linux network namespaces (root, iproute2); ARROCH_SKIP_NETNS=1 or -m 'not netns' deselects",
     )
+
+
+@pytest.fixture
+def lan() -> Iterator[Lan]:
+    """Three network namespaces (planning, sim, ar) on one bridge; fails when they cannot be made."""
+    require_netns()
+    with Lan(["planning", "sim", "ar"]) as network:
+        yield network
 
 
 @pytest.fixture(scope="session")

@@ -25,7 +25,8 @@ from services.supervisor.deployment.render import RenderError, Request, render
 from tests.procs import ROOT, arroch
 
 DEPLOY = ROOT / "deploy"
-UNITS = ["router", *DEFAULT_SERVICES]
+UNITS = ["router", *DEFAULT_SERVICES, "tablet"]
+ZENOH_IDENTITY = {"tablet": "ar"}  # the page joins Zenoh with the AR client's certificate and rights
 
 
 def test_certs_name_the_role_list_the_addresses_and_reuse_the_authority(tmp_path: Path):
@@ -156,11 +157,8 @@ def _env_file() -> dict[str, str]:
 
 def _exec_start(unit: str) -> list[str]:
     """ExecStart as systemd expands it: ``${X}`` one word, ``$X`` split at spaces (none if empty)."""
-    line = next(
-        l
-        for l in (DEPLOY / "systemd" / f"arroch-{unit}.service").read_text().splitlines()
-        if l.startswith("ExecStart=")
-    )
+    lines = (DEPLOY / "systemd" / f"arroch-{unit}.service").read_text().splitlines()
+    line = next(text for text in lines if text.startswith("ExecStart="))
     env = _env_file()
     words: list[str] = []
     for word in shlex.split(line.removeprefix("ExecStart=")):
@@ -179,11 +177,17 @@ def _subcommands() -> dict[str, argparse.ArgumentParser]:
     return dict(action.choices)
 
 
+def test_there_is_a_unit_for_every_service_and_the_tablet_page():
+    assert sorted(p.name for p in (DEPLOY / "systemd").glob("*.service")) == sorted(
+        f"arroch-{u}.service" for u in UNITS
+    )
+
+
 @pytest.mark.parametrize("unit", UNITS)
 def test_each_unit_runs_its_service_with_its_rendered_config(unit: str):
     argv = _exec_start(unit)
     assert argv[0].startswith("/") and argv[1] == unit
-    assert argv[argv.index("--zenoh-config") + 1] == f"/etc/arroch/zenoh/{unit}.json5"
+    assert argv[argv.index("--zenoh-config") + 1] == f"/etc/arroch/zenoh/{ZENOH_IDENTITY.get(unit, unit)}.json5"
     commands = _subcommands()
     if unit not in commands:
         pytest.skip(f"`arroch {unit}` is not in this tree yet: its unit's options are checked once it is")

@@ -14,24 +14,16 @@ import json
 import shutil
 import signal
 import subprocess
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
-from tests.deploy.netns import Lan, require_netns
+from tests.deploy.netns import Lan
 from tests.deploy.secure import make_pki, render_configs
 from tests.procs import arroch
 
 pytestmark = pytest.mark.netns
 PORT = 7447  # each namespace has its own ports: the standard one is free in the hub
-
-
-@pytest.fixture
-def lan() -> Iterator[Lan]:
-    require_netns()
-    with Lan(["planning", "sim", "ar"]) as network:
-        yield network
 
 
 def established(lan: Lan, host: str) -> str:

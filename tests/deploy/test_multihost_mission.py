@@ -25,7 +25,7 @@ import pytest
 
 from tests.deploy.netns import Lan
 from tests.deploy.secure import make_pki, render_configs
-from tests.deploy.test_multihost import PORT, established, lan  # noqa: F401  (lan is a fixture)
+from tests.deploy.test_multihost import PORT, established
 from tests.procs import Proc, arroch
 
 pytestmark = pytest.mark.netns

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import re
 import sys
 from pathlib import Path
 
@@ -93,15 +94,15 @@ def test_progress_counts_each_delivery_once_whether_heard_from_status_or_event()
     progress = MissionProgress({"r0": 2, "r1": 1})
     progress.on_status(RobotStatus(robot="r0", state="moving", delivered=["o0"], stamp=12.0))
     progress.on_event(Event(kind="delivered", robot="r0", object="o0", stamp=12.5))  # the same delivery
-    progress.on_event(Event(kind="door_opened", door="d1", stamp=20.0))
+    progress.on_event(Event(kind="door_opened", door="d1", stamp=20.0, data={"by": "robot"}))
     progress.on_status(RobotStatus(robot="r1", state="waiting_at_door", waiting_door="d1", stamp=21.0))
     assert progress.delivered() == (1, 3)
     line = progress.line()
     assert "t=21.0s delivered 1/3" in line and "r0 1/2 moving" in line and "r1 0/1 waiting at d1" in line
-    assert "door openings 1" in line
+    assert "door openings 1 (by the human 0)" in line
     assert progress.bar(width=6).startswith("[##....] 1/3 delivered")
     progress.on_event(Event(kind="mission_done", data={"makespan": 99.25}))
-    assert progress.done and "makespan  99.250" in progress.metrics_text()
+    assert progress.done and "other figures:\n  makespan: 99.250" in progress.metrics_text()
 
 
 def test_on_a_terminal_a_log_line_goes_above_the_progress_bar():
@@ -112,3 +113,49 @@ def test_on_a_terminal_a_log_line_goes_above_the_progress_bar():
     out.end_progress()
     erase = "\r\x1b[K"
     assert stream.getvalue() == f"{erase}[###] 1/3{erase}[sim] hello\n[###] 1/3\n"
+
+
+def test_the_final_metrics_are_a_rounded_table_with_units_and_meanings():
+    from services.supervisor.metrics_table import metrics_table
+
+    metrics = {
+        "completed": True,
+        "time": 690.4499999999999,
+        "team_completion_time": 690.4499999999999,
+        "agent_completion_times": {"r0": 413.35, "human": 690.4499999999999},
+        "human_door_openings": 4,
+        "door_openings": {"d_lab": {"robot": 14}, "d_storage": {"human": 4}},
+        "feedback": {"sent": 2, "accepted": 1, "refused": 1, "unanswered": 0},
+        "robots": {"r0": {"wait_time": 229.85}},
+        "params": {"site": "office", "method": "arroch", "seed": 1, "human": {"task_mean": 600.0}},
+        "makespan": 1.23456,
+    }
+    table = metrics_table(metrics)
+    assert "690.4499" not in table and "task_mean" not in table  # rounded; the params summed up in one line
+    rows = {re.split(r"\s{2,}", line.strip())[0]: line for line in table.splitlines()}
+    assert re.match(r"team completion time +690\.4  s +the slowest agent's", rows["team completion time"])
+    assert re.match(r"human door openings +4  count +doors the human", rows["human door openings"])
+    assert "14 by robots (automatic doors) + 4 by the human" in rows["door openings, all"]
+    assert "1 accepted, 1 refused, 0 unanswered" in rows["feedback sent"]
+    assert "waited 229.8 s at doors" in rows["r0 completion time"]
+    assert "run: site office, method arroch, seed 1" in table
+    assert "other figures:\n  makespan: 1.235" in table  # what the table does not know is still shown
+    assert metrics_table({}) == "(no metrics)"
+    # Figures in shapes the table does not expect are listed as they are, never a crash.
+    odd = metrics_table({"door_openings": 3, "robots": ["r0"], "time": "late", "feedback": {"sent": "x"}})
+    assert "  door_openings: 3" in odd and "  robots: ['r0']" in odd and "  time: late" in odd
+
+
+def test_the_demo_lingers_only_for_a_terminal_unless_told():
+    import argparse
+
+    from services.demo import lingers
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    assert lingers(argparse.Namespace(linger=None), Terminal()) is True
+    assert lingers(argparse.Namespace(linger=None), io.StringIO()) is False
+    assert lingers(argparse.Namespace(linger=False), Terminal()) is False
+    assert lingers(argparse.Namespace(linger=True), io.StringIO()) is True

@@ -86,3 +86,16 @@ def test_code_fingerprint_follows_the_sources(tmp_path) -> None:  # noqa: ANN001
     assert second != first
     (tmp_path / "services" / "planner" / "notes.txt").write_text("not a source")
     assert code_fingerprint(tmp_path) == second
+
+
+def test_dependency_versions_name_python_and_what_is_installed() -> None:
+    from importlib.metadata import version
+
+    from services.experiments.provenance import dependency_versions
+
+    versions = dependency_versions()
+    assert versions["python"].count(".") == 2
+    assert versions["clingo"] == version("clingo") and versions["eclipse-zenoh"] == version("eclipse-zenoh")
+    assert versions["opencv-python-headless"].startswith("5.")
+    assert "arroch" not in versions  # its own extras name no package of their own
+    assert dependency_versions("no-such-distribution") == {"python": versions["python"]}

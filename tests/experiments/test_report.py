@@ -32,8 +32,8 @@ def _csv(path: Path) -> list[dict[str, str]]:
 
 @pytest.fixture
 def fixed(tmp_path: Path) -> Path:
-    rows = [row("arroch", 2, i, team=v, doors=d) for i, (v, d) in enumerate(zip(A, DOORS_A))]
-    rows += [row("no-comm", 2, i, team=v, doors=d) for i, (v, d) in enumerate(zip(B, DOORS_B))]
+    rows = [row("arroch", 2, i, team=v, doors=d) for i, (v, d) in enumerate(zip(A, DOORS_A, strict=True))]
+    rows += [row("no-comm", 2, i, team=v, doors=d) for i, (v, d) in enumerate(zip(B, DOORS_B, strict=True))]
     # Trial 5 completed for ARROCH only: its pair is dropped from the paired tests (not from ARROCH's mean).
     rows.append(row("arroch", 2, 5, team=700.0, doors=9))
     rows.append(
@@ -47,7 +47,7 @@ def test_pairs_by_trial_index_drop_a_failed_trial(fixed: Path) -> None:
     results = load_results(fixed)
     pairs = results.pairs("team_completion_time", 2, "arroch", "no-comm")
     assert [p.trial for p in pairs] == [0, 1, 2, 3, 4]
-    assert [(p.a, p.b) for p in pairs] == list(zip(A, B))
+    assert [(p.a, p.b) for p in pairs] == list(zip(A, B, strict=True))
     assert len(results.values("arroch", 2, "team_completion_time")) == 6
 
 

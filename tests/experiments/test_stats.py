@@ -53,7 +53,9 @@ def test_wilcoxon_ties_small_sample_enumerates_the_sign_flips() -> None:
     d = np.array([-1.0, -1.0, -2.0, 3.0])
     ranks = [1.5, 1.5, 3.0, 4.0]  # mid-ranks of |d|
     observed = 4.0  # R+: only the 3 is positive
-    flips = [sum(r for r, s in zip(ranks, signs) if s > 0) for signs in itertools.product((-1, 1), repeat=4)]
+    flips = [
+        sum(r for r, s in zip(ranks, signs, strict=True) if s > 0) for signs in itertools.product((-1, 1), repeat=4)
+    ]
     mean = sum(ranks) / 2
     p = sum(abs(f - mean) >= abs(observed - mean) for f in flips) / len(flips)  # 12/16
     r = wilcoxon_signed_rank(d)
@@ -134,7 +136,7 @@ def test_zero_variance_is_not_available_and_does_not_warn() -> None:
 def test_tost_on_near_identical_pairs() -> None:
     # d = 0.1 -0.1 0.2 -0.2 0: mean 0, variance 0.1/4 = 0.025, se = sqrt(0.005); t1 = 30/se: equivalent beyond doubt.
     b = [600.0, 610.0, 620.0, 630.0, 640.0]
-    a = [v + e for v, e in zip(b, (0.1, -0.1, 0.2, -0.2, 0.0))]
+    a = [v + e for v, e in zip(b, (0.1, -0.1, 0.2, -0.2, 0.0), strict=True)]
     r = paired(a, b, margin=30.0)
     assert r.mean_diff == pytest.approx(0.0, abs=1e-12)
     assert r.tost_p < 1e-9

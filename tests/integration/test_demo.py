@@ -2,15 +2,18 @@
 AR client and the tablet page; the page's URL and token printed and the page really served; the run
 folder with the metrics, the event log and a few overlay frames that are real drawings over the
 camera's images, taken at the sim's held instants (lockstep: a frame every ``--camera-hold`` site
-seconds, time held until its overlay came back), so how many are kept does not depend on the load."""
+seconds, time held until its overlay came back), so how many are kept does not depend on the load.
+With ``--linger`` the page stays up after the mission until Ctrl-C, the metrics printed as a table."""
 
 from __future__ import annotations
 
 import json
 import re
+import signal
 import ssl
 import time
 import urllib.request
+from itertools import pairwise
 from pathlib import Path
 
 import cv2
@@ -44,7 +47,7 @@ def drawn_fraction(image: np.ndarray, primitives: list[dict]) -> tuple[int, floa
             continue
         rgb = np.array(prim["color"][:3], dtype=float)
         points = np.asarray(prim["points"], dtype=float)
-        for a, b in zip(points[:-1], points[1:]):
+        for a, b in pairwise(points):
             steps = max(int(np.hypot(*(b - a)) / 3.0), 1)
             for s in np.linspace(0.0, 1.0, steps + 1):
                 u, v = np.round(a + s * (b - a)).astype(int)
@@ -56,7 +59,11 @@ def drawn_fraction(image: np.ndarray, primitives: list[dict]) -> tuple[int, floa
 
 def test_demo_runs_the_mission_serves_the_tablet_page_and_keeps_overlay_frames(spawn, tmp_path: Path):
     state = tmp_path / "state"  # the tablet's certificate goes to $XDG_STATE_HOME/arroch/tablet
-    proc = spawn(arroch("demo", "--run-dir", str(tmp_path / "runs")), env={"XDG_STATE_HOME": str(state)}, name="demo")
+    proc = spawn(
+        arroch("demo", "--run-dir", str(tmp_path / "runs"), "--linger"),
+        env={"XDG_STATE_HOME": str(state)},
+        name="demo",
+    )
 
     # The URL and the token, said clearly while the mission runs, and the page really there.
     proc.wait_for("==> tablet page", timeout=60)
@@ -67,6 +74,17 @@ def test_demo_runs_the_mission_serves_the_tablet_page_and_keeps_overlay_frames(s
     context = ssl.create_default_context(cafile=str(state / "arroch" / "tablet" / "ca.pem"))
     with urllib.request.urlopen(url, context=context, timeout=10) as page:
         assert page.status == 200 and b"<html" in page.read().lower()
+
+    # --linger: after the mission, its metrics as a table, and the page still served until Ctrl-C.
+    proc.wait_for("stay up until Ctrl-C", timeout=TIMEOUT)
+    for row in ("[up] completed ", "[up] human door openings ", "[up] door openings, all ", "the paper's measure"):
+        assert row in proc.output, row
+    assert re.search(r"\[up\] team completion time +\d+\.\d  s ", proc.output), proc.output[-3000:]
+    time.sleep(1.0)
+    assert proc.alive()
+    with urllib.request.urlopen(url, context=context, timeout=10) as page:
+        assert page.status == 200
+    proc.signal(signal.SIGINT)  # what a terminal's Ctrl-C sends to the foreground group
 
     deadline = time.monotonic() + TIMEOUT
     while proc.alive() and time.monotonic() < deadline:
@@ -97,8 +115,8 @@ def test_demo_runs_the_mission_serves_the_tablet_page_and_keeps_overlay_frames(s
         layers = {p["layer"] for p in record["primitives"]}
         assert (
             record["ok"]
-            and any(l.startswith("robot:") for l in layers)
-            and any(l.startswith("intent:") for l in layers)
+            and any(layer.startswith("robot:") for layer in layers)
+            and any(layer.startswith("intent:") for layer in layers)
         ), layers
         samples, fraction = drawn_fraction(image, record["primitives"])
         assert samples >= 20 and fraction >= 0.3, (

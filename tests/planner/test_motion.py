@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from itertools import pairwise
 
 from services.planner.motion import MotionPlanner, polyline_distance
 from tests.planner.conftest import site_named
@@ -26,10 +27,10 @@ def test_paths_around_walls_are_collision_free_and_go_through_the_doorway():
     p = m.path(a, b)
     assert m.stats["astar"] >= 1
     assert p.length > math.dist(a, b) + 0.5, "the straight line crosses a wall"
-    for q, r in zip(p.points, p.points[1:]):
+    for q, r in pairwise(p.points):
         assert m.segment_free(q, r), (q, r)
     door = site.opening("d_office_a")
-    crossing = [(q, r) for q, r in zip(p.points, p.points[1:]) if (q[1] - 6.0) * (r[1] - 6.0) <= 0]
+    crossing = [(q, r) for q, r in pairwise(p.points) if (q[1] - 6.0) * (r[1] - 6.0) <= 0]
     assert crossing, "the path crosses the wall line"
     (x0, y0), (x1, y1) = crossing[0]
     x_at_wall = x0 + (x1 - x0) * (6.0 - y0) / (y1 - y0)
@@ -54,7 +55,7 @@ def test_trajectories_are_timed_at_robot_speed():
     rows = m.trajectory(pts, 100.0)
     assert rows[0][:3] == [100.0, 12.0, 7.0]
     assert math.isclose(rows[-1][0], 100.0 + 4.0 / m.speed) and rows[-1][1:3] == [14.0, 9.0]
-    for r0, r1 in zip(rows, rows[1:]):
+    for r0, r1 in pairwise(rows):
         ds = math.dist(r0[1:3], r1[1:3])
         assert ds <= 0.5 + 1e-9
         assert math.isclose(r1[0] - r0[0], ds / m.speed, abs_tol=1e-9)

@@ -178,7 +178,9 @@ def test_a_finished_action_gets_the_next_one_and_a_new_action_id(spawn, router, 
 
 
 def start_and_first_command(spawn, router: str, namespace: str, client: TestClient):
-    """Start the planner, publish the initial world: (plans queue, r0's commands queue, first plan, r0's first command)."""
+    """Start the planner, publish the initial world.
+
+    Returns (plans queue, r0's commands queue, first plan, r0's first command)."""
     plans = client.collect(client.keys.plan(), TeamPlan)
     commands = client.collect(client.keys.robot_command("r0"), RobotCommand)
     start_planner(spawn, router, namespace)
@@ -253,7 +255,7 @@ def test_off_track_robots_and_door_changes_trigger_replans(spawn, router, namesp
     start_planner(spawn, router, namespace)
     time.sleep(0.5)
     publish_world(client, 1, 0.0)
-    first = wait_for_message(plans, lambda p: p.world_version >= 1, timeout=30)
+    wait_for_message(plans, lambda p: p.world_version >= 1, timeout=30)
     cmd = wait_for_message(commands, timeout=10)
     # r2 reports it is executing the command, but stands 3 m away from its trajectory. The clock is
     # in lockstep: that news waits for the next world version (a plan made in between would reach

@@ -26,8 +26,8 @@ def plan():
     return robots, openings
 
 
-def check(robots, openings, windows=Windows()):
-    return validate(SITE, WORLD, robots, openings, windows)
+def check(robots, openings, windows: Windows | None = None):
+    return validate(SITE, WORLD, robots, openings, Windows() if windows is None else windows)
 
 
 def first(steps, action, arg=None):

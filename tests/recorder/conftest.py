@@ -54,7 +54,8 @@ def mission(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Mission]:
             "--namespace",
             namespace,
             "--child",
-            f"ros2rec={{python}} -m services.cli record --profile ros2 --out {ros2} --namespace {{namespace}} --log-level WARNING",
+            f"ros2rec={{python}} -m services.cli record --profile ros2 --out {ros2} --namespace {{namespace}} "
+            "--log-level WARNING",
         ),
         name="up",
     )

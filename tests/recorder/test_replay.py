@@ -68,7 +68,7 @@ def test_replaying_the_mission_into_a_fresh_ar_client_draws_the_same_robots(miss
         assert set(old_layers) == set(new_layers), (seq, set(old_layers), set(new_layers))
         for layer, prims in old_layers.items():
             assert len(prims) == len(new_layers[layer]), (seq, layer)
-            for a, b in zip(prims, new_layers[layer]):
+            for a, b in zip(prims, new_layers[layer], strict=True):
                 assert a.shape == b.shape and np.abs(a - b).max() <= 1.0, (seq, layer, np.abs(a - b).max())
             drawn += 1
     assert drawn >= 10  # robots were in view in enough frames for this to mean something

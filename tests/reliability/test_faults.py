@@ -96,7 +96,7 @@ def test_planner_killed_mid_mission_replans_from_the_live_world_and_the_active_c
     assert outcome.starts("planner") == 2 and outcome.starts("sim") == outcome.starts("restrictor") == 1
     assert mission.lines("planner was killed by SIGKILL") and mission.lines(f"restarted planner (pid {new_pid}")
     table_line(
-        "planner SIGKILL (after %d deliveries, site t=%.0f s)" % (len(kill.delivered), kill.site_time),
+        f"planner SIGKILL (after {len(kill.delivered)} deliveries, site t={kill.site_time:.0f} s)",
         "restart reported; first plan: live world version, nothing delivered replanned, ids go on, "
         "active door_unavailable respected",
         t_first - kill.at,
@@ -148,8 +148,8 @@ def test_restrictor_killed_mid_mission_restores_its_constraint_set(spawn, tmp_pa
     assert fb["sent"] >= 2 and fb["accepted"] == fb["sent"] and fb["unanswered"] == 0, fb
     assert outcome.starts("restrictor") == 2 and outcome.starts("planner") == 1
     table_line(
-        "restrictor SIGKILL (site t=%.0f s, %d constraint(s) active, version %d)"
-        % (kill.site_time, len(last.constraints), last.version),
+        f"restrictor SIGKILL (site t={kill.site_time:.0f} s, {len(last.constraints)} constraint(s) active, "
+        f"version {last.version})",
         "restart reported; first set after restart = the persisted one; versions grow, ids not reused; "
         "the human's feedback all accepted",
         t_first - kill.at,
@@ -228,7 +228,7 @@ def test_ar_client_killed_mid_mission_comes_back_with_overlays_of_the_live_world
     assert any(o.ok for o in before), "the AR client localised before the kill too"
     assert outcome.starts("ar") == 2 and outcome.starts("sim") == outcome.starts("planner") == 1
     table_line(
-        "AR client SIGKILL (after %d deliveries)" % len(kill.delivered),
+        f"AR client SIGKILL (after {len(kill.delivered)} deliveries)",
         "restart reported; overlays again: localised, door states known, robots drawn",
         t_ok - kill.at,
     )
@@ -250,7 +250,7 @@ def test_router_killed_mid_mission_is_restarted_on_its_endpoint_and_every_servic
         after = out[out.index("restarted router (pid") :]
         return {
             m.group(1)
-            for m in SERVICE_IDS.finditer("\n".join(l for l in after.splitlines() if " is up (" in l))
+            for m in SERVICE_IDS.finditer("\n".join(line for line in after.splitlines() if " is up (" in line))
             if int(m.group(2)) == pids.get(m.group(1))
         }
 
@@ -263,7 +263,7 @@ def test_router_killed_mid_mission_is_restarted_on_its_endpoint_and_every_servic
     assert outcome.starts("router") == 2
     assert all(outcome.starts(name) == 1 for name in pids), "the services reconnected: none was restarted"
     table_line(
-        "router SIGKILL (after %d deliveries)" % len(kill.delivered),
+        f"router SIGKILL (after {len(kill.delivered)} deliveries)",
         "restarted on the same endpoint; planner, restrictor, sim reconnected (not restarted)",
         recovered,
     )

@@ -393,6 +393,7 @@ def test_a_mission_survives_100k_bad_payloads_and_counts_every_one(spawn, tmp_pa
             check_program(constraint.asp)
     print(
         f"\nfuzz: {len(plan.puts)} bad puts, {len(plan.queries)} bad queries, {len(plan.hostile)} smuggling feedbacks, "
-        f"{len(plan.frames)} bad frames in {sent_for:.1f} s (site time {started_at_site_time:.0f} to {sent_at_site_time:.0f} s); "
+        f"{len(plan.frames)} bad frames in {sent_for:.1f} s (site time {started_at_site_time:.0f} to "
+        f"{sent_at_site_time:.0f} s); "
         f"mission time {metrics['team_completion_time']:.1f} s, actions {metrics['actions']}; kinds {dict(plan.kinds)}"
     )

@@ -85,6 +85,8 @@ def test_the_mission_completes_after_the_sim_hosts_link_is_cut_for_10_s(lan: Lan
     )
     assert sim_outcome.starts("sim") == 1
     print(
-        f"\nfault table | sim host's link cut for {CUT:.0f} s (after {MID_DELIVERIES}+ deliveries) | planning host hears "
-        f"nothing while cut; progress resumes after heal; no restarts | mission completed | {recovered:.2f} s after heal"
+        f"\nfault table | sim host's link cut for {CUT:.0f} s (after {MID_DELIVERIES}+ deliveries) | planning host "
+        "hears "
+        f"nothing while cut; progress resumes after heal; no restarts | mission completed | {recovered:.2f} s after "
+        "heal"
     )

@@ -47,7 +47,8 @@ REASONS = [
     (
         "door_closed",
         {"door": "d_storage"},
-        "unknown constraint kind 'door_closed'; the library has: door_unavailable, forbid_room, door_available_now, cancel",
+        "unknown constraint kind 'door_closed'; the library has: door_unavailable, forbid_room, door_available_now, "
+        "cancel",
     ),
     (7, {}, "kind must name a library entry, got int"),
     (None, {}, "kind must name a library entry, got NoneType"),

@@ -114,7 +114,7 @@ def test_bridge_messages_decode_to_the_poses_they_came_from(spawn, router, names
     )
     msg, _ = path.next()
     assert len(msg.poses) == len(rows)
-    for row, ps in zip(rows, msg.poses):
+    for row, ps in zip(rows, msg.poses, strict=True):
         assert abs(ps.pose.position.x - row[1]) <= MM and abs(ps.pose.position.y - row[2]) <= MM
         assert angle_gap(ros.yaw_of(ps.pose.orientation), row[3]) <= DEG
         assert abs(ros.seconds(ps.header.stamp) - row[0]) <= 1e-6

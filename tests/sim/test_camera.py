@@ -68,7 +68,7 @@ def _gray(image: np.ndarray) -> np.ndarray:
 
 def _detect_opencv(detector: cv2.aruco.ArucoDetector, gray: np.ndarray) -> dict[int, np.ndarray]:
     corners, ids, _ = detector.detectMarkers(gray)
-    return {} if ids is None else {int(i): opencv_corners(c) for c, i in zip(corners, ids.ravel())}
+    return {} if ids is None else {int(i): opencv_corners(c) for c, i in zip(corners, ids.ravel(), strict=True)}
 
 
 def _detect_apriltag(gray: np.ndarray) -> dict[int, np.ndarray]:

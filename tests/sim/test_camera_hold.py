@@ -177,7 +177,7 @@ def test_lockstep_holds_time_for_each_frames_overlay_then_times_out_then_falls_b
         for _ in range(MAX_MISSED):
             frame, arrived = next_frame(frames)
             assert on_grid(frame.stamp)
-            moved = wait_for_message(clocks, lambda c: c.time > frame.stamp, timeout=10)
+            moved = wait_for_message(clocks, lambda c, held=frame.stamp: c.time > held, timeout=10)
             waited = time.monotonic() - arrived
             assert 0.8 * TIMEOUT <= waited <= TIMEOUT + 1.0, waited
             assert moved.time <= frame.stamp + HOLD + 1e-6  # stopped again at the next hold instant at the latest

@@ -10,6 +10,7 @@ Tolerances (robot_speed 0.5 m/s, 1.5 rad/s turn rate, 0.3 m lookahead, 20 Hz):
 from __future__ import annotations
 
 import math
+from itertools import pairwise
 
 import pytest
 
@@ -35,7 +36,7 @@ def follow(rows, start, *, cfg=CFG, s_limit=math.inf, steps=10_000):
 
 
 def deviation(path: Path, trace) -> float:
-    return max(min(segment_distance((s.x, s.y), a, b) for a, b in zip(path.points, path.points[1:])) for s in trace)
+    return max(min(segment_distance((s.x, s.y), a, b) for a, b in pairwise(path.points)) for s in trace)
 
 
 def test_straight_line_is_followed_exactly_at_robot_speed():

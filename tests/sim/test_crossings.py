@@ -62,10 +62,10 @@ def test_a_robot_forced_through_a_closed_door_is_one_crossing_and_pybullet_sees_
     # and pybullet's overlap reaches no further than the leaf's half thickness (2 cm, plus one
     # point of the pass) beyond the gap's line on either side.
     assert any(watched)
-    assert all(b for w, b in zip(watched, blocked) if w)
+    assert all(b for w, b in zip(watched, blocked, strict=True) if w)
     points = straight_pass()
-    leaf_y = [y for (_, y), b in zip(points, blocked) if b]
-    watch_y = [y for (_, y), w in zip(points, watched) if w]
+    leaf_y = [y for (_, y), b in zip(points, blocked, strict=True) if b]
+    watch_y = [y for (_, y), w in zip(points, watched, strict=True) if w]
     assert min(watch_y) - min(leaf_y) <= 0.04 + 1e-9 and max(leaf_y) - max(watch_y) <= 0.04 + 1e-9
 
 

@@ -8,6 +8,7 @@ a few percentage points fails reliably.
 from __future__ import annotations
 
 import math
+from itertools import pairwise
 
 import numpy as np
 import pytest
@@ -246,7 +247,7 @@ def test_focus_intervals_fit_her_task_and_do_not_overlap():
             assert round(f.end - f.start, 6) in (120.0, 180.0, 240.0)
             starts.append(f.start / h.task_duration)
             lengths.append(f.minutes)
-        assert all(a.end <= b.start for a, b in zip(h.focus, h.focus[1:]))
+        assert all(a.end <= b.start for a, b in pairwise(h.focus))
     assert min(starts) < 0.02 and max(starts) > 0.5
     counts = np.bincount(lengths)[2:5] / len(lengths)  # 2, 3 and 4 minutes equally likely
     assert all(within(c, 1 / 3, len(lengths)) for c in counts)

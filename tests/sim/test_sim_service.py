@@ -146,7 +146,8 @@ def test_human_feedback_reaches_the_real_restrictor(router, client, spawn, tmp_p
     human = tmp_path / "human.toml"
     # One focus interval, always declared: the restrictor must get exactly one door_unavailable.
     human.write_text(
-        "[human]\ntask_mean = 240.0\ntask_std = 0.0\nfocus_count = 1\nfocus_min_minutes = 2\nfocus_max_minutes = 2\ndeclare_probability = 1.0\n"
+        "[human]\ntask_mean = 240.0\ntask_std = 0.0\nfocus_count = 1\nfocus_min_minutes = 2\nfocus_max_minutes = "
+        "2\ndeclare_probability = 1.0\n"
     )
     namespace = client.keys.site
     sets = client.collect(client.keys.constraints(), ConstraintSet)
@@ -282,7 +283,8 @@ def test_feedback_nobody_acknowledges_ends_lockstep_loudly_as_failed(router, cli
     site = load_site(None)
     human = tmp_path / "human.toml"
     human.write_text(
-        "[human]\ntask_mean = 400.0\ntask_std = 0.0\nfocus_count = 1\ndeclare_probability = 1.0\nfeedback_timeout = 0.3\nfeedback_retries = 1\n"
+        "[human]\ntask_mean = 400.0\ntask_std = 0.0\nfocus_count = 1\ndeclare_probability = 1.0\nfeedback_timeout = "
+        "0.3\nfeedback_retries = 1\n"
     )
     metrics = tmp_path / "m.json"
     sim = spawn(

@@ -57,7 +57,7 @@ def _across(site: Site, opening_id: str, offset: float, reach: float = 0.6) -> t
 
 def test_every_wall_is_the_site_wall_box(world: World, site: Site) -> None:
     assert len(world.wall_names) == len(site.walls)
-    for name, wall in zip(world.wall_names, site.walls):
+    for name, wall in zip(world.wall_names, site.walls, strict=True):
         x0, y0, x1, y1 = wall.box
         np.testing.assert_allclose(_extent(world, name), [x0, y0, 0.0, x1, y1, wall.height], atol=1e-6, err_msg=name)
 

@@ -20,8 +20,10 @@ def run(*args: str) -> subprocess.CompletedProcess:
 
 
 def test_check_prints_a_summary() -> None:
-    out = run("site", "check", str(default_site_path()))
+    out = run("site", "check")  # no file: the packaged site, as for every other command
     assert out.returncode == 0, out.stderr
+    named = run("site", "check", str(default_site_path())).stdout
+    assert out.stdout.splitlines()[1:] == named.splitlines()[1:]  # the same site; only its source differs
     for line in (
         "site office",
         "rooms (9)",
@@ -49,7 +51,7 @@ def test_check_refuses_a_bad_file_with_the_reason() -> None:
 
 def test_show_renders_a_png(tmp_path: Path) -> None:
     png = tmp_path / "office.png"
-    out = run("site", "show", str(default_site_path()), "--png", str(png), "--dpi", "80")
+    out = run("site", "show", "--png", str(png), "--dpi", "80")  # the packaged site
     assert out.returncode == 0, out.stderr
     import cv2
 

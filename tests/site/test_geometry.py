@@ -45,7 +45,7 @@ def test_walls_merge_shared_edges_and_cut_openings(site: Site) -> None:
         ]
     )
     assert len(got) == len(expected)
-    for (ga, gb, gbox), (ea, eb, ebox) in zip(got, expected):
+    for (ga, gb, gbox), (ea, eb, ebox) in zip(got, expected, strict=True):
         assert ga == pytest.approx(ea) and gb == pytest.approx(eb) and gbox == pytest.approx(ebox)
     assert all(w.thickness == 0.1 and w.height == 2.5 for w in site.walls)
     assert {w.axis for w in site.walls if w.a[0] == 4.0} == {"y"}
@@ -168,7 +168,7 @@ def test_inflation_keeps_a_robot_centre_off_the_walls(site: Site) -> None:
     from protocol.site.geometry import box_distance
 
     rows, cols = np.nonzero(~g.occupied)
-    for r, c in list(zip(rows, cols))[::37]:
+    for r, c in list(zip(rows, cols, strict=True))[::37]:
         x, y = g.cell_to_world(int(r), int(c))
         assert min(box_distance(w.box, x, y) for w in site.walls) >= 0.25 - 1e-9
     # The passage stays passable: a free path of cells across x = 4.

@@ -121,7 +121,8 @@ def test_the_tiny_site_the_bad_files_derive_from_is_valid() -> None:
         ),
         (
             '[site]\nname = "x"\n[[rooms]]\nid = "a"\nrect = [0, 0, 1]\n',
-            'x.toml: rooms[0] (id "a"): rect: expected an array of 4 numbers [xmin, ymin, xmax, ymax], got an array [0, 0, 1]',
+            'x.toml: rooms[0] (id "a"): rect: expected an array of 4 numbers [xmin, ymin, xmax, ymax], got an array '
+            "[0, 0, 1]",
         ),
         ("site = 3\n", "x.toml: site: expected a table, got 3"),
     ],

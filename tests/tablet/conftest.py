@@ -13,7 +13,10 @@ from services.ar_client.web.headless import Browser, chromium_path
 def browser() -> Iterator[Callable[..., Browser]]:
     """``browser(fake_camera=PATH, window=(w, h))`` starts Chromium; every one is closed at teardown."""
     if chromium_path() is None:
-        pytest.skip("no Chromium on this machine (Debian: apt-get install chromium; .ci/run installs it)")
+        pytest.skip(
+            "tablet page in a browser: no Chromium on this machine "
+            "(`make test` installs it when run as root; else: sudo apt-get install chromium)"
+        )
     opened: list[Browser] = []
 
     def _open(**kwargs) -> Browser:  # noqa: ANN003

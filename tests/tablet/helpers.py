@@ -81,7 +81,8 @@ def snapshots(n: int = 6, width: int = 640, height: int = 480) -> Snapshots:
 def snapshot_at(
     view: tuple[float, float, float, float, float], width: int = 640, height: int = 480
 ) -> tuple[np.ndarray, CameraSpec]:
-    """One RGB sim snapshot from ``view`` (X, Y, Z, YAW, PITCH as in ``arroch sim snapshot --camera``) and its camera."""
+    """One RGB sim snapshot from ``view`` (X, Y, Z, YAW, PITCH as in ``arroch sim snapshot --camera``)
+    and its camera."""
     camera = CameraSpec.from_degrees(*view, width, height, VFOV)
     with World(SITE) as world:
         return world.render(camera), camera

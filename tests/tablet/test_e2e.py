@@ -69,7 +69,8 @@ def _screen(browser) -> np.ndarray:  # noqa: ANN001
 def _stage_box(browser, element: str, size: tuple[int, int]) -> tuple[float, float, float]:  # noqa: ANN001
     """(x, y, scale) of a ``size`` picture shown with object-fit: contain in ``element`` (viewport px)."""
     rect = browser.evaluate(
-        f"(() => {{ const r = document.getElementById('{element}').getBoundingClientRect(); return [r.x, r.y, r.width, r.height]; }})()"
+        f"(() => {{ const r = document.getElementById('{element}').getBoundingClientRect(); "
+        "return [r.x, r.y, r.width, r.height]; })()"
     )
     x, y, bw, bh = rect
     s = min(bw / size[0], bh / size[1])
@@ -103,7 +104,7 @@ def _drawn_through(image: np.ndarray, shots: Snapshots, box: tuple[float, float,
 def _assert_pictures_lack_the_robot(shots: Snapshots) -> None:
     """The pictures alone never show the robot's colour where its rim projects (the sim's robots are at
     their starts, out of view): whatever the screenshot has there, the page drew."""
-    for frame, camera in zip(shots.frames, shots.cameras):
+    for frame, camera in zip(shots.frames, shots.cameras, strict=True):
         assert _colour_hits(frame, camera.project(_avatar_rim()), COLOUR) == 0.0
 
 
@@ -225,7 +226,9 @@ def test_ar_page_overlays_where_the_robot_is_and_feedback_round_trips(
 
 def _sim_camera(client, shots: Snapshots, stop: threading.Event) -> None:  # noqa: ANN001
     """Publish the snapshots as the sim's camera does (``frame_message``: JPEG and intrinsics), at 5 Hz."""
-    messages = [frame_message("simcam", frame, camera) for frame, camera in zip(shots.frames, shots.cameras)]
+    messages = [
+        frame_message("simcam", frame, camera) for frame, camera in zip(shots.frames, shots.cameras, strict=True)
+    ]
     k = 0
     while not stop.is_set():
         client.publish(client.keys.camera_frame("simcam"), messages[k % len(messages)])
@@ -260,7 +263,8 @@ def test_viewer_mode_shows_the_sim_stream_with_overlay_and_the_map(router, names
         assert _colour_hits(image, _on_screen(_avatar_rim(), _drawn_through(image, shots, box), box), COLOUR) >= 0.8
         # The map: the robot's disc at its position (the page's map transform: fit the site's bounds, 16 px margin).
         mx, my, mw, mh = page.evaluate(
-            "(() => { const r = document.getElementById('map').getBoundingClientRect(); return [r.x, r.y, r.width, r.height]; })()"
+            "(() => { const r = document.getElementById('map').getBoundingClientRect(); return [r.x, r.y, r.width, "
+            "r.height]; })()"
         )
         bx0, by0, bx1, by1 = SITE.bounds
         ms = min((mw - 32) / (bx1 - bx0), (mh - 32) / (by1 - by0))
@@ -307,7 +311,9 @@ def test_frames_shrink_when_round_trips_grow_and_grow_back(router, namespace, sp
         sender.size = [1280, 720];
         const answer = (rtt) => {
             const seq = sender.seq = sender.seq + 1;
-            sender.inFlight = { seq, sent: performance.now() - rtt, captured: performance.now() - rtt - 5, w: 1280, h: 720, bytes: 1 };
+            sender.inFlight = {
+                seq, sent: performance.now() - rtt, captured: performance.now() - rtt - 5, w: 1280, h: 720, bytes: 1,
+            };
             sender.lastChange = -1e9;  // as if the last change were long ago
             sender.answered(seq);
             return [sender.scale, sender.quality];

@@ -69,7 +69,8 @@ def test_gravity_from_devicemotion_rides_with_the_frames_and_fixes_a_single_tag_
     # The drawn pose moves over to the right solution (the filter takes a few consistent frames to follow a jump).
     right = page.wait_for(
         "(() => { const o = window.arroch.state().overlay;"
-        f" const d = Math.hypot(o.position[0] - {truth.position[0]}, o.position[1] - {truth.position[1]}, o.position[2] - {truth.position[2]});"
+        f" const d = Math.hypot(o.position[0] - {truth.position[0]}, o.position[1] - {truth.position[1]}, "
+        f"o.position[2] - {truth.position[2]});"
         " return o.ok && o.gravity && d < 0.15 && o; })()",
         timeout=20,
     )

@@ -12,6 +12,8 @@ import sys
 
 from protocol.runner import add_common_arguments
 
+from ..cli import detector_option
+
 log = logging.getLogger("arroch.tablet")
 
 EXIT_USAGE = 2
@@ -114,7 +116,8 @@ def _calibrate(args: argparse.Namespace) -> int:
         print(f"skipped {name}: {why}")
     print(
         f"wrote {args.out}: fx {K.fx:.2f} fy {K.fy:.2f} cx {K.cx:.2f} cy {K.cy:.2f} ({K.width}x{K.height}), "
-        f"distortion {' '.join(f'{d:.4f}' for d in K.distortion)}, RMS {result.rms_px:.3f} px from {len(result.used)} image(s)"
+        f"distortion {' '.join(f'{d:.4f}' for d in K.distortion)}, RMS {result.rms_px:.3f} px from {len(result.used)} "
+        "image(s)"
     )
     return 0
 
@@ -171,7 +174,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     tablet.add_argument("--max-clients", type=int, default=8, metavar="N", help="pages connected at once (default 8)")
     tablet.add_argument("--workers", type=int, default=2, metavar="N", help="frame-processing threads (default 2)")
     tablet.add_argument(
-        "--detector", choices=("opencv", "apriltag"), default="opencv", help="tag detector (default opencv)"
+        "--detector",
+        type=detector_option,
+        default="opencv",
+        metavar="{opencv,apriltag}",
+        help="tag detector (default opencv; apriltag needs the arroch[apriltag] extra)",
     )
     tablet.add_argument(
         "--allow-origin",

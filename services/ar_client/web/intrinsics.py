@@ -103,7 +103,10 @@ class CameraModel:
             K = scaled(self.calibration, width, height)
             if K is not None:
                 return K, f"calibrated at {self.calibration.width}x{self.calibration.height}"
-            why = f"default {self.hfov_deg:g} deg (calibration is {self.calibration.width}x{self.calibration.height}, another aspect)"
+            why = (
+                f"default {self.hfov_deg:g} deg (calibration is {self.calibration.width}x{self.calibration.height}, "
+                "another aspect)"
+            )
             return default_intrinsics(width, height, self.hfov_deg), why
         return default_intrinsics(
             width, height, self.hfov_deg

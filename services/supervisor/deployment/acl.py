@@ -197,7 +197,7 @@ def to_json5(extra_cns: Mapping[str, Sequence[str]] | None = None, indent: str =
         f'{i1}default_permission: "deny",',
         f"{i1}rules: [",
     ]
-    for rule, reason in zip(block["rules"], reasons):
+    for rule, reason in zip(block["rules"], reasons, strict=True):
         lines += [f"{i2}// {reason}", f"{i2}{json.dumps(rule)},"]
     lines += [
         f"{i1}],",

@@ -145,7 +145,8 @@ def render(req: Request, template_dir: Path = TEMPLATE_DIR) -> str:
         rendered = string.Template(text).substitute(encoded)
     except KeyError as exc:
         raise RenderError(
-            f"template {template_path(req, template_dir).name} needs {exc} which a {req.resolved_kind} request does not give"
+            f"template {template_path(req, template_dir).name} needs {exc} which a {req.resolved_kind} request does "
+            "not give"
         ) from None
     except ValueError as exc:  # a stray '$' in the template
         raise RenderError(

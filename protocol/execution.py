@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 from itertools import pairwise
 
+from .actions import STEPS, Action
 from .messages import RobotCommand
 from .plane import segment_intersection
 from .site.model import Site
@@ -24,15 +25,16 @@ REACH = 1.0  # m from the robot's centre within which it can pick up an object
 def command_problem(site: Site, x: float, y: float, cmd: RobotCommand, start_tolerance: float = START_TOLERANCE) -> str:
     """Why ``cmd`` cannot be executed by a robot at (x, y), in words; ``""`` if it can."""
     target = cmd.args[0] if cmd.args else ""
-    if cmd.action in ("approach", "gothrough", "opendoor"):
+    rule = STEPS.get(cmd.action)  # None for a stop
+    if rule is not None and rule.arg in ("opening", "door"):
         try:
             opening = site.opening(target)
         except KeyError:
             return f"{cmd.action}: no door or passage {target!r}"
-        if cmd.action == "opendoor" and opening.kind != "door":
+        if rule.arg == "door" and opening.kind != "door":
             return f"opendoor: {target!r} is a passage, not a door"
     if not cmd.trajectory:
-        return f"gothrough: empty trajectory cannot go through {target!r}" if cmd.action == "gothrough" else ""
+        return f"gothrough: empty trajectory cannot go through {target!r}" if cmd.action == Action.GOTHROUGH else ""
     x0, y0 = cmd.trajectory[0][1], cmd.trajectory[0][2]
     gap = math.hypot(x0 - x, y0 - y)
     if gap > start_tolerance:
@@ -42,7 +44,7 @@ def command_problem(site: Site, x: float, y: float, cmd: RobotCommand, start_tol
         for wall in site.walls:
             if segment_intersection(a, b, wall.a, wall.b) is not None:
                 return f"trajectory segment {_fmt(a)}->{_fmt(b)} crosses a wall"
-    if cmd.action == "gothrough":
+    if cmd.action == Action.GOTHROUGH:
         ea, eb = site.opening(target).endpoints
         if not any(segment_intersection(a, b, ea, eb) is not None for a, b in pairwise(points)):
             return f"gothrough: trajectory does not cross {target!r}"
@@ -55,7 +57,7 @@ def dwell_problem(
     """Why the ``load``/``unload`` ``cmd``, its drive over at (x, y), cannot dwell; ``""`` if it can.
     ``object_xy``: where the object is (for a load)."""
     oid = cmd.args[0]
-    if cmd.action == "load":
+    if cmd.action == Action.LOAD:
         gap = math.hypot(object_xy[0] - x, object_xy[1] - y)
         return f"load: object {oid!r} is {gap:.2f} m away (reach {reach} m)" if gap > reach else ""
     goes_to = site.objects[oid].deliver_to

@@ -13,6 +13,8 @@ from collections.abc import Iterable
 
 import clingo
 
+from protocol.actions import Action
+
 from .plan import Pass, RobotPlan, Step
 from .problem import RobotProblem
 
@@ -61,7 +63,7 @@ def decode(
     for rid, prob in problems.items():
         legs = {leg.id: leg for leg in prob.legs}
         steps = [Step(p.action, p.args, p.start, p.end) for p in prob.prefix]
-        passes = [Pass(p.opening, p.start, p.end, "", "", False) for p in prob.prefix if p.action == "gothrough"]
+        passes = [Pass(p.opening, p.start, p.end, "", "", False) for p in prob.prefix if p.action == Action.GOTHROUGH]
         uses: set[tuple[str, int]] = set()
         t = prob.ready
         for pos in range(1, len(prob.stops) + 1):
@@ -69,10 +71,10 @@ def decode(
             for k, c in enumerate(leg.crossings, start=1):
                 a, g = arr[(rid, pos, k)], go[(rid, pos, k)]
                 if not (c.approach == 0 and k == 1 and leg.origin == "start" and prob.beside == c.opening):
-                    steps.append(Step("approach", (c.opening,), t, a))
+                    steps.append(Step(Action.APPROACH.value, (c.opening,), t, a))
                 if c.human:
-                    steps.append(Step("opendoor", (c.opening,), a, g))
-                steps.append(Step("gothrough", (c.opening,), g, g + c.through))
+                    steps.append(Step(Action.OPENDOOR.value, (c.opening,), a, g))
+                steps.append(Step(Action.GOTHROUGH.value, (c.opening,), g, g + c.through))
                 passes.append(Pass(c.opening, g, g + c.through, c.src, c.dst, c.human))
                 if c.human:
                     cover = _cover(windows, opens, c.opening, g, g + c.through, hold)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from protocol.actions import Action
 from protocol.messages import Intent, RobotCommand
 
 from .motion import MotionPlanner, Point
@@ -115,8 +116,8 @@ class Dispatcher:
         steps = plan.steps
         if (
             len(steps) >= 2
-            and steps[0].action == "opendoor"
-            and steps[1].action == "gothrough"
+            and steps[0].action == Action.OPENDOOR
+            and steps[1].action == Action.GOTHROUGH
             and steps[0].args[:1] == steps[1].args[:1]
             and steps[0].args[:1]
             and steps[0].args[0] in world.open_doors

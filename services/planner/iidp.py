@@ -21,7 +21,7 @@ Work saved without changing the result:
 
 - a robot is not solved for when no plan of it could beat the current team cost, or the best swap
   found so far in the round: its plan alone (step 1) bounds its finishing time from below, and the
-  others' passes bound the openings (the fewest hold windows that cover them, :func:`min_openings`);
+  others' passes bound the openings (the fewest hold windows that cover them, :func:`.team_cost.min_openings`);
   robots are solved in order of that bound, so a round often stops after a few;
 - a robot in no conflict can only improve the team without delaying it, so its program is bounded
   by the team's completion time (the horizon), which keeps it small;
@@ -49,9 +49,10 @@ import logging
 import time
 from dataclasses import dataclass, replace
 
-from .plan import Pass, RobotPlan, TeamResult, count_conflicts, share_windows
+from .plan import Pass, RobotPlan, count_conflicts
 from .problem import RobotProblem
 from .single import SingleRobotSolver
+from .team_cost import improves, lower_bound, shared, team_cost
 
 log = logging.getLogger("arroch.planner.iidp")
 
@@ -60,7 +61,6 @@ log = logging.getLogger("arroch.planner.iidp")
 # the plan's own times bound them.
 ESCALATION = ((4, 16), None)
 RELAXED_TIME = 5  # times the usual solver time for those larger programs
-MIN_TIME_GAIN = 3  # s of total robot time a round must save when it changes nothing else
 
 
 class NoPlan(Exception):
@@ -77,54 +77,6 @@ class IidpStats:
     rounds: int = 0
     converged: bool = False
     skipped: int = 0  # best responses not computed because they could not improve the team
-
-
-def team_cost(plans: dict[str, RobotPlan], hold: int, existing: frozenset) -> tuple[int, int, int, int, int]:
-    return TeamResult("iidp", 0, hold, plans, existing=existing).cost()
-
-
-def shared(plans: dict[str, RobotPlan], hold: int, existing: frozenset) -> dict[str, RobotPlan]:
-    return share_windows(plans, hold, existing)
-
-
-def improves(cost: tuple, current: tuple) -> bool:
-    """A better team cost; on total robot time alone (the last level) only by ``MIN_TIME_GAIN`` s or
-    more - a round per second saved would spend the time limit on rounding noise."""
-    if cost[:-1] != current[:-1]:
-        return cost[:-1] < current[:-1]
-    return cost[-1] <= current[-1] - MIN_TIME_GAIN
-
-
-def min_openings(plans, hold: int, existing: frozenset) -> int:
-    """The fewest human openings that could cover these plans' passes through human doors.
-
-    Per door, in order of start: an opening that starts when the first uncovered pass does covers
-    every later pass that ends within its hold window, and none can cover more, so this greedy count
-    is the minimum. Passes inside a door already open are free."""
-    n = 0
-    by_door: dict[str, list[tuple[int, int]]] = {}
-    for plan in plans:
-        for p in plan.passes:
-            if p.human and not any(d == p.opening and t <= p.start and p.end <= t + hold for d, t in existing):
-                by_door.setdefault(p.opening, []).append((p.start, p.end))
-    for passes in by_door.values():
-        cover_until = None
-        for start, end in sorted(passes):
-            if cover_until is not None and end <= cover_until:
-                continue
-            n += 1
-            cover_until = start + hold
-    return n
-
-
-def lower_bound(
-    rid: str, plans: dict[str, RobotPlan], alone: int, hold: int, existing: frozenset
-) -> tuple[int, int, int, int, int]:
-    """A cost no plan of ``rid`` can beat, with the others' plans fixed (component by component)."""
-    others = [p for o, p in plans.items() if o != rid]
-    overlaps = count_conflicts([replace(p, uses=frozenset()) for p in others], hold)  # doorway overlaps only
-    makespan = max([alone] + [p.finish for p in others])
-    return (overlaps, makespan, min_openings(others, hold, existing), 0, sum(p.finish for p in others) + alone)
 
 
 def iidp(

@@ -11,71 +11,98 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from .plan import TeamResult
+from protocol.actions import STEPS, Action, EndsAt, Fluents
+
+from .motion import Point
+from .plan import RobotPlan, Step, TeamResult
 from .problem import ProblemBuilder
 from .world import InProgress, RobotState, World
 
 
 def world_at(builder: ProblemBuilder, world: World, result: TeamResult, t: float) -> World:
     """The world ``result`` (planned from ``world``) leads to at site-clock time ``t``."""
-    site = builder.site
     robots: dict[str, RobotState] = {}
     for rid, state in world.robots.items():
         plan = result.plans.get(rid)
-        if plan is None:
-            robots[rid] = state
-            continue
-        room = builder.robot_room(state)
-        x, y, theta = state.pose
-        carrying, delivered = set(state.carrying), set(state.delivered)
-        beside = state.beside
-        in_progress = None
-        for step in plan.steps:
-            start, end = result.absolute(step.start), result.absolute(step.end)
-            arg = step.args[0] if step.args else ""
-            if start > t:
-                break
-            if step.action == "gothrough":
-                opening = site.opening(arg)
-                ip = state.in_progress
-                dst = (
-                    ip.target
-                    if ip is not None and ip.action == "gothrough" and ip.args[:1] == (arg,) and step is plan.steps[0]
-                    else ""
-                )
-                dst = dst or next(
-                    (p.dst for p in plan.passes if p.opening == arg and result.absolute(p.start) == start and p.dst),
-                    opening.other(room) if room in opening.rooms else opening.rooms[1],
-                )
-                if end > t:
-                    (x, y), beside = opening.center, ""
-                    in_progress = InProgress("gothrough", (arg,), float(end), dst)
-                    room = dst
-                    break
-                (x, y), room, beside = builder.beside(arg, dst), dst, ""
-            elif step.action in ("approach", "opendoor"):
-                bx, by = builder.beside(arg, room)
-                if end > t and step.action == "approach":
-                    # part-way along the (straight, within one room) drive
-                    f = (t - start) / (end - start)
-                    x, y = x + f * (bx - x), y + f * (by - y)
-                    break
-                (x, y), beside = (bx, by), arg
-            elif step.action in ("load", "unload"):
-                (x, y) = builder.object_point(arg) if step.action == "load" else builder.drop_point(arg)
-                beside = ""
-                if end > t:
-                    in_progress = InProgress(step.action, (arg,), float(end))
-                    break
-                if step.action == "load":
-                    carrying.add(arg)
-                else:
-                    carrying.discard(arg)
-                    delivered.add(arg)
-        robots[rid] = RobotState(rid, (x, y, theta), frozenset(carrying), frozenset(delivered), beside, in_progress)
+        robots[rid] = state if plan is None else _robot_at(builder, state, plan, result, t)
     open_doors = {
         o.door: float(result.absolute(o.start))
         for o in result.openings
         if result.absolute(o.start) <= t < result.absolute(o.end)
     }
     return replace(world, now=float(t), robots=robots, open_doors=open_doors)
+
+
+def _robot_at(builder: ProblemBuilder, state: RobotState, plan: RobotPlan, result: TeamResult, t: float) -> RobotState:
+    fluents = Fluents(builder.robot_room(state), state.beside, set(state.carrying), set(state.delivered))
+    x, y = state.pose[0], state.pose[1]
+    in_progress = None
+    for step in plan.steps:
+        start, end = result.absolute(step.start), result.absolute(step.end)
+        if start > t:
+            break
+        action, arg = Action(step.action), step.args[0] if step.args else ""
+        rule = STEPS[action]
+        room_after = _entered(builder, state, plan, result, step, fluents.room) if action is Action.GOTHROUGH else ""
+        if end > t and action is Action.APPROACH:
+            # part-way along the (straight, within one room) drive
+            bx, by = builder.beside(arg, fluents.room)
+            f = (t - start) / (end - start)
+            x, y = x + f * (bx - x), y + f * (by - y)
+            break
+        if end > t and action is Action.GOTHROUGH:
+            (x, y) = builder.site.opening(arg).center
+            fluents.room, fluents.beside = room_after, ""
+            in_progress = InProgress(action.value, (arg,), float(end), room_after)
+            break
+        (x, y) = _point(builder, rule.ends_at, arg, fluents.room, room_after) or (x, y)
+        if end > t and rule.in_place:
+            fluents.beside = ""
+            in_progress = InProgress(action.value, (arg,), float(end))
+            break
+        fluents.apply(action, arg, room_after)
+    return RobotState(
+        state.id,
+        (x, y, state.pose[2]),
+        frozenset(fluents.carrying),
+        frozenset(fluents.delivered),
+        fluents.beside,
+        in_progress,
+    )
+
+
+def _entered(
+    builder: ProblemBuilder, state: RobotState, plan: RobotPlan, result: TeamResult, step: Step, room: str
+) -> str:
+    """The room a gothrough step taken from ``room`` enters: the one the robot is already entering,
+    the plan's pass, or the opening's other side."""
+    arg = step.args[0]
+    ip = state.in_progress
+    if (
+        ip is not None
+        and ip.action == Action.GOTHROUGH
+        and ip.args[:1] == (arg,)
+        and step is plan.steps[0]
+        and ip.target
+    ):
+        return ip.target
+    start = result.absolute(step.start)
+    passed = next((p.dst for p in plan.passes if p.opening == arg and result.absolute(p.start) == start and p.dst), "")
+    if passed:
+        return passed
+    opening = builder.site.opening(arg)
+    return opening.other(room) if room in opening.rooms else opening.rooms[1]
+
+
+def _point(builder: ProblemBuilder, ends_at: EndsAt, arg: str, room: str, room_after: str) -> Point | None:
+    """Where a step that ends at ``ends_at`` leaves the robot (None: where it was)."""
+    match ends_at:
+        case EndsAt.NEAR_SIDE:
+            return builder.beside(arg, room)
+        case EndsAt.FAR_SIDE:
+            return builder.beside(arg, room_after)
+        case EndsAt.OBJECT:
+            return builder.object_point(arg)
+        case EndsAt.DROP:
+            return builder.drop_point(arg)
+    return None

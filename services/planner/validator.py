@@ -28,7 +28,8 @@ from itertools import pairwise
 
 import clingo
 
-from protocol.site import Site
+from protocol.actions import STEPS, Action, EndsAt, Fluents
+from protocol.site import Opening, Site
 
 from .plan import TeamResult
 from .problem import BESIDE_MARGIN, ProblemBuilder
@@ -104,10 +105,7 @@ def validate(
         if state is None:
             errors.append(f"{rid}: not in the world")
             continue
-        room = _room_of(site, state, builder)
-        beside = state.beside
-        carrying = set(state.carrying)
-        delivered = set(state.delivered)
+        fl = Fluents(_room_of(site, state, builder), state.beside, set(state.carrying), set(state.delivered))
         pos: tuple[float, float] | None = (state.pose[0], state.pose[1])
         in_progress = state.in_progress
         t = world.now - TIME_TOLERANCE
@@ -120,90 +118,61 @@ def validate(
             if step.start < t - 1e-6:
                 errors.append(f"{where}: starts before the previous step ends ({t:g})")
             t = max(t, step.end)
-            arg = step.args[0] if step.args else ""
-            if step.action == "approach":
+            if step.action not in STEPS:
+                errors.append(f"{where}: unknown action")
+                prev = step
+                continue
+            action, arg = Action(step.action), step.args[0] if step.args else ""
+            # the robot is in the middle of this step (it must finish it first)
+            first_in_progress = i == 0 and in_progress is not None
+            continuing = first_in_progress and in_progress.action == action and in_progress.args[:1] == (arg,)
+            room_after = ""
+            if action is Action.APPROACH:
                 opening = _opening(site, arg)
-                if opening is None or room not in opening.rooms:
-                    errors.append(f"{where}: {arg} is not an opening of room {room}")
-                else:
-                    target = opening.beside(room, site.params.robot_radius + BESIDE_MARGIN)
-                    if pos is not None:
-                        _check_duration(errors, where, pos, target, speed, step)
-                    pos = target
-                beside = arg
-            elif step.action == "opendoor":
+                if opening is None or fl.room not in opening.rooms:
+                    errors.append(f"{where}: {arg} is not an opening of room {fl.room}")
+                    fl.apply(action, arg)
+                    prev = step
+                    continue
+            elif action is Action.OPENDOOR:
                 opening = _opening(site, arg)
                 if opening is None or opening.kind != "door" or not opening.human_operated:
                     errors.append(f"{where}: {arg} is not a human-operated door")
-                if beside != arg:
-                    errors.append(f"{where}: the robot is not beside {arg} (beside {beside or 'nothing'})")
-            elif step.action == "gothrough":
+                if fl.beside != arg:
+                    errors.append(f"{where}: the robot is not beside {arg} (beside {fl.beside or 'nothing'})")
+            elif action is Action.GOTHROUGH:
                 opening = _opening(site, arg)
-                continuing = (
-                    i == 0
-                    and in_progress is not None
-                    and in_progress.action == "gothrough"
-                    and in_progress.args[:1] == (arg,)
-                )
                 if opening is None:
                     errors.append(f"{where}: unknown opening {arg}")
                     continue
                 if continuing:
-                    room = opening.other(in_progress.target)  # it is leaving this room
-                elif room not in opening.rooms:
-                    errors.append(f"{where}: {arg} is not an opening of room {room}")
+                    fl.room = opening.other(in_progress.target)  # it is leaving this room
+                elif fl.room not in opening.rooms:
+                    errors.append(f"{where}: {arg} is not an opening of room {fl.room}")
                     continue
-                if beside != arg and not continuing:
-                    errors.append(f"{where}: not preceded by approach({arg})")
-                if opening.kind == "door" and opening.human_operated and not continuing:
-                    if prev is None or prev.action != "opendoor" or prev.args[:1] != (arg,):
-                        errors.append(f"{where}: a human-operated door without opendoor first")
-                    if not any(d == arg and s - 1e-6 <= step.start and step.end <= e + 1e-6 for d, s, e in openings):
-                        errors.append(f"{where}: the door is not open then (no planned opening covers it)")
-                other = opening.other(room)
-                stays.append((rid, room, since, step.end))
+                if not continuing:
+                    _check_entry(errors, where, opening, fl.beside, prev, step, openings)
+                room_after = opening.other(fl.room)
+                stays.append((rid, fl.room, since, step.end))
                 passes.setdefault(arg, []).append((step.start, step.end, rid))
-                room, since = other, step.start
-                target = opening.beside(other, site.params.robot_radius + BESIDE_MARGIN)
-                if not continuing and pos is not None:
-                    _check_duration(errors, where, pos, target, speed, step)
-                pos = target
-                beside = ""
-            elif step.action in ("load", "unload"):
+                since = step.start
+            else:
                 spec = site.objects.get(arg)
                 if spec is None:
                     errors.append(f"{where}: unknown object {arg}")
                     continue
-                if spec.robot != rid:
-                    errors.append(f"{where}: {arg} belongs to {spec.robot}")
-                if step.action == "load":
-                    if arg in carrying or arg in delivered or arg in delivered_before:
-                        errors.append(f"{where}: {arg} is already carried or delivered")
-                    if room != spec.room and not (i == 0 and in_progress is not None and in_progress.action == "load"):
-                        errors.append(f"{where}: {arg} is in {spec.room}, the robot in {room}")
-                    if len(carrying) >= site.params.robot_capacity:
-                        errors.append(f"{where}: capacity {site.params.robot_capacity} exceeded")
-                    carrying.add(arg)
-                    pos = spec.position
-                else:
-                    if arg not in carrying:
-                        errors.append(f"{where}: {arg} is not carried")
-                    if room != spec.deliver_to:
-                        errors.append(f"{where}: {arg} goes to {spec.deliver_to}, the robot is in {room}")
-                    carrying.discard(arg)
-                    delivered.add(arg)
-                    pos = None  # the drop point is the planner's choice
-                if step.end - step.start < site.params.load_time - TIME_TOLERANCE and not (
-                    i == 0 and in_progress is not None
-                ):
-                    errors.append(f"{where}: shorter than load_time")
-                beside = ""
-            else:
-                errors.append(f"{where}: unknown action")
+                under_way = in_progress.action if first_in_progress else ""
+                _check_handling(errors, where, site, rid, fl, step, delivered_before, under_way)
+            target = _end_point(site, STEPS[action].ends_at, arg, fl.room, room_after)
+            if STEPS[action].straight_line and pos is not None and not continuing:
+                _check_duration(errors, where, pos, target, speed, step)
+            if STEPS[action].ends_at is not EndsAt.STAYS:
+                pos = target
+            fl.apply(action, arg, room_after)
             prev = step
-        stays.append((rid, room, since, max(t, since)))
+        stays.append((rid, fl.room, since, max(t, since)))
         for obj, spec in site.objects.items():
-            if spec.robot == rid and obj not in delivered and obj not in delivered_before:
+            if spec.robot == rid and obj not in fl.delivered and obj not in delivered_before:
                 errors.append(f"{rid}: object {obj} is never delivered")
     _check_openings(errors, site, openings, windows, existing, hold)
     for opening, items in passes.items():
@@ -216,6 +185,73 @@ def validate(
             if r == room and s < t1 and e > t0:
                 errors.append(f"{rid} is in forbidden room {room} during [{max(s, t0):g}, {min(e, t1):g})")
     return errors
+
+
+def _check_entry(
+    errors: list[str],
+    where: str,
+    opening: Opening,
+    beside: str,
+    prev: StepView | None,
+    step: StepView,
+    openings: Sequence[tuple[str, float, float]],
+) -> None:
+    """A gothrough not under way: after approaching the opening, and through a human-operated door
+    only after opendoor and inside a planned opening window."""
+    arg = opening.id
+    if beside != arg:
+        errors.append(f"{where}: not preceded by approach({arg})")
+    if opening.kind == "door" and opening.human_operated:
+        if prev is None or prev.action != Action.OPENDOOR or prev.args[:1] != (arg,):
+            errors.append(f"{where}: a human-operated door without opendoor first")
+        if not any(d == arg and s - 1e-6 <= step.start and step.end <= e + 1e-6 for d, s, e in openings):
+            errors.append(f"{where}: the door is not open then (no planned opening covers it)")
+
+
+def _check_handling(
+    errors: list[str],
+    where: str,
+    site: Site,
+    rid: str,
+    fl: Fluents,
+    step: StepView,
+    delivered_before: frozenset[str],
+    under_way: str,
+) -> None:
+    """A load or unload: the robot's own object, in the right room, within capacity; it lasts
+    load_time unless the robot is in the middle of an action (``under_way``: its name) at the start."""
+    arg = step.args[0]
+    spec = site.objects[arg]
+    if spec.robot != rid:
+        errors.append(f"{where}: {arg} belongs to {spec.robot}")
+    if step.action == Action.LOAD:
+        if arg in fl.carrying or arg in fl.delivered or arg in delivered_before:
+            errors.append(f"{where}: {arg} is already carried or delivered")
+        if fl.room != spec.room and under_way != Action.LOAD:
+            errors.append(f"{where}: {arg} is in {spec.room}, the robot in {fl.room}")
+        if len(fl.carrying) >= site.params.robot_capacity:
+            errors.append(f"{where}: capacity {site.params.robot_capacity} exceeded")
+    else:
+        if arg not in fl.carrying:
+            errors.append(f"{where}: {arg} is not carried")
+        if fl.room != spec.deliver_to:
+            errors.append(f"{where}: {arg} goes to {spec.deliver_to}, the robot is in {fl.room}")
+    if step.end - step.start < site.params.load_time - TIME_TOLERANCE and not under_way:
+        errors.append(f"{where}: shorter than load_time")
+
+
+def _end_point(site: Site, ends_at: EndsAt, arg: str, room: str, room_after: str) -> tuple[float, float] | None:
+    """Where a step leaves the robot, in the site's own geometry (None: not known here - the drop
+    point is the planner's choice - or where it was)."""
+    margin = site.params.robot_radius + BESIDE_MARGIN
+    match ends_at:
+        case EndsAt.NEAR_SIDE:
+            return site.opening(arg).beside(room, margin)
+        case EndsAt.FAR_SIDE:
+            return site.opening(arg).beside(room_after, margin)
+        case EndsAt.OBJECT:
+            return site.objects[arg].position
+    return None
 
 
 def _check_openings(

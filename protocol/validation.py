@@ -1,0 +1,200 @@
+"""msgspec's validation errors, told the ARROCH way: which field, and what is wrong with it.
+
+msgspec says ``Expected `float` <= 10000.0 - at `$.poses[0].x``` and stops at the first problem.
+:func:`field_error` turns that into a :class:`ProtocolError` with the field path as the rest of
+the project writes it (``poses[0].x``; map entries as ``robots.r1``) and the problem in words
+that name the value (``100000.0 is above the maximum 10000.0``). It reads the offending value in
+the plain data that was being validated and the field's declared type, so the words can say what
+was found and what was allowed. The same formatter serves messages off the wire, site files, the
+constraint library and the tablet's messages.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import typing
+from typing import Any, Literal
+
+import msgspec
+
+from .errors import ProtocolError
+from .schema import ID_PATTERN, Row
+
+_SUFFIX = re.compile(r"^(?P<what>.*?)(?: - at (?P<key>`key` in )?`(?P<path>\$[^`]*)`)?$", re.S)
+_TOKEN = re.compile(r"\.([^.\[]+)|\[(\d+|\.\.\.)\]")
+_MISSING = re.compile(r"^Object missing required field `(?P<name>[^`]+)`$")
+_TYPE = re.compile(r"^Expected `(?P<want>[^`]+)`, got `(?P<got>[^`]+)`$")
+_BOUND = re.compile(r"^Expected `(?P<kind>int|float)` (?P<op>>=|<=|>|<) (?P<bound>\S+)$")
+_LENGTH = re.compile(r"^Expected `(?P<kind>str|bytes|array|object)` of length (?P<op>>=|<=) (?P<n>\d+)$")
+_WIRE_NAMES = {"array": "list", "object": "map", "None": "NoneType", "null": "NoneType"}
+_NOTHING = object()
+
+
+def field_error(exc: msgspec.ValidationError, root: Any, data: Any, prefix: str = "") -> ProtocolError:
+    """The :class:`ProtocolError` for msgspec's ``exc``, raised validating ``data`` as ``root``.
+
+    ``prefix`` goes before the field path (e.g. a table's name in a file)."""
+    cause = exc.__cause__
+    if isinstance(cause, ProtocolError):  # raised by a check of our own, already in words
+        return ProtocolError(_join(prefix, cause.field), cause.problem)
+    text = str(exc)
+    match = _SUFFIX.match(text)
+    what, path = (match["what"], match["path"] or "$") if match else (text, "$")
+    steps = _resolve(root, data, _TOKEN.findall(path[1:]))
+    field = _join(prefix, _format(steps))
+    value, hint = (steps[-1][1], steps[-1][2]) if steps else (data, root)
+    if match and match["key"]:
+        return _key_error(what, field, value)
+    if (missing := _MISSING.match(what)) is not None:
+        return ProtocolError(_join(field, missing["name"]), "required field is missing")
+    if len(steps) >= 2 and _has_mark(steps[-2][2], Row) and _TYPE.match(what):
+        # A wrong element in a row of numbers: the row is what is wrong.
+        return ProtocolError(_format(steps[:-1], prefix), f"expected numbers, got {_name(value)}")
+    if _has_mark(hint, Row) and _LENGTH.match(what) or _has_mark(hint, Row) and _TYPE.match(what):
+        width = _fixed_length(hint)
+        found = f"{len(value)} values" if isinstance(value, list) else _name(value)
+        return ProtocolError(field, f"expected a row of {width} numbers, got {found}")
+    return ProtocolError(field, _problem(what, value, hint))
+
+
+def _problem(what: str, value: Any, hint: Any) -> str:
+    if (m := _TYPE.match(what)) is not None:
+        want = " or ".join(_WIRE_NAMES.get(w, w) for w in m["want"].split(" | "))
+        got = _name(value) if value is not _NOTHING else _WIRE_NAMES.get(m["got"], m["got"])
+        return f"expected {want}, got {got}"
+    if (m := _BOUND.match(what)) is not None and value is not _NOTHING:
+        if isinstance(value, float) and not math.isfinite(value):
+            return f"must be finite, got {value}"
+        shown = float(value) if m["kind"] == "float" else value
+        side = "below the minimum" if m["op"] in (">=", ">") else "above the maximum"
+        return f"{shown} is {side} {m['bound']}"
+    if (m := _LENGTH.match(what)) is not None and value is not _NOTHING:
+        n, size = m["n"], len(value)
+        if m["op"] == ">=":  # only fixed lengths have a minimum
+            return f"expected {n} items, got {size}"
+        return {
+            "str": f"string of {size} characters exceeds the limit {n}",
+            "bytes": f"{size} bytes exceeds the limit {n}",
+            "array": f"list of {size} items exceeds the limit {n}",
+            "object": f"map of {size} entries exceeds the limit {n}",
+        }[m["kind"]]
+    if what.startswith("Expected `str` matching regex") and isinstance(value, str):
+        if ID_PATTERN.pattern in what or "A-Za-z" in what:
+            return f"{value[:40]!r} is not an identifier (letter first, then letters, digits, _ or -; 64 at most)"
+        return f"{value[:40]!r} does not have the expected form"
+    if what.startswith("Invalid enum value"):
+        choices = _choices(hint)
+        if choices:
+            return f"{value!r} is not one of {', '.join(map(str, choices))}"
+    return what[:1].lower() + what[1:]
+
+
+def _key_error(what: str, field: str, mapping: Any) -> ProtocolError:
+    """A problem with a key of the map at ``field``."""
+    keys = list(mapping) if isinstance(mapping, dict) else []
+    bad = next((k for k in keys if not isinstance(k, str)), None)
+    if bad is not None:
+        return ProtocolError(field, f"map key {bad!r} is not a string")
+    if (m := _LENGTH.match(what)) is not None:
+        return ProtocolError(field, f"map key longer than {m['n']} characters")
+    return ProtocolError(field, f"map key: {what[:1].lower() + what[1:]}")
+
+
+# ---------------------------------------------------------------------------- walking the path
+
+
+def _resolve(root: Any, data: Any, tokens: list[tuple[str, str]]) -> list[tuple[str, Any, Any]]:
+    """``(step, value, declared type)`` along msgspec's path; ``step`` is ``.name`` or ``[i]``.
+
+    msgspec writes a map entry as ``[...]``: the entry is found again as the first whose value
+    does not validate against the map's value type."""
+    steps: list[tuple[str, Any, Any]] = []
+    value, hint = data, root
+    for name, index in tokens:
+        if name:
+            hint = _field_type(hint, name)
+            value = value.get(name, _NOTHING) if isinstance(value, dict) else _NOTHING
+            steps.append((f".{name}", value, hint))
+        elif index == "...":
+            item = _args(hint)[1] if len(_args(hint)) == 2 else Any
+            key = _failing_key(value, item)
+            value = value.get(key, _NOTHING) if isinstance(value, dict) else _NOTHING
+            steps.append((f".{key}" if key is not None else "[...]", value, item))
+            hint = item
+        else:
+            i = int(index)
+            hint = _args(hint)[0] if _args(hint) else Any
+            value = value[i] if isinstance(value, list) and i < len(value) else _NOTHING
+            steps.append((f"[{i}]", value, hint))
+    return steps
+
+
+def _failing_key(mapping: Any, item: Any) -> Any:
+    if not isinstance(mapping, dict):
+        return None
+    for key, value in mapping.items():
+        try:
+            msgspec.convert(value, item)
+        except (msgspec.ValidationError, TypeError):
+            return key
+    return None
+
+
+def _format(steps: list[tuple[str, Any, Any]], prefix: str = "") -> str:
+    return _join(prefix, "".join(step for step, _, _ in steps).lstrip("."))
+
+
+def _join(prefix: str, field: str) -> str:
+    if not prefix:
+        return field
+    if not field:
+        return prefix
+    return f"{prefix}{field}" if field.startswith("[") else f"{prefix}.{field}"
+
+
+# ---------------------------------------------------------------------------- declared types
+
+
+def _strip(hint: Any) -> Any:
+    """The type without ``Annotated`` and ``| None``."""
+    while True:
+        if typing.get_origin(hint) is typing.Annotated:
+            hint = typing.get_args(hint)[0]
+            continue
+        args = typing.get_args(hint)
+        if type(None) in args and len(args) == 2:
+            hint = next(a for a in args if a is not type(None))
+            continue
+        return hint
+
+
+def _args(hint: Any) -> tuple[Any, ...]:
+    return typing.get_args(_strip(hint))
+
+
+def _field_type(hint: Any, name: str) -> Any:
+    cls = _strip(hint)
+    if isinstance(cls, type) and issubclass(cls, msgspec.Struct):
+        return typing.get_type_hints(cls, include_extras=True).get(name, Any)
+    return Any
+
+
+def _has_mark(hint: Any, mark: type) -> bool:
+    return any(isinstance(m, mark) for m in getattr(hint, "__metadata__", ()))
+
+
+def _fixed_length(hint: Any) -> int | None:
+    for meta in getattr(hint, "__metadata__", ()):
+        if isinstance(meta, msgspec.Meta) and meta.min_length is not None and meta.min_length == meta.max_length:
+            return meta.min_length
+    return None
+
+
+def _choices(hint: Any) -> tuple[Any, ...]:
+    base = _strip(hint)
+    return typing.get_args(base) if typing.get_origin(base) is Literal else ()
+
+
+def _name(value: Any) -> str:
+    return type(value).__name__

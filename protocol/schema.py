@@ -61,6 +61,14 @@ class JsonTree:
     """Marker: a JSON-like tree (maps with string keys, lists, finite numbers, strings, ``None``)."""
 
 
+@dataclass(frozen=True)
+class Says:
+    """Marker: how to word any refusal of this value itself (``words(value) -> problem``), where the
+    generic words would be vaguer (``"tag id 600 is not in family 36h11"``)."""
+
+    words: Callable[[Any], str]
+
+
 # ---------------------------------------------------------------------------- field types
 
 

@@ -11,6 +11,7 @@ constraint library and the tablet's messages.
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import typing
@@ -19,7 +20,7 @@ from typing import Any, Literal
 import msgspec
 
 from .errors import ProtocolError
-from .schema import ID_PATTERN, Row
+from .schema import Row, Says
 
 _SUFFIX = re.compile(r"^(?P<what>.*?)(?: - at (?P<key>`key` in )?`(?P<path>\$[^`]*)`)?$", re.S)
 _TOKEN = re.compile(r"\.([^.\[]+)|\[(\d+|\.\.\.)\]")
@@ -27,66 +28,159 @@ _MISSING = re.compile(r"^Object missing required field `(?P<name>[^`]+)`$")
 _TYPE = re.compile(r"^Expected `(?P<want>[^`]+)`, got `(?P<got>[^`]+)`$")
 _BOUND = re.compile(r"^Expected `(?P<kind>int|float)` (?P<op>>=|<=|>|<) (?P<bound>\S+)$")
 _LENGTH = re.compile(r"^Expected `(?P<kind>str|bytes|array|object)` of length (?P<op>>=|<=) (?P<n>\d+)$")
+_UNKNOWN = re.compile(r"^Object contains unknown field `(?P<name>[^`]+)`$")
 _WIRE_NAMES = {"array": "list", "object": "map", "None": "NoneType", "null": "NoneType"}
 _NOTHING = object()
 
 
-def field_error(exc: msgspec.ValidationError, root: Any, data: Any, prefix: str = "") -> ProtocolError:
-    """The :class:`ProtocolError` for msgspec's ``exc``, raised validating ``data`` as ``root``.
+class Words:
+    """How problems are worded: for messages off the wire, in the terms of the wire (``expected
+    float, got str``). :class:`FileWords` words them for people editing a TOML file."""
 
-    ``prefix`` goes before the field path (e.g. a table's name in a file)."""
-    cause = exc.__cause__
-    if isinstance(cause, ProtocolError):  # raised by a check of our own, already in words
-        return ProtocolError(_join(prefix, cause.field), cause.problem)
-    text = str(exc)
-    match = _SUFFIX.match(text)
-    what, path = (match["what"], match["path"] or "$") if match else (text, "$")
-    steps = _resolve(root, data, _TOKEN.findall(path[1:]))
-    field = _join(prefix, _format(steps))
-    value, hint = (steps[-1][1], steps[-1][2]) if steps else (data, root)
-    if match and match["key"]:
-        return _key_error(what, field, value)
-    if (missing := _MISSING.match(what)) is not None:
-        return ProtocolError(_join(field, missing["name"]), "required field is missing")
-    if len(steps) >= 2 and _has_mark(steps[-2][2], Row) and _TYPE.match(what):
-        # A wrong element in a row of numbers: the row is what is wrong.
-        return ProtocolError(_format(steps[:-1], prefix), f"expected numbers, got {_name(value)}")
-    if _has_mark(hint, Row) and _LENGTH.match(what) or _has_mark(hint, Row) and _TYPE.match(what):
-        width = _fixed_length(hint)
-        found = f"{len(value)} values" if isinstance(value, list) else _name(value)
-        return ProtocolError(field, f"expected a row of {width} numbers, got {found}")
-    return ProtocolError(field, _problem(what, value, hint))
+    def value(self, value: Any) -> str:
+        return type(value).__name__
 
+    def type_mismatch(self, want: list[str], value: Any, hint: Any, name: str) -> str:
+        return f"expected {' or '.join(_WIRE_NAMES.get(w, w) for w in want)}, got {self.value(value)}"
 
-def _problem(what: str, value: Any, hint: Any) -> str:
-    if (m := _TYPE.match(what)) is not None:
-        want = " or ".join(_WIRE_NAMES.get(w, w) for w in m["want"].split(" | "))
-        got = _name(value) if value is not _NOTHING else _WIRE_NAMES.get(m["got"], m["got"])
-        return f"expected {want}, got {got}"
-    if (m := _BOUND.match(what)) is not None and value is not _NOTHING:
+    def bound(self, kind: str, op: str, bound: str, value: Any) -> str:
         if isinstance(value, float) and not math.isfinite(value):
             return f"must be finite, got {value}"
-        shown = float(value) if m["kind"] == "float" else value
-        side = "below the minimum" if m["op"] in (">=", ">") else "above the maximum"
-        return f"{shown} is {side} {m['bound']}"
-    if (m := _LENGTH.match(what)) is not None and value is not _NOTHING:
-        n, size = m["n"], len(value)
-        if m["op"] == ">=":  # only fixed lengths have a minimum
+        shown = float(value) if kind == "float" else value
+        side = "below the minimum" if op in (">=", ">") else "above the maximum"
+        return f"{shown} is {side} {bound}"
+
+    def length(self, kind: str, op: str, n: str, value: Any, name: str) -> str:
+        size = len(value)
+        if op == ">=":  # only fixed lengths have a minimum
             return f"expected {n} items, got {size}"
         return {
             "str": f"string of {size} characters exceeds the limit {n}",
             "bytes": f"{size} bytes exceeds the limit {n}",
             "array": f"list of {size} items exceeds the limit {n}",
             "object": f"map of {size} entries exceeds the limit {n}",
-        }[m["kind"]]
+        }[kind]
+
+    def choice(self, value: Any, choices: tuple[Any, ...]) -> str:
+        return f"{value!r} is not one of {', '.join(map(str, choices))}"
+
+    def missing(self, parent: str, name: str, hint: Any) -> tuple[str, str]:
+        return _join(parent, name), "required field is missing"
+
+    def unknown(self, parent: str, name: str, allowed: tuple[str, ...]) -> tuple[str, str]:
+        return _join(parent, name), "unknown field"
+
+
+class FileWords(Words):
+    """Problems worded for a TOML file: values as they are written there, tables and keys."""
+
+    _WANT = {"int": "an integer", "float": "a number", "str": "a string", "bool": "true or false", "object": "a table"}
+
+    def value(self, value: Any) -> str:
+        if isinstance(value, dict):
+            return "a table"
+        if isinstance(value, bool):
+            return "true" if value else "false"
+        if isinstance(value, str):
+            return json.dumps(value) if len(value) < 60 else "a long string"
+        if isinstance(value, list):
+            text = "[" + ", ".join(self.value(x) for x in value) + "]"
+            return f"an array {text}" if len(text) < 60 else "an array"
+        return repr(value)
+
+    def type_mismatch(self, want: list[str], value: Any, hint: Any, name: str) -> str:
+        if want == ["array"] and _records_listed(hint):
+            return f"expected an array of tables [[{name}]], got {self.value(value)}"
+        return f"expected {' or '.join(self._WANT.get(w, 'an ' + w) for w in want)}, got {self.value(value)}"
+
+    def bound(self, kind: str, op: str, bound: str, value: Any) -> str:
+        if isinstance(value, float) and not math.isfinite(value):
+            return f"must be a finite number, got {value!r}"
+        limit = float(bound)
+        if op == ">":
+            return f"must be greater than {limit:g}, got {value:g}"
+        if op == ">=":
+            return f"must not be negative, got {value:g}" if limit == 0 else f"must be at least {bound}, got {value}"
+        return f"must be at most {bound}, got {value}"
+
+    def length(self, kind: str, op: str, n: str, value: Any, name: str) -> str:
+        if kind == "array" and op == ">=" and n == "1":
+            return f"at least one [[{name}]] entry is required"
+        return super().length(kind, op, n, value, name)
+
+    def choice(self, value: Any, choices: tuple[Any, ...]) -> str:
+        return f"{self.value(value)} is not one of {', '.join(map(str, choices))}"
+
+    def missing(self, parent: str, name: str, hint: Any) -> tuple[str, str]:
+        if parent:
+            return parent, f"missing required key {name!r}"
+        if _records_listed(hint):
+            return name, f"missing required [[{name}]] entries"
+        return name, f"missing required table [{name}]"
+
+    def unknown(self, parent: str, name: str, allowed: tuple[str, ...]) -> tuple[str, str]:
+        what = "key" if parent else "table"
+        return (parent or name), f"unknown {what} {name!r} (expected {', '.join(allowed)})"
+
+
+WIRE = Words()
+FILE = FileWords()
+
+
+def field_error(
+    exc: msgspec.ValidationError, root: Any, data: Any, prefix: str = "", words: Words = WIRE
+) -> ProtocolError:
+    """The :class:`ProtocolError` for msgspec's ``exc``, raised validating ``data`` as ``root``.
+
+    ``prefix`` goes before the field path (e.g. a table's name in a file); ``words`` says how the
+    problem is worded (:data:`WIRE` or :data:`FILE`)."""
+    text = str(exc)
+    match = _SUFFIX.match(text)
+    what, path = (match["what"], match["path"] or "$") if match else (text, "$")
+    steps = _resolve(root, data, _TOKEN.findall(path[1:]))
+    field = _join(prefix, _format(steps))
+    value, hint = (steps[-1][1], steps[-1][2]) if steps else (data, root)
+    cause = exc.__cause__
+    if isinstance(cause, ProtocolError):  # raised by a record's own check, already in words
+        return ProtocolError(_join(field, cause.field), cause.problem)
+    if match and match["key"]:
+        return _key_error(what, field, value)
+    if (missing := _MISSING.match(what)) is not None:
+        return ProtocolError(*words.missing(field, missing["name"], _field_type(hint, missing["name"])))
+    if (unknown := _UNKNOWN.match(what)) is not None:
+        allowed = tuple(_strip(hint).__struct_fields__) if _is_record(hint) else ()
+        return ProtocolError(*words.unknown(field, unknown["name"], allowed))
+    says = next((m for m in getattr(hint, "__metadata__", ()) if isinstance(m, Says)), None)
+    if says is not None and value is not _NOTHING:
+        return ProtocolError(field, says.words(value))
+    if len(steps) >= 2 and _has_mark(steps[-2][2], Row) and _TYPE.match(what):
+        # A wrong element in a row of numbers: the row is what is wrong.
+        return ProtocolError(_format(steps[:-1], prefix), f"expected numbers, got {_name(value)}")
+    if _has_mark(hint, Row) and (_LENGTH.match(what) or _TYPE.match(what)):
+        width = _fixed_length(hint)
+        found = f"{len(value)} values" if isinstance(value, list) else _name(value)
+        return ProtocolError(field, f"expected a row of {width} numbers, got {found}")
+    name = steps[-1][0].lstrip(".") if steps else ""
+    return ProtocolError(field, _problem(what, value, hint, name, words))
+
+
+def _problem(what: str, value: Any, hint: Any, name: str, words: Words) -> str:
+    if (m := _TYPE.match(what)) is not None:
+        if value is _NOTHING:
+            return f"expected {m['want']}, got {m['got']}"
+        return words.type_mismatch(m["want"].split(" | "), value, hint, name)
+    if (m := _BOUND.match(what)) is not None and value is not _NOTHING:
+        return words.bound(m["kind"], m["op"], m["bound"], value)
+    if (m := _LENGTH.match(what)) is not None and value is not _NOTHING:
+        return words.length(m["kind"], m["op"], m["n"], value, name)
     if what.startswith("Expected `str` matching regex") and isinstance(value, str):
-        if ID_PATTERN.pattern in what or "A-Za-z" in what:
+        if "A-Za-z" in what:
             return f"{value[:40]!r} is not an identifier (letter first, then letters, digits, _ or -; 64 at most)"
         return f"{value[:40]!r} does not have the expected form"
     if what.startswith("Invalid enum value"):
         choices = _choices(hint)
         if choices:
-            return f"{value!r} is not one of {', '.join(map(str, choices))}"
+            return words.choice(value, choices)
     return what[:1].lower() + what[1:]
 
 
@@ -178,6 +272,17 @@ def _field_type(hint: Any, name: str) -> Any:
     if isinstance(cls, type) and issubclass(cls, msgspec.Struct):
         return typing.get_type_hints(cls, include_extras=True).get(name, Any)
     return Any
+
+
+def _is_record(hint: Any) -> bool:
+    cls = _strip(hint)
+    return isinstance(cls, type) and issubclass(cls, msgspec.Struct)
+
+
+def _records_listed(hint: Any) -> bool:
+    """True for a list of records (an array of tables, in a file)."""
+    base = _strip(hint)
+    return typing.get_origin(base) is list and _is_record(typing.get_args(base)[0])
 
 
 def _has_mark(hint: Any, mark: type) -> bool:

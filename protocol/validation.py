@@ -168,7 +168,9 @@ def _problem(what: str, value: Any, hint: Any, name: str, words: Words) -> str:
     if (m := _TYPE.match(what)) is not None:
         if value is _NOTHING:
             return f"expected {m['want']}, got {m['got']}"
-        return words.type_mismatch(m["want"].split(" | "), value, hint, name)
+        want = m["want"].split(" | ")
+        # "or null" says a key may be left out, which is not what is wrong with the value given.
+        return words.type_mismatch([w for w in want if w not in ("null", "None")] or want, value, hint, name)
     if (m := _BOUND.match(what)) is not None and value is not _NOTHING:
         return words.bound(m["kind"], m["op"], m["bound"], value)
     if (m := _LENGTH.match(what)) is not None and value is not _NOTHING:

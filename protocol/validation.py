@@ -11,10 +11,12 @@ constraint library and the tablet's messages.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import re
 import typing
+from functools import cache
 from typing import Any, Literal
 
 import msgspec
@@ -72,7 +74,11 @@ class Words:
 
 
 class FileWords(Words):
-    """Problems worded for a TOML file: values as they are written there, tables and keys."""
+    """Problems worded for a TOML file: values as they are written there, tables and keys.
+    ``tables_at_top``: the top level holds tables (a site file), not keys (a config's one table)."""
+
+    def __init__(self, *, tables_at_top: bool = True) -> None:
+        self.tables_at_top = tables_at_top
 
     _WANT = {"int": "an integer", "float": "a number", "str": "a string", "bool": "true or false", "object": "a table"}
 
@@ -112,19 +118,49 @@ class FileWords(Words):
         return f"{self.value(value)} is not one of {', '.join(map(str, choices))}"
 
     def missing(self, parent: str, name: str, hint: Any) -> tuple[str, str]:
-        if parent:
+        if parent or not self.tables_at_top:
             return parent, f"missing required key {name!r}"
         if _records_listed(hint):
             return name, f"missing required [[{name}]] entries"
         return name, f"missing required table [{name}]"
 
     def unknown(self, parent: str, name: str, allowed: tuple[str, ...]) -> tuple[str, str]:
-        what = "key" if parent else "table"
+        what = "key" if parent or not self.tables_at_top else "table"
         return (parent or name), f"unknown {what} {name!r} (expected {', '.join(allowed)})"
 
 
 WIRE = Words()
 FILE = FileWords()
+CONFIG = FileWords(tables_at_top=False)
+
+
+@cache
+def fields_struct(cls: type) -> type[msgspec.Struct]:
+    """A Struct with the fields of dataclass ``cls`` (their annotated types and defaults) and no
+    other: what :func:`check_fields` converts with, so a dataclass states its limits once."""
+    hints = typing.get_type_hints(cls, include_extras=True)
+    fields = []
+    for f in dataclasses.fields(cls):
+        if f.default is not dataclasses.MISSING:
+            default: Any = f.default
+        elif f.default_factory is not dataclasses.MISSING:
+            default = msgspec.field(default_factory=f.default_factory)
+        else:
+            default = msgspec.NODEFAULT
+        fields.append((f.name, hints[f.name], default))
+    return msgspec.defstruct(f"{cls.__name__}Fields", fields, kw_only=True, forbid_unknown_fields=True)
+
+
+def check_fields(cls: type, data: Any, words: Words = CONFIG) -> dict[str, Any]:
+    """``data`` (a mapping, e.g. a TOML table) checked against the annotated fields of dataclass
+    ``cls``: the given keys' values, converted (an int where a float is asked becomes a float).
+    Unknown keys, wrong types and values out of their limits raise :class:`ProtocolError`."""
+    struct = fields_struct(cls)
+    try:
+        checked = msgspec.convert(data, struct)
+    except msgspec.ValidationError as exc:
+        raise field_error(exc, struct, data, words=words) from None
+    return {name: getattr(checked, name) for name in data}
 
 
 def field_error(

@@ -229,6 +229,10 @@ def _key_error(what: str, field: str, mapping: Any) -> ProtocolError:
     if bad is not None:
         return ProtocolError(field, f"map key {bad!r} is not a string")
     if (m := _LENGTH.match(what)) is not None:
+        if m["op"] == ">=":
+            return ProtocolError(
+                field, "map key must not be empty" if m["n"] == "1" else f"map key under {m['n']} characters"
+            )
         return ProtocolError(field, f"map key longer than {m['n']} characters")
     return ProtocolError(field, f"map key: {what[:1].lower() + what[1:]}")
 

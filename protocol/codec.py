@@ -22,7 +22,7 @@ from msgspec import Meta
 
 from .errors import ProtocolError
 from .messages import BY_TYPE, Message
-from .schema import extra_checks, record_to_wire
+from .schema import extra_checks, plain_value, record_to_wire
 from .validation import field_error
 
 M = TypeVar("M", bound=Message)
@@ -42,7 +42,7 @@ class _Envelope(msgspec.Struct):
     stamp: Any
 
 
-_encode = msgspec.msgpack.Encoder().encode
+_encode = msgspec.msgpack.Encoder(enc_hook=plain_value).encode
 _envelope = msgspec.msgpack.Decoder(_Envelope).decode
 _untyped = msgspec.msgpack.Decoder().decode
 _TYPED: dict[type, Callable[[Any], Message]] = {}

@@ -23,6 +23,7 @@ from functools import cache
 from typing import Annotated, Any, Literal
 
 import msgspec
+import numpy as np
 from msgspec import Meta
 
 from .errors import ProtocolError
@@ -195,9 +196,20 @@ def run_extra_checks(record: Any) -> None:
 # ---------------------------------------------------------------------------- records as plain data
 
 
+def plain_value(value: Any) -> Any:
+    """A value msgspec does not encode itself, as one it does: numpy numbers and arrays (poses and
+    camera parameters are often computed with numpy) become Python numbers and lists. msgspec asks
+    only for such values, so messages of plain Python values pay nothing for it."""
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"cannot put a {type(value).__name__} on the wire")
+
+
 def record_to_wire(record: msgspec.Struct) -> dict[str, Any]:
     """The record as plain data (maps, lists, scalars; bytes kept as bytes), as it goes on the wire."""
-    return msgspec.to_builtins(record, builtin_types=(bytes,))
+    return msgspec.to_builtins(record, builtin_types=(bytes,), enc_hook=plain_value)
 
 
 def record_from_wire(cls: type, data: Any) -> Any:

@@ -169,3 +169,17 @@ def test_camera_frame_gravity_is_optional_and_old_frames_still_decode():
     bad = msgspec.structs.replace(new, gravity=[0.0, 9.8])
     with pytest.raises(Exception, match="gravity"):
         decode(encode(bad), CameraFrame)
+
+
+def test_numpy_values_go_on_the_wire_as_plain_numbers():
+    """Poses and camera parameters are often computed with numpy: they encode as msgpack numbers."""
+    import numpy as np
+
+    from protocol.messages import CameraTruth
+
+    pose = RobotPose(robot="r0", x=np.float64(1.5), y=np.float32(2.0), theta=np.int64(0))
+    assert msgpack.unpackb(encode(pose))["x"] == 1.5 and decode(encode(pose), RobotPose).y == 2.0
+    truth = CameraTruth(camera="c", frame_seq=1, position=np.array([1.0, 2.0, 3.0]), quaternion=[0.0, 0.0, 0.0, 1.0])
+    assert msgpack.unpackb(encode(truth))["position"] == [1.0, 2.0, 3.0]
+    with pytest.raises(TypeError, match="cannot put a object on the wire"):
+        encode(RobotPose(robot="r0", x=object(), y=0.0, theta=0.0))  # type: ignore[arg-type]

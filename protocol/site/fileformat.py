@@ -116,31 +116,26 @@ class RoomTable(_Table, kw_only=True):
             raise ProtocolError("rect", f"ymax {y1:g} must be greater than ymin {y0:g} (zero or negative depth)")
 
 
-def _distinct_rooms(rooms: tuple[str, str]) -> None:
-    if rooms[0] == rooms[1]:
-        raise ProtocolError("rooms", f"joins room {rooms[0]!r} to itself")
+class _OpeningTable(_Table, kw_only=True):
+    """What doors and passages share: the two rooms they join, where, how wide."""
 
-
-class DoorTable(_Table, kw_only=True):
-    id: Id
     rooms: RoomPair
     center: Vec2
     width: Positive
+
+    def __post_init__(self) -> None:
+        if self.rooms[0] == self.rooms[1]:
+            raise ProtocolError("rooms", f"joins room {self.rooms[0]!r} to itself")
+
+
+class DoorTable(_OpeningTable, kw_only=True):
+    id: Id
     human_operated: bool | None = None
     swing_into: Id | None = None
 
-    def __post_init__(self) -> None:
-        _distinct_rooms(self.rooms)
 
-
-class PassageTable(_Table, kw_only=True):
+class PassageTable(_OpeningTable, kw_only=True):
     id: Id | None = None
-    rooms: RoomPair
-    center: Vec2
-    width: Positive
-
-    def __post_init__(self) -> None:
-        _distinct_rooms(self.rooms)
 
 
 class LandmarkTable(_Table, kw_only=True):

@@ -5,16 +5,19 @@ Every message carries the envelope ``v`` (schema major version), ``type``, ``src
 ``stamp`` default to empty values so code can build a message and let the publisher
 (:class:`protocol.service.Service`) stamp it.
 
+Messages are ``msgspec`` Structs: each field's type carries its limits (:mod:`protocol.schema`),
+which msgspec checks as it decodes (:mod:`protocol.codec`). ``type`` is the Struct's tag (the
+class name); ``v`` is an ordinary field whose default is the class's ``VERSION``.
+
 Trajectories travel as rows ``[t, x, y, theta]`` rather than maps: about 3x cheaper to
 encode, and the row length is checked on decode.
 """
 
-from __future__ import annotations
+from typing import Annotated, ClassVar
 
-from dataclasses import dataclass
-from typing import ClassVar
+from msgspec import Meta, Struct, field
 
-from .schema import Json, Scalar, spec
+from .schema import Choice, Float, Ident, Int, Json, List, Map, Rows, Scalar, Str
 
 # Bounds shared by several messages. Site coordinates are metres; 10 km covers any building.
 COORD = 10_000.0
@@ -28,251 +31,222 @@ LINE_STYLES = ("solid", "xray", "dashed")
 AWAITING = ("", "plan", "feedback", "command", "camera")  # what a paused lockstep simulator waits for (Clock)
 
 
-@dataclass(kw_only=True, slots=True)
-class Message:
-    """Envelope fields common to all messages."""
+class Message(Struct, kw_only=True, tag_field="type", tag=True):
+    """Envelope fields common to all messages. ``TYPE`` is the class name, which msgspec writes
+    as ``type`` (the tag)."""
 
     TYPE: ClassVar[str] = ""
     VERSION: ClassVar[int] = 1
     MAX_SIZE: ClassVar[int] = 1024 * 1024  # encoded bytes accepted on decode
 
-    src: str = spec("", max_len=128)
-    seq: int = spec(0, lo=0, hi=2**63 - 1)
-    stamp: float = spec(0.0, lo=-TIME, hi=TIME)
+    def __init_subclass__(cls, **kwargs: object) -> None:
+        super().__init_subclass__(**kwargs)
+        cls.TYPE = cls.__name__
+
+    v: int = 1  # the schema major version; the decoder refuses one above the class's VERSION
+    src: Str(128) = ""
+    seq: Int(0, 2**63 - 1) = 0
+    stamp: Float(-TIME, TIME) = 0.0
 
 
 # ---------------------------------------------------------------------------- nested records
 
 
-@dataclass(kw_only=True, slots=True)
-class PlanStep:
+class PlanStep(Struct, kw_only=True):
     """One action of a robot's plan, with its planned start and end on the site clock."""
 
-    action: str = spec(choices=("approach", "opendoor", "gothrough", "load", "unload"))
-    args: list[str] = spec(factory=list, max_len=8, ident=True)
-    start: float = spec(lo=-TIME, hi=TIME)
-    end: float = spec(lo=-TIME, hi=TIME)
-    action_id: int = spec(0, lo=0, hi=2**31)
+    action: Choice("approach", "opendoor", "gothrough", "load", "unload")
+    args: List(Ident, 8) = []
+    start: Float(-TIME, TIME)
+    end: Float(-TIME, TIME)
+    action_id: Int(0, 2**31) = 0
 
 
-@dataclass(kw_only=True, slots=True)
-class PlannedOpening:
+class PlannedOpening(Struct, kw_only=True):
     """A door opening the plan asks of the human: door ``door`` open during [start, end)."""
 
-    door: str = spec(ident=True)
-    start: float = spec(lo=-TIME, hi=TIME)
-    end: float = spec(lo=-TIME, hi=TIME)
-    robots: list[str] = spec(factory=list, max_len=1000, ident=True)
+    door: Ident
+    start: Float(-TIME, TIME)
+    end: Float(-TIME, TIME)
+    robots: List(Ident, 1000) = []
 
 
-@dataclass(kw_only=True, slots=True)
-class Constraint:
+class Constraint(Struct, kw_only=True):
     """One active constraint: the library entry and its validated parameters, its window, its ASP."""
 
-    id: str = spec(ident=True)
-    kind: str = spec(ident=True)
-    params: dict[str, Scalar] = spec(factory=dict, max_len=32)
-    start: float = spec(lo=-TIME, hi=TIME)
-    end: float = spec(lo=-TIME, hi=TIME)
-    asp: str = spec(max_len=65536)
-    origin: str = spec("", max_len=128)  # who asked for it (Feedback src)
+    id: Ident
+    kind: Ident
+    params: Map(Scalar, 32) = {}
+    start: Float(-TIME, TIME)
+    end: Float(-TIME, TIME)
+    asp: Str(65536)
+    origin: Str(128) = ""  # who asked for it (Feedback src)
 
 
-@dataclass(kw_only=True, slots=True)
-class Primitive:
+class Primitive(Struct, kw_only=True):
     """A 2-D drawing instruction in image pixels, for thin clients."""
 
-    kind: str = spec(choices=PRIMITIVE_KINDS)
-    points: list[list[float]] = spec(factory=list, max_len=4096, row_len=2, lo=-1e6, hi=1e6)
-    color: list[int] = spec(factory=lambda: [255, 255, 255, 255], max_len=4, lo=0, hi=255)
-    width: float = spec(2.0, lo=0.0, hi=100.0)
-    radius: float = spec(0.0, lo=0.0, hi=1e5)
-    text: str = spec("", max_len=256)
-    style: str = spec("solid", choices=LINE_STYLES)
-    layer: str = spec("", max_len=64)  # e.g. robot id, "status", "door"
+    kind: Choice(*PRIMITIVE_KINDS)
+    points: Rows(2, 4096, -1e6, 1e6) = []
+    color: List(Int(0, 255), 4) = field(default_factory=lambda: [255, 255, 255, 255])
+    width: Float(0.0, 100.0) = 2.0
+    radius: Float(0.0, 1e5) = 0.0
+    text: Str(256) = ""
+    style: Choice(*LINE_STYLES) = "solid"
+    layer: Str(64) = ""  # e.g. robot id, "status", "door"
 
 
 # ---------------------------------------------------------------------------- messages
 
 
-@dataclass(kw_only=True, slots=True)
 class Clock(Message):
-    TYPE: ClassVar[str] = "Clock"
-    time: float = spec(lo=0.0, hi=TIME)
-    mode: str = spec("realtime", choices=("realtime", "rate", "lockstep", "wall"))
-    rate: float = spec(1.0, lo=0.0, hi=1e6)
-    world_version: int = spec(0, lo=0, hi=2**63 - 1)
+    time: Float(0.0, TIME)
+    mode: Choice("realtime", "rate", "lockstep", "wall") = "realtime"
+    rate: Float(0.0, 1e6) = 1.0
+    world_version: Int(0, 2**63 - 1) = 0
     paused: bool = False
     # Lockstep, while paused: what the simulator waits for - "plan" (one answering world_version and
     # at least constraints_version), "feedback" (the ack of the human's feedback), "command" (a
     # robot's command of the plan it has), "camera" (the overlay of a frame it holds); "" otherwise.
     # The planner plans the moment the simulator waits for a plan, and holds while it waits for a
     # feedback's ack (a new constraint set follows).
-    awaiting: str = spec("", choices=AWAITING)
-    constraints_version: int = spec(0, lo=0, hi=2**63 - 1)
+    awaiting: Choice(*AWAITING) = ""
+    constraints_version: Int(0, 2**63 - 1) = 0
 
 
-@dataclass(kw_only=True, slots=True)
 class RobotPose(Message):
-    TYPE: ClassVar[str] = "RobotPose"
-    robot: str = spec(ident=True)
-    x: float = spec(lo=-COORD, hi=COORD)
-    y: float = spec(lo=-COORD, hi=COORD)
-    theta: float = spec(lo=-ANGLE, hi=ANGLE)
+    robot: Ident
+    x: Float(-COORD, COORD)
+    y: Float(-COORD, COORD)
+    theta: Float(-ANGLE, ANGLE)
     # "v" is the envelope's schema version, so the linear velocity travels as "vel".
-    vel: float = spec(0.0, lo=-100.0, hi=100.0)
-    omega: float = spec(0.0, lo=-100.0, hi=100.0)
+    vel: Float(-100.0, 100.0) = 0.0
+    omega: Float(-100.0, 100.0) = 0.0
 
 
-@dataclass(kw_only=True, slots=True)
 class RobotStatus(Message):
-    TYPE: ClassVar[str] = "RobotStatus"
-    robot: str = spec(ident=True)
-    state: str = spec(choices=ROBOT_STATES)
-    plan_id: int = spec(0, lo=0, hi=2**63 - 1)
-    action_id: int = spec(0, lo=0, hi=2**31)  # 0: no action
-    action: str = spec("", max_len=32)
-    args: list[str] = spec(factory=list, max_len=8, ident=True)
-    progress: float = spec(0.0, lo=0.0, hi=1.0)
-    carrying: list[str] = spec(factory=list, max_len=1000, ident=True)
-    delivered: list[str] = spec(factory=list, max_len=100_000, ident=True)
-    waiting_door: str = spec("", max_len=64)
-    detail: str = spec("", max_len=512)
-    world_version: int = spec(0, lo=0, hi=2**63 - 1)
+    robot: Ident
+    state: Choice(*ROBOT_STATES)
+    plan_id: Int(0, 2**63 - 1) = 0
+    action_id: Int(0, 2**31) = 0  # 0: no action
+    action: Str(32) = ""
+    args: List(Ident, 8) = []
+    progress: Float(0.0, 1.0) = 0.0
+    carrying: List(Ident, 1000) = []
+    delivered: List(Ident, 100_000) = []
+    waiting_door: Str(64) = ""
+    detail: Str(512) = ""
+    world_version: Int(0, 2**63 - 1) = 0
 
 
-@dataclass(kw_only=True, slots=True)
 class RobotCommand(Message):
-    TYPE: ClassVar[str] = "RobotCommand"
-    robot: str = spec(ident=True)
-    plan_id: int = spec(lo=0, hi=2**63 - 1)
-    action_id: int = spec(lo=0, hi=2**31)
-    action: str = spec(choices=("approach", "opendoor", "gothrough", "load", "unload", "stop"))
-    args: list[str] = spec(factory=list, max_len=8, ident=True)
-    trajectory: list[list[float]] = spec(factory=list, max_len=MAX_TRAJECTORY, row_len=4, lo=-TIME, hi=TIME)
-    duration: float = spec(0.0, lo=0.0, hi=1e6)  # for load/unload: time spent in place after the path
+    robot: Ident
+    plan_id: Int(0, 2**63 - 1)
+    action_id: Int(0, 2**31)
+    action: Choice("approach", "opendoor", "gothrough", "load", "unload", "stop")
+    args: List(Ident, 8) = []
+    trajectory: Rows(4, MAX_TRAJECTORY, -TIME, TIME) = []
+    duration: Float(0.0, 1e6) = 0.0  # for load/unload: time spent in place after the path
 
 
-@dataclass(kw_only=True, slots=True)
 class TeamPlan(Message):
-    TYPE: ClassVar[str] = "TeamPlan"
-    plan_id: int = spec(lo=0, hi=2**63 - 1)
-    world_version: int = spec(0, lo=0, hi=2**63 - 1)
-    constraints_version: int = spec(0, lo=0, hi=2**63 - 1)
-    method: str = spec("iidp", max_len=32)
-    makespan: float = spec(0.0, lo=0.0, hi=TIME)
-    door_openings: int = spec(0, lo=0, hi=2**31)
-    solve_time: float = spec(0.0, lo=0.0, hi=1e6)
-    iterations: int = spec(0, lo=0, hi=2**31)
-    robots: dict[str, list[PlanStep]] = spec(factory=dict, max_len=10_000)
-    openings: list[PlannedOpening] = spec(factory=list, max_len=10_000)
-    diagnostic: str = spec("", max_len=4096)
+    plan_id: Int(0, 2**63 - 1)
+    world_version: Int(0, 2**63 - 1) = 0
+    constraints_version: Int(0, 2**63 - 1) = 0
+    method: Str(32) = "iidp"
+    makespan: Float(0.0, TIME) = 0.0
+    door_openings: Int(0, 2**31) = 0
+    solve_time: Float(0.0, 1e6) = 0.0
+    iterations: Int(0, 2**31) = 0
+    robots: Map(list[PlanStep], 10_000) = {}
+    openings: List(PlannedOpening, 10_000) = []
+    diagnostic: Str(4096) = ""
 
 
-@dataclass(kw_only=True, slots=True)
 class Intent(Message):
-    TYPE: ClassVar[str] = "Intent"
-    robot: str = spec(ident=True)
-    plan_id: int = spec(0, lo=0, hi=2**63 - 1)
-    action_id: int = spec(0, lo=0, hi=2**31)
-    action: str = spec("", max_len=32)
-    args: list[str] = spec(factory=list, max_len=8, ident=True)
-    trajectory: list[list[float]] = spec(factory=list, max_len=MAX_TRAJECTORY, row_len=4, lo=-TIME, hi=TIME)
+    robot: Ident
+    plan_id: Int(0, 2**63 - 1) = 0
+    action_id: Int(0, 2**31) = 0
+    action: Str(32) = ""
+    args: List(Ident, 8) = []
+    trajectory: Rows(4, MAX_TRAJECTORY, -TIME, TIME) = []
 
 
-@dataclass(kw_only=True, slots=True)
 class DoorState(Message):
-    TYPE: ClassVar[str] = "DoorState"
-    door: str = spec(ident=True)
+    door: Ident
     open: bool
-    by: str = spec("", max_len=64)  # "human", a robot id, "sensor", or ""
-    until: float = spec(0.0, lo=0.0, hi=TIME)  # when a human opening is due to end; 0 if unknown
-    world_version: int = spec(0, lo=0, hi=2**63 - 1)
+    by: Str(64) = ""  # "human", a robot id, "sensor", or ""
+    until: Float(0.0, TIME) = 0.0  # when a human opening is due to end; 0 if unknown
+    world_version: Int(0, 2**63 - 1) = 0
 
 
-@dataclass(kw_only=True, slots=True)
 class Feedback(Message):
     """A choice from the constraint library. ``params`` holds the entry's parameters, unchecked here:
     the restrictor validates them against the library and the site."""
 
-    TYPE: ClassVar[str] = "Feedback"
-    kind: str = spec(max_len=64)
-    params: dict[str, Scalar] = spec(factory=dict, max_len=32)
+    kind: Str(64)
+    params: Map(Scalar, 32) = {}
 
 
-@dataclass(kw_only=True, slots=True)
 class FeedbackAck(Message):
-    TYPE: ClassVar[str] = "FeedbackAck"
-    to: str = spec(max_len=128)  # the Feedback's src
-    feedback_seq: int = spec(lo=0, hi=2**63 - 1)
+    to: Str(128)  # the Feedback's src
+    feedback_seq: Int(0, 2**63 - 1)
     accepted: bool
-    reason: str = spec("", max_len=1024)
-    constraint_id: str = spec("", max_len=64)
-    constraints_version: int = spec(0, lo=0, hi=2**63 - 1)
+    reason: Str(1024) = ""
+    constraint_id: Str(64) = ""
+    constraints_version: Int(0, 2**63 - 1) = 0
 
 
-@dataclass(kw_only=True, slots=True)
 class ConstraintSet(Message):
-    TYPE: ClassVar[str] = "ConstraintSet"
-    version: int = spec(lo=0, hi=2**63 - 1)
-    constraints: list[Constraint] = spec(factory=list, max_len=10_000)
-    asp: str = spec("", max_len=1024 * 1024)  # all active constraints' ASP, ready for the solver
+    version: Int(0, 2**63 - 1)
+    constraints: List(Constraint, 10_000) = []
+    asp: Str(1024 * 1024) = ""  # all active constraints' ASP, ready for the solver
 
 
-@dataclass(kw_only=True, slots=True)
 class CameraFrame(Message):
-    TYPE: ClassVar[str] = "CameraFrame"
     MAX_SIZE: ClassVar[int] = 16 * 1024 * 1024
-    camera: str = spec(ident=True)
-    jpeg: bytes = spec(max_len=16 * 1024 * 1024)
-    width: int = spec(lo=1, hi=16384)
-    height: int = spec(lo=1, hi=16384)
-    intrinsics: list[float] = spec(max_len=4, lengths=(4,), lo=-1e6, hi=1e6)  # fx, fy, cx, cy
-    distortion: list[float] = spec(
-        factory=lambda: [0.0] * 5, max_len=5, lengths=(5,), lo=-1e6, hi=1e6
-    )  # k1 k2 p1 p2 k3
+    camera: Ident
+    jpeg: Annotated[bytes, Meta(max_length=16 * 1024 * 1024)]
+    width: Int(1, 16384)
+    height: Int(1, 16384)
+    intrinsics: List(Float(-1e6, 1e6), 4, lengths=(4,))  # fx, fy, cx, cy
+    distortion: List(Float(-1e6, 1e6), 5, lengths=(5,)) = field(default_factory=lambda: [0.0] * 5)  # k1 k2 p1 p2 k3
     # The device's gravity at capture in the camera frame (OpenCV axes, pointing down, m/s²), as its
     # accelerometer measured it; empty when unknown. Optional: frames without it decode as before.
-    gravity: list[float] = spec(factory=list, max_len=3, lengths=(0, 3), lo=-1000.0, hi=1000.0)
+    gravity: List(Float(-1000.0, 1000.0), 3, lengths=(0, 3)) = []
 
 
-@dataclass(kw_only=True, slots=True)
 class CameraTruth(Message):
-    TYPE: ClassVar[str] = "CameraTruth"
-    camera: str = spec(ident=True)
-    frame_seq: int = spec(lo=0, hi=2**63 - 1)  # seq of the CameraFrame it belongs to
-    position: list[float] = spec(max_len=3, lengths=(3,), lo=-COORD, hi=COORD)
-    quaternion: list[float] = spec(max_len=4, lengths=(4,), lo=-1.0, hi=1.0)  # x, y, z, w of R_world_camera
+    camera: Ident
+    frame_seq: Int(0, 2**63 - 1)  # seq of the CameraFrame it belongs to
+    position: List(Float(-COORD, COORD), 3, lengths=(3,))
+    quaternion: List(Float(-1.0, 1.0), 4, lengths=(4,))  # x, y, z, w of R_world_camera
 
 
-@dataclass(kw_only=True, slots=True)
 class Overlay(Message):
-    TYPE: ClassVar[str] = "Overlay"
-    camera: str = spec(ident=True)
-    frame_seq: int = spec(0, lo=0, hi=2**63 - 1)
-    width: int = spec(0, lo=0, hi=16384)
-    height: int = spec(0, lo=0, hi=16384)
+    camera: Ident
+    frame_seq: Int(0, 2**63 - 1) = 0
+    width: Int(0, 16384) = 0
+    height: Int(0, 16384) = 0
     ok: bool = False
-    position: list[float] = spec(factory=list, max_len=3, lengths=(0, 3), lo=-COORD, hi=COORD)  # empty when not ok
-    quaternion: list[float] = spec(factory=list, max_len=4, lengths=(0, 4), lo=-1.0, hi=1.0)
-    tags: list[int] = spec(factory=list, max_len=1000, lo=0, hi=1_000_000)
-    reprojection_rmse: float = spec(0.0, lo=0.0, hi=1e6)
-    lost_age: float = spec(0.0, lo=0.0, hi=TIME)  # seconds since the last good pose when not ok
-    latency: float = spec(0.0, lo=0.0, hi=1e6)
-    primitives: list[Primitive] = spec(factory=list, max_len=20_000)
+    position: List(Float(-COORD, COORD), 3, lengths=(0, 3)) = []  # empty when not ok
+    quaternion: List(Float(-1.0, 1.0), 4, lengths=(0, 4)) = []
+    tags: List(Int(0, 1_000_000), 1000) = []
+    reprojection_rmse: Float(0.0, 1e6) = 0.0
+    lost_age: Float(0.0, TIME) = 0.0  # seconds since the last good pose when not ok
+    latency: Float(0.0, 1e6) = 0.0
+    primitives: List(Primitive, 20_000) = []
 
 
-@dataclass(kw_only=True, slots=True)
 class Event(Message):
     """Something that happened: ``door_opened``, ``delivered``, ``mission_done``, ``plan_conflict``, ...
 
     ``data`` carries kind-specific details (e.g. the metrics of ``mission_done``)."""
 
-    TYPE: ClassVar[str] = "Event"
-    kind: str = spec(ident=True)
-    robot: str = spec("", max_len=64)
-    door: str = spec("", max_len=64)
-    object: str = spec("", max_len=64)
+    kind: Ident
+    robot: Str(64) = ""
+    door: Str(64) = ""
+    object: Str(64) = ""
     data: Json = None
 
 

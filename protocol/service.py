@@ -42,12 +42,13 @@ import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import Annotated, Any, TypeVar
 
+import msgspec
 import zenoh
 
 from .clock import SimClock, WallClock
-from .codec import _ENCODERS, ENCODING, decode, decoder_for, encode, encoder_for, validator_for
+from .codec import ENCODING, decode, decoder_for, encode, encoder_for, validator_for
 from .errors import ProtocolError
 from .keys import Keys
 from .messages import Clock as ClockMessage
@@ -444,7 +445,7 @@ class Service:
         then the very bytes received go out again: nothing is re-encoded, so the envelope (``src``,
         ``seq``, ``stamp``) and any fields unknown to ``msg_type`` travel on unchanged."""
         put = self.advertise(to_key).put  # declared now: never inside a Zenoh callback
-        check = validator_for(msg_type)  # decoding's checks, without building a message
+        check = validator_for(msg_type)  # decoding's checks (the message it builds is dropped)
         refuse = self._refuser(key)
         add_received, add_published = self._tallies["received"].add, self._tallies["published"].add
 
@@ -600,7 +601,7 @@ class Service:
         publisher = self._publishers.get(key) or self.advertise(key)
         if stamp:
             self.stamp(msg)
-        payload = encode(msg, extra) if extra else (_ENCODERS.get(type(msg)) or encoder_for(type(msg)))(msg)
+        payload = encode(msg, extra)
         publisher.put(payload)
         self._tallies["published"].add()  # once put (a put that raised is not counted); one C call
 
@@ -690,13 +691,16 @@ def _default_instance(name: str) -> str:
     return f"{name}-{os.getpid()}" if k == 0 else f"{name}-{os.getpid()}-{k}"
 
 
+class _Sender(msgspec.Struct):
+    src: Annotated[str, msgspec.Meta(max_length=128)] = "unknown"
+
+
+_read_sender = msgspec.msgpack.Decoder(_Sender).decode
+
+
 def _guess_sender(payload: bytes) -> str:
     """Best-effort sender of an undecodable payload, for rate-limited logging only."""
     try:
-        import msgpack
-
-        data = msgpack.unpackb(payload, raw=False, max_str_len=256, max_array_len=64, max_map_len=64, max_bin_len=0)
-        src = data.get("src") if isinstance(data, dict) else None
-        return src if isinstance(src, str) and len(src) <= 128 else "unknown"
+        return _read_sender(payload).src
     except Exception:
         return "unknown"

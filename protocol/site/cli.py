@@ -1,4 +1,4 @@
-"""``arroch site check|show|generate``: validate, draw and generate site files."""
+"""``arroch site check|show|generate|schema``: validate, draw and generate site files, and print their JSON Schema."""
 
 from __future__ import annotations
 
@@ -101,8 +101,19 @@ def cmd_generate(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_schema(args: argparse.Namespace) -> int:
+    import json
+
+    from .fileformat import site_schema
+
+    print(json.dumps(site_schema(), indent=2))
+    return 0
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser("site", help="check, draw or generate site files", description=__doc__)
+    parser = subparsers.add_parser(
+        "site", help="check, draw or generate site files, or print their JSON Schema", description=__doc__
+    )
     sub = parser.add_subparsers(dest="site_command", metavar="SUBCOMMAND", required=True)
 
     check = sub.add_parser(
@@ -123,3 +134,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     gen.add_argument("--seed", type=int, default=0, metavar="S", help="random seed (default 0)")
     gen.add_argument("--out", metavar="FILE", help="file to write (default: standard output)")
     gen.set_defaults(func=cmd_generate)
+
+    schema = sub.add_parser(
+        "schema", help="print the JSON Schema of site files (tables, keys, types, ranges) for editors and tools"
+    )
+    schema.set_defaults(func=cmd_schema)

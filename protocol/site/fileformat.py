@@ -1,5 +1,7 @@
 """The site file format: which tables and keys exist, their types and ranges.
 
+The format is declared as msgspec Structs (:class:`SiteFile` and its tables): each key's type
+carries its limits, and :mod:`protocol.validation` words a refusal for the file (:data:`FILE`).
 This module knows the file format (which tables, which keys, which types and ranges); what the
 values mean together (rooms that overlap, doors off a shared wall, ...) is checked by
 :mod:`protocol.site.build`. Either way the refusal is a :class:`SiteError` naming the file and
@@ -9,13 +11,17 @@ Array entries are numbered from 0 in file order.
 
 from __future__ import annotations
 
-import json
-import math
 import re
-from collections.abc import Callable
+import sys
 from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Any
 
+import msgspec
+from msgspec import Meta, Struct
+
+from ..errors import ProtocolError
+from ..schema import Says
+from ..validation import FILE, field_error
 from .errors import SiteError
 from .model import TAG36H11_CODES, Params
 
@@ -23,197 +29,150 @@ ID_RE = re.compile(r"^[a-z][a-z0-9_]*$")
 ID_MAX = 64  # ids also become Zenoh key chunks (protocol.schema allows 64 characters)
 ASP_KEYWORDS = frozenset({"not"})  # a bare word clingo would not read as a constant
 SITE_NAME_RE = re.compile(r"^[A-Za-z0-9_\-]+$")  # the default key namespace (protocol.keys)
+_MAX = sys.float_info.max  # a number bounded by ±this is finite
 
 
-class Bad(Exception):
-    """A value is wrong; the caller adds the file and entry to make a SiteError.
+# --- value types: each carries its limits (msgspec.Meta) and, where generic words would be vague,
+# the words of its refusal (Says) --------------------------------------------------------------------
 
-    ``path`` locates the problem inside the value (``"[2]"`` for an array item).
-    """
-
-    def __init__(self, problem: str, path: str = "") -> None:
-        super().__init__(problem)
-        self.problem = problem
-        self.path = path
+# Not ASP's "not" (ASP_KEYWORDS); written so a JSON Schema tool reads it too (no \Z in ECMA-262).
+_ID_REGEX = rf"^(?!not$)[a-z][a-z0-9_]{{0,{ID_MAX - 1}}}$"
 
 
-# --- value checkers: take the raw TOML value, return the converted value or raise Bad -------------
+def _says_ident(value: Any) -> str:
+    shown = FILE.value(value)
+    if not isinstance(value, str):
+        return f"expected a string, got {shown}"
+    return f"{shown} is not a valid lower-case ASP constant (^[a-z][a-z0-9_]*$, at most {ID_MAX} characters, not 'not')"
 
 
-def _describe(v: Any) -> str:
-    """A value as it looks in TOML, shortened."""
-    if isinstance(v, dict):
-        return "a table"
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, str):
-        return json.dumps(v) if len(v) < 60 else "a long string"
-    if isinstance(v, list):
-        text = "[" + ", ".join(_describe(x) for x in v) + "]"
-        return f"an array {text}" if len(text) < 60 else "an array"
-    return repr(v)
+def _says_site_name(value: Any) -> str:
+    if not isinstance(value, str):
+        return f"expected a string, got {FILE.value(value)}"
+    return f"{FILE.value(value)} cannot be a key namespace (letters, digits, _ and - only)"
 
 
-def number(v: Any) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise Bad(f"expected a number, got {_describe(v)}")
-    if not math.isfinite(v):
-        raise Bad(f"must be a finite number, got {v!r}")
-    return float(v)
+def _says_tag(value: Any) -> str:
+    if isinstance(value, bool) or not isinstance(value, int):
+        return f"expected an integer, got {FILE.value(value)}"
+    return f"tag id {value} is not in family 36h11 (0..{TAG36H11_CODES - 1})"
 
 
-def positive(v: Any) -> float:
-    x = number(v)
-    if x <= 0:
-        raise Bad(f"must be greater than 0, got {x:g}")
-    return x
+def _vector(n: int, names: str) -> Any:
+    def says(value: Any) -> str:
+        return f"expected an array of {n} numbers [{names}], got {FILE.value(value)}"
+
+    return Annotated[tuple[(Number,) * n], Says(says)]  # type: ignore[misc]
 
 
-def non_negative(v: Any) -> float:
-    x = number(v)
-    if x < 0:
-        raise Bad(f"must not be negative, got {x:g}")
-    return x
+Number = Annotated[float, Meta(ge=-_MAX, le=_MAX)]  # any finite number
+Positive = Annotated[float, Meta(gt=0, le=_MAX)]
+NonNegative = Annotated[float, Meta(ge=0, le=_MAX)]
+PositiveInt = Annotated[int, Meta(ge=1)]
+Id = Annotated[str, Meta(pattern=_ID_REGEX), Says(_says_ident)]
+SiteName = Annotated[str, Meta(pattern=SITE_NAME_RE.pattern), Says(_says_site_name)]
+TagId = Annotated[int, Meta(ge=0, le=TAG36H11_CODES - 1), Says(_says_tag)]
+Vec2 = _vector(2, "x, y")
+Vec3 = _vector(3, "x, y, z")
+Pose = _vector(3, "x, y, theta")
+RoomPair = Annotated[
+    tuple[Id, Id], Says(lambda v: f"expected an array of 2 room ids, got {FILE.value(v)}")  # noqa: E731
+]
+Rect = _vector(4, "xmin, ymin, xmax, ymax")
 
 
-def integer(v: Any) -> int:
-    if isinstance(v, bool) or not isinstance(v, int):
-        raise Bad(f"expected an integer, got {_describe(v)}")
-    return v
+class _Table(Struct, kw_only=True, forbid_unknown_fields=True):
+    """A table of the file: every key declared, no other allowed."""
 
 
-def positive_int(v: Any) -> int:
-    x = integer(v)
-    if x < 1:
-        raise Bad(f"must be at least 1, got {x}")
-    return x
+class SiteTable(_Table, kw_only=True):
+    name: SiteName
 
 
-def tag_id(v: Any) -> int:
-    x = integer(v)
-    if not 0 <= x < TAG36H11_CODES:
-        raise Bad(f"tag id {x} is not in family 36h11 (0..{TAG36H11_CODES - 1})")
-    return x
+class ParamsTable(_Table, kw_only=True):
+    robot_speed: Positive | None = None
+    robot_radius: Positive | None = None
+    load_time: NonNegative | None = None
+    door_hold_time: NonNegative | None = None
+    robot_capacity: PositiveInt | None = None
+    wall_height: Positive | None = None
+    wall_thickness: Positive | None = None
 
 
-def boolean(v: Any) -> bool:
-    if not isinstance(v, bool):
-        raise Bad(f"expected true or false, got {_describe(v)}")
-    return v
+class HumanTable(_Table, kw_only=True):
+    room: Id
+    position: Vec2
 
 
-def string(v: Any) -> str:
-    if not isinstance(v, str):
-        raise Bad(f"expected a string, got {_describe(v)}")
-    return v
+class RoomTable(_Table, kw_only=True):
+    id: Id
+    rect: Rect
+
+    def __post_init__(self) -> None:
+        x0, y0, x1, y1 = self.rect
+        if x1 <= x0:
+            raise ProtocolError("rect", f"xmax {x1:g} must be greater than xmin {x0:g} (zero or negative width)")
+        if y1 <= y0:
+            raise ProtocolError("rect", f"ymax {y1:g} must be greater than ymin {y0:g} (zero or negative depth)")
 
 
-def ident(v: Any) -> str:
-    """An id the planner can write into ASP as a constant (and use in a key expression)."""
-    s = string(v)
-    if not ID_RE.match(s) or s in ASP_KEYWORDS or len(s) > ID_MAX:
-        raise Bad(
-            f"{_describe(s)} is not a valid lower-case ASP constant (^[a-z][a-z0-9_]*$, at most {ID_MAX} characters, "
-            "not 'not')"
-        )
-    return s
+class _OpeningTable(_Table, kw_only=True):
+    """What doors and passages share: the two rooms they join, where, how wide."""
+
+    rooms: RoomPair
+    center: Vec2
+    width: Positive
+
+    def __post_init__(self) -> None:
+        if self.rooms[0] == self.rooms[1]:
+            raise ProtocolError("rooms", f"joins room {self.rooms[0]!r} to itself")
 
 
-def site_name(v: Any) -> str:
-    s = string(v)
-    if not SITE_NAME_RE.match(s):
-        raise Bad(f"{_describe(s)} cannot be a key namespace (letters, digits, _ and - only)")
-    return s
+class DoorTable(_OpeningTable, kw_only=True):
+    id: Id
+    human_operated: bool | None = None
+    swing_into: Id | None = None
 
 
-def vector(n: int, names: str) -> Callable[[Any], tuple[float, ...]]:
-    def check(v: Any) -> tuple[float, ...]:
-        if not isinstance(v, list) or len(v) != n:
-            raise Bad(f"expected an array of {n} numbers [{names}], got {_describe(v)}")
-        out = []
-        for i, item in enumerate(v):
-            try:
-                out.append(number(item))
-            except Bad as exc:
-                raise Bad(exc.problem, f"[{i}]") from None
-        return tuple(out)
-
-    return check
+class PassageTable(_OpeningTable, kw_only=True):
+    id: Id | None = None
 
 
-def rect(v: Any) -> tuple[float, float, float, float]:
-    x0, y0, x1, y1 = vector(4, "xmin, ymin, xmax, ymax")(v)
-    if x1 <= x0:
-        raise Bad(f"xmax {x1:g} must be greater than xmin {x0:g} (zero or negative width)")
-    if y1 <= y0:
-        raise Bad(f"ymax {y1:g} must be greater than ymin {y0:g} (zero or negative depth)")
-    return (x0, y0, x1, y1)
+class LandmarkTable(_Table, kw_only=True):
+    tag: TagId
+    size: Positive
+    position: Vec3
+    yaw: Number
 
 
-def room_pair(v: Any) -> tuple[str, str]:
-    if not isinstance(v, list) or len(v) != 2:
-        raise Bad(f"expected an array of 2 room ids, got {_describe(v)}")
-    a, b = (ident(x) for x in v)
-    if a == b:
-        raise Bad(f"joins room {a!r} to itself")
-    return (a, b)
+class RobotTable(_Table, kw_only=True):
+    id: Id
+    start: Pose
 
 
-# --- the format: tables, their keys, which are required --------------------------------------------
+class ObjectTable(_Table, kw_only=True):
+    id: Id
+    position: Vec2
+    deliver_to: Id
+    robot: Id
 
-REQUIRED = True
-OPTIONAL = False
-Schema = dict[str, tuple[Callable[[Any], Any], bool]]
 
-PARAMS: Schema = {
-    "robot_speed": (positive, OPTIONAL),
-    "robot_radius": (positive, OPTIONAL),
-    "load_time": (non_negative, OPTIONAL),
-    "door_hold_time": (non_negative, OPTIONAL),
-    "robot_capacity": (positive_int, OPTIONAL),
-    "wall_height": (positive, OPTIONAL),
-    "wall_thickness": (positive, OPTIONAL),
-}
+class SiteFile(_Table, kw_only=True):
+    """A site file: the building, its openings and landmarks, the robots, the objects and the human."""
 
-TABLES: dict[str, Schema] = {
-    "site": {"name": (site_name, REQUIRED)},
-    "params": PARAMS,
-    "human": {"room": (ident, REQUIRED), "position": (vector(2, "x, y"), REQUIRED)},
-}
+    site: SiteTable
+    params: ParamsTable | None = None
+    rooms: Annotated[list[RoomTable], Meta(min_length=1)]
+    doors: list[DoorTable] = []
+    passages: list[PassageTable] = []
+    landmarks: list[LandmarkTable] = []
+    robots: Annotated[list[RobotTable], Meta(min_length=1)]
+    objects: list[ObjectTable] = []
+    human: HumanTable
 
-ARRAYS: dict[str, Schema] = {
-    "rooms": {"id": (ident, REQUIRED), "rect": (rect, REQUIRED)},
-    "doors": {
-        "id": (ident, REQUIRED),
-        "rooms": (room_pair, REQUIRED),
-        "center": (vector(2, "x, y"), REQUIRED),
-        "width": (positive, REQUIRED),
-        "human_operated": (boolean, OPTIONAL),
-        "swing_into": (ident, OPTIONAL),
-    },
-    "passages": {
-        "id": (ident, OPTIONAL),
-        "rooms": (room_pair, REQUIRED),
-        "center": (vector(2, "x, y"), REQUIRED),
-        "width": (positive, REQUIRED),
-    },
-    "landmarks": {
-        "tag": (tag_id, REQUIRED),
-        "size": (positive, REQUIRED),
-        "position": (vector(3, "x, y, z"), REQUIRED),
-        "yaw": (number, REQUIRED),
-    },
-    "robots": {"id": (ident, REQUIRED), "start": (vector(3, "x, y, theta"), REQUIRED)},
-    "objects": {
-        "id": (ident, REQUIRED),
-        "position": (vector(2, "x, y"), REQUIRED),
-        "deliver_to": (ident, REQUIRED),
-        "robot": (ident, REQUIRED),
-    },
-}
 
-REQUIRED_TOP = ("site", "rooms", "robots", "human")
-TOP_ORDER = ("site", "params", "rooms", "doors", "passages", "landmarks", "robots", "objects", "human")
+TABLES = ("site", "params", "human")
+ARRAYS = ("rooms", "doors", "passages", "landmarks", "robots", "objects")
 
 
 @dataclass
@@ -239,49 +198,51 @@ def entry_label(array: str, index: int, raw: Any) -> str:
     return label
 
 
-def check_table(file: str, label: str, raw: Any, schema: Schema) -> Entry:
-    if not isinstance(raw, dict):
-        raise SiteError(file, label, f"expected a table, got {_describe(raw)}")
-    for key in raw:
-        if key not in schema:
-            raise SiteError(file, label, f"unknown key {key!r} (expected {', '.join(schema)})")
-    values: dict[str, Any] = {}
-    for key, (check, required) in schema.items():
-        if key not in raw:
-            if required:
-                raise SiteError(file, label, f"missing required key {key!r}")
-            values[key] = None
-            continue
-        try:
-            values[key] = check(raw[key])
-        except Bad as exc:
-            raise SiteError(file, label, f"{key}{exc.path}: {exc.problem}") from None
-    return Entry(label, values)
+_ENTRY = re.compile(r"^(?P<table>[a-z_]+)(?:\[(?P<index>\d+)\])?(?:\.?(?P<rest>.*))?$")
+
+
+def _site_error(file: str, doc: dict[str, Any], error: ProtocolError) -> SiteError:
+    """``rooms[2].rect: ...`` as SiteError(file, 'rooms[2] (id "lab")', 'rect: ...')."""
+    m = _ENTRY.match(error.field)
+    if m is None:
+        return SiteError(file, "", error.problem)
+    table, index, rest = m["table"], m["index"], m["rest"] or ""
+    label = table
+    if index is not None:
+        raw = doc.get(table)
+        i = int(index)
+        label = entry_label(table, i, raw[i] if isinstance(raw, list) and i < len(raw) else None)
+    return SiteError(file, label, f"{rest}: {error.problem}" if rest else error.problem)
+
+
+def parse_document(file: str, doc: dict[str, Any]) -> SiteFile:
+    """The file's tables as a :class:`SiteFile`, or a :class:`SiteError` naming the entry and problem."""
+    try:
+        return msgspec.convert(doc, SiteFile)
+    except msgspec.ValidationError as exc:
+        raise _site_error(file, doc, field_error(exc, SiteFile, doc, words=FILE)) from None
+
+
+def _values(table: Struct) -> dict[str, Any]:
+    return {name: getattr(table, name) for name in table.__struct_fields__}
 
 
 def check_document(file: str, doc: dict[str, Any]) -> dict[str, Any]:
     """Check every table's shape and types; returns ``{table: Entry}`` and ``{array: [Entry]}``."""
-    for key in doc:
-        if key not in TOP_ORDER:
-            raise SiteError(file, key, f"unknown table {key!r} (expected {', '.join(TOP_ORDER)})")
+    parsed = parse_document(file, doc)
     out: dict[str, Any] = {}
-    for key, schema in TABLES.items():
-        out[key] = check_table(file, key, doc[key], schema) if key in doc else None
-    for key, schema in ARRAYS.items():
-        raw_list = doc.get(key, [])
-        if not isinstance(raw_list, list):
-            raise SiteError(file, key, f"expected an array of tables [[{key}]], got {_describe(raw_list)}")
-        out[key] = [check_table(file, entry_label(key, i, raw), raw, schema) for i, raw in enumerate(raw_list)]
-    # What is there is checked first, so a malformed table is reported before a missing one.
-    for key in REQUIRED_TOP:
-        if key not in doc:
-            raise SiteError(
-                file, key, f"missing required table [{key}]" if key in TABLES else f"missing required [[{key}]] entries"
-            )
-    for key in ("rooms", "robots"):
-        if not out[key]:
-            raise SiteError(file, key, f"at least one [[{key}]] entry is required")
+    for key in TABLES:
+        table = getattr(parsed, key)
+        out[key] = None if table is None else Entry(key, _values(table))
+    for key in ARRAYS:
+        raws = doc.get(key, [])
+        out[key] = [Entry(entry_label(key, i, raws[i]), _values(t)) for i, t in enumerate(getattr(parsed, key))]
     return out
+
+
+def site_schema() -> dict[str, Any]:
+    """The JSON Schema of site files (tables, keys, types and ranges)."""
+    return msgspec.json.schema(SiteFile)
 
 
 def params_from(entry: Entry | None) -> Params:

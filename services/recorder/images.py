@@ -6,9 +6,8 @@ Pixel centres stay put: ``u' = (u + ½)·s − ½`` (as the tablet scales a cali
 
 from __future__ import annotations
 
-import dataclasses
-
 import cv2
+import msgspec
 import numpy as np
 
 from protocol.messages import CameraFrame, Overlay
@@ -32,7 +31,7 @@ def scale_frame(frame: CameraFrame, scale: float) -> CameraFrame:
     if not ok:
         return frame
     fx, fy, cx, cy = frame.intrinsics
-    return dataclasses.replace(
+    return msgspec.structs.replace(
         frame,
         jpeg=jpeg.tobytes(),
         width=width,
@@ -44,7 +43,7 @@ def scale_frame(frame: CameraFrame, scale: float) -> CameraFrame:
 def scale_overlay(overlay: Overlay, scale: float) -> Overlay:
     """The overlay's primitives in the pixels of the frame scaled by ``scale``."""
     prims = [
-        dataclasses.replace(
+        msgspec.structs.replace(
             p,
             points=[[_pixel(u, scale), _pixel(v, scale)] for u, v in p.points],
             width=p.width * scale,
@@ -52,6 +51,6 @@ def scale_overlay(overlay: Overlay, scale: float) -> Overlay:
         )
         for p in overlay.primitives
     ]
-    return dataclasses.replace(
+    return msgspec.structs.replace(
         overlay, primitives=prims, width=round(overlay.width * scale), height=round(overlay.height * scale)
     )

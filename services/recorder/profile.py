@@ -7,9 +7,9 @@ replays faithfully however fast it ran. Not thread-safe: the recorder calls it u
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
+import msgspec
 from foxglove.messages import FrameTransforms, Log, SceneUpdate
 
 from protocol.codec import encode
@@ -122,7 +122,7 @@ class FoxgloveProfile:
 
     def _raw(self, msg: Message, key: str) -> None:
         # A camera frame's JPEG is kept once, in its CompressedImage; replay puts it back.
-        stored = dataclasses.replace(msg, jpeg=b"") if isinstance(msg, CameraFrame) else msg
+        stored = msgspec.structs.replace(msg, jpeg=b"") if isinstance(msg, CameraFrame) else msg
         self.sink.raw(topics.raw_topic(self.keys, key), msg.TYPE, record_schema(type(msg)), encode(stored), msg.stamp)
 
     def _json(self, topic: str):

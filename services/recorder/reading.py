@@ -3,12 +3,12 @@ put back from the image channel), its metadata, and its channels' counts and tim
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
 
+import msgspec
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
@@ -146,5 +146,5 @@ def messages(path: Path, *, start: float | None = None, end: float | None = None
 
 
 def _frame_with(topic: str, log_time: int, frame: CameraFrame, jpeg: bytes) -> Recorded:
-    whole = dataclasses.replace(frame, jpeg=bytes(jpeg))
+    whole = msgspec.structs.replace(frame, jpeg=bytes(jpeg))
     return Recorded(topic, log_time / 1e9, encode(whole), whole)

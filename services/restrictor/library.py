@@ -22,9 +22,15 @@ import tomllib
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Annotated, Any, Literal, Protocol
+
+import msgspec
+from msgspec import Meta, Struct
 
 from protocol.asp_vocabulary import ASP_INT_MAX, ASP_INT_MIN, UnsafeProgram, check_program, is_asp_constant
+from protocol.errors import ProtocolError
+from protocol.schema import Says
+from protocol.validation import Words, field_error
 
 PACKAGED = "<packaged library>"
 
@@ -52,11 +58,6 @@ _MAX_PARAMS = 16
 _MAX_LABEL = 80
 _MAX_HELP = 300
 _MAX_TEMPLATE = 4096
-
-_ENTRY_KEYS = {"id", "label", "help", "effect", "params", "asp", "window_param", "window_minutes", "cancels"}
-_PARAM_KEYS = {"name", "type", "label", "help", "min", "max", "human_operated"}
-_CANCELS_KEYS = {"kind", "same"}
-_TOP_KEYS = {"version", "entry"}
 
 
 class LibraryError(ValueError):
@@ -143,26 +144,135 @@ def _packaged() -> Library:
     return parse_library(text, "library.toml", source=PACKAGED)
 
 
+# --------------------------------------------------------------------------- the file format
+
+# The file as msgspec Structs: keys, types and sizes are checked while converting; what the keys
+# mean together (ranges, windows, templates, references between entries) is checked below.
+
+
+class _LibraryWords(Words):
+    """Refusals worded as this file's readers know them (``label: 81 characters, more than 80``)."""
+
+    _WANT = {"str": "a string", "int": "an integer", "bool": "true or false", "object": "a table"}
+
+    def type_mismatch(self, want: list[str], value: Any, hint: Any, name: str) -> str:
+        if want == ["array"]:
+            return f"expected a list of tables, got {self.value(value)}"
+        return f"expected {' or '.join(self._WANT.get(w, w) for w in want)}, got {self.value(value)}"
+
+    def length(self, kind: str, op: str, n: str, value: Any, name: str) -> str:
+        if name == "entry":
+            return "needs at least one [[entry]]" if op == ">=" else f"has {len(value)} entries, more than {n}"
+        if name == "params":
+            return f"{len(value)} parameters, more than {n}"
+        return f"{len(value)} characters, more than {n}"
+
+    def missing(self, parent: str, name: str, hint: Any) -> tuple[str, str]:
+        if not parent and name == "entry":
+            return "", "needs at least one [[entry]]"
+        return _join(parent, name), "required"
+
+    def unknown(self, parent: str, name: str, allowed: tuple[str, ...]) -> tuple[str, str]:
+        return parent, f"unknown field(s) {name} (known: {', '.join(sorted(allowed))})"
+
+
+_WORDS = _LibraryWords()
+
+
+def _join(parent: str, name: str) -> str:
+    return f"{parent}.{name}" if parent else name
+
+
+def _says_identifier(value: Any) -> str:
+    return f"{value!r} is not an identifier (lower-case letter first, then a-z, 0-9, _; 64 at most)"
+
+
+def _text(limit: int, *, required: bool) -> Any:
+    def says(value: Any) -> str:
+        if not isinstance(value, str):
+            return f"expected a string, got {type(value).__name__}"
+        if len(value) > limit:
+            return f"{len(value)} characters, more than {limit}"
+        return "must not be empty"
+
+    return Annotated[str, Meta(max_length=limit, pattern=r"\S" if required else None), Says(says)]
+
+
+Identifier = Annotated[str, Meta(pattern=_ID.pattern), Says(_says_identifier)]
+
+
+class _Table(Struct, kw_only=True, forbid_unknown_fields=True):
+    """A table of the file: its keys declared, no other allowed."""
+
+
+class _CancelsTable(_Table, kw_only=True):
+    kind: Identifier
+    same: Annotated[list[str], Says(lambda v: "expected a list of parameter names")] = []
+
+
+class _ParamTable(_Table, kw_only=True):
+    name: Identifier
+    type: Literal[PARAM_TYPES]  # type: ignore[valid-type]
+    label: _text(_MAX_LABEL, required=True)
+    help: _text(_MAX_HELP, required=False) = ""
+    min: int | None = None
+    max: int | None = None
+    human_operated: bool | None = None
+
+
+class _EntryTable(_Table, kw_only=True):
+    id: Identifier
+    label: _text(_MAX_LABEL, required=True)
+    help: _text(_MAX_HELP, required=True)
+    effect: Literal[EFFECTS] = ADD  # type: ignore[valid-type]
+    params: Annotated[list[_ParamTable], Meta(max_length=_MAX_PARAMS)] = []
+    asp: _text(_MAX_TEMPLATE, required=True) | None = None
+    window_param: str | None = None
+    window_minutes: int | None = None
+    cancels: list[_CancelsTable] | None = None
+
+
+class _LibraryFile(_Table, kw_only=True):
+    version: Any = 1
+    entry: Annotated[list[_EntryTable], Meta(min_length=1, max_length=_MAX_ENTRIES)]
+
+
+_LABEL = re.compile(r"(?P<name>entry|params|cancels)\[(?P<i>\d+)\]")
+
+
+def _library_error(name: str, data: dict[str, Any], error: ProtocolError) -> LibraryError:
+    """``entry[0].params[1].min`` as ``name: entry[0] (id 'busy'): params[1] (name 'minutes'): min: ...``."""
+    parts, raw, rest = [name], data, error.field
+    while (m := _LABEL.match(rest)) is not None:
+        items = raw.get(m["name"]) if isinstance(raw, dict) else None
+        i = int(m["i"])
+        raw = items[i] if isinstance(items, list) and i < len(items) else None
+        key = "id" if m["name"] == "entry" else "name" if m["name"] == "params" else None
+        ident = raw.get(key) if key and isinstance(raw, dict) else None
+        parts.append(m.group(0) + (f" ({key} {ident!r})" if isinstance(ident, str) else ""))
+        rest = rest[m.end() :].lstrip(".")
+    if rest:
+        parts.append(rest)
+    return LibraryError(": ".join([*parts, error.problem]))
+
+
 def parse_library(text: str, name: str = "library.toml", *, source: str | None = None) -> Library:
     """Validate library TOML text; ``name`` prefixes every error message."""
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise LibraryError(f"{name}: not valid TOML: {exc}") from None
+    try:
+        parsed = msgspec.convert(data, _LibraryFile)
+    except msgspec.ValidationError as exc:
+        raise _library_error(name, data, field_error(exc, _LibraryFile, data, words=_WORDS)) from None
     where = _Where(name)
-    _no_unknown_keys(data, _TOP_KEYS, where)
-    version = data.get("version", 1)
-    if version != 1 or isinstance(version, bool):
-        where.fail(f"version {version!r} is not supported (this restrictor reads version 1)")
-    raw_entries = data.get("entry")
-    if not isinstance(raw_entries, list) or not raw_entries:
-        where.fail("needs at least one [[entry]]")
-    if len(raw_entries) > _MAX_ENTRIES:
-        where.fail(f"has {len(raw_entries)} entries, more than {_MAX_ENTRIES}")
+    if parsed.version != 1 or isinstance(parsed.version, bool):
+        where.fail(f"version {parsed.version!r} is not supported (this restrictor reads version 1)")
     entries: dict[str, Entry] = {}
-    for index, raw in enumerate(raw_entries):
-        entry_where = where.entry(index, raw)
-        entry = _parse_entry(raw, entry_where)
+    for index, table in enumerate(parsed.entry):
+        entry_where = where.entry(index, {"id": table.id})
+        entry = _parse_entry(table, entry_where)
         if entry.id in entries:
             entry_where.fail(f"duplicate id {entry.id!r}")
         entries[entry.id] = entry
@@ -191,56 +301,13 @@ class _Where:
         raise LibraryError(f"{self.prefix}: {problem}")
 
 
-def _no_unknown_keys(table: dict[str, Any], known: set[str], where: _Where) -> None:
-    unknown = sorted(set(table) - known)
-    if unknown:
-        where.fail(f"unknown field(s) {', '.join(unknown)} (known: {', '.join(sorted(known))})")
-
-
-def _text(raw: dict[str, Any], key: str, where: _Where, *, limit: int, required: bool = True) -> str:
-    value = raw.get(key, None if required else "")
-    if value is None:
-        where.fail(f"{key}: required")
-    if not isinstance(value, str):
-        where.fail(f"{key}: expected a string, got {type(value).__name__}")
-    if required and not value.strip():
-        where.fail(f"{key}: must not be empty")
-    if len(value) > limit:
-        where.fail(f"{key}: {len(value)} characters, more than {limit}")
-    return value
-
-
-def _identifier(raw: dict[str, Any], key: str, where: _Where) -> str:
-    value = raw.get(key)
-    if not isinstance(value, str) or not _ID.match(value):
-        where.fail(f"{key}: {value!r} is not an identifier (lower-case letter first, then a-z, 0-9, _; 64 at most)")
-    return value
-
-
-def _integer(raw: dict[str, Any], key: str, where: _Where) -> int | None:
-    value = raw.get(key)
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, int):
-        where.fail(f"{key}: expected an integer, got {type(value).__name__}")
-    return value
-
-
-def _parse_param(raw: Any, where: _Where) -> Param:
-    if not isinstance(raw, dict):
-        where.fail(f"expected a table, got {type(raw).__name__}")
-    _no_unknown_keys(raw, _PARAM_KEYS, where)
-    name = _identifier(raw, "name", where)
+def _parse_param(raw: _ParamTable, where: _Where) -> Param:
+    name, kind = raw.name, raw.type
     if name == "kind":
         where.fail("name: 'kind' is reserved (it names the entry in feedback)")
     if name in WINDOW_NAMES:
         where.fail(f"name: {name!r} is reserved for the window")
-    kind = raw.get("type")
-    if kind not in PARAM_TYPES:
-        where.fail(f"type: {kind!r} is not one of {', '.join(PARAM_TYPES)}")
-    label = _text(raw, "label", where, limit=_MAX_LABEL)
-    help_text = _text(raw, "help", where, limit=_MAX_HELP, required=False)
-    lo, hi = _integer(raw, "min", where), _integer(raw, "max", where)
+    lo, hi = raw.min, raw.max
     if kind == INT:
         if lo is None or hi is None:
             where.fail("an int parameter needs both min and max")
@@ -250,93 +317,41 @@ def _parse_param(raw: Any, where: _Where) -> Param:
             where.fail(f"range [{lo}, {hi}] exceeds ASP integers [{ASP_INT_MIN}, {ASP_INT_MAX}]")
     elif lo is not None or hi is not None:
         where.fail(f"min/max apply to int parameters only, not {kind}")
-    human_operated = raw.get("human_operated", True)
-    if "human_operated" in raw:
-        if kind != DOOR:
-            where.fail(f"human_operated applies to door parameters only, not {kind}")
-        if not isinstance(human_operated, bool):
-            where.fail(f"human_operated: expected true or false, got {type(human_operated).__name__}")
-    return Param(name=name, type=kind, label=label, help=help_text, min=lo, max=hi, human_operated=human_operated)
+    if raw.human_operated is not None and kind != DOOR:
+        where.fail(f"human_operated applies to door parameters only, not {kind}")
+    human_operated = True if raw.human_operated is None else raw.human_operated
+    return Param(name=name, type=kind, label=raw.label, help=raw.help, min=lo, max=hi, human_operated=human_operated)
 
 
-def _parse_entry(raw: Any, where: _Where) -> Entry:
-    if not isinstance(raw, dict):
-        where.fail(f"expected a table, got {type(raw).__name__}")
-    _no_unknown_keys(raw, _ENTRY_KEYS, where)
-    ident = _identifier(raw, "id", where)
-    label = _text(raw, "label", where, limit=_MAX_LABEL)
-    help_text = _text(raw, "help", where, limit=_MAX_HELP)
-    effect = raw.get("effect", ADD)
-    if effect not in EFFECTS:
-        where.fail(f"effect: {effect!r} is not one of {', '.join(EFFECTS)}")
-    raw_params = raw.get("params", [])
-    if not isinstance(raw_params, list):
-        where.fail(f"params: expected a list of tables, got {type(raw_params).__name__}")
-    if len(raw_params) > _MAX_PARAMS:
-        where.fail(f"params: {len(raw_params)} parameters, more than {_MAX_PARAMS}")
+def _parse_entry(raw: _EntryTable, where: _Where) -> Entry:
     params: list[Param] = []
-    for index, raw_param in enumerate(raw_params):
-        pname = raw_param.get("name") if isinstance(raw_param, dict) else None
-        param_where = where.sub(f"params[{index}]" + (f" (name {pname!r})" if isinstance(pname, str) else ""))
+    for index, raw_param in enumerate(raw.params):
+        param_where = where.sub(f"params[{index}] (name {raw_param.name!r})")
         param = _parse_param(raw_param, param_where)
         if any(p.name == param.name for p in params):
             param_where.fail(f"duplicate parameter name {param.name!r}")
         params.append(param)
     entry_params = tuple(params)
-    cancels = _parse_cancels(raw.get("cancels", []), where)
-    if effect == CANCEL:
-        return _cancel_entry(raw, where, ident, label, help_text, entry_params, cancels)
-    return _add_entry(raw, where, ident, label, help_text, entry_params, cancels)
+    cancels = tuple(Cancels(kind=c.kind, same=tuple(c.same)) for c in raw.cancels or ())
+    if raw.effect == CANCEL:
+        return _cancel_entry(raw, where, entry_params, cancels)
+    return _add_entry(raw, where, entry_params, cancels)
 
 
-def _parse_cancels(raw: Any, where: _Where) -> tuple[Cancels, ...]:
-    if not isinstance(raw, list):
-        where.fail(f"cancels: expected a list of tables, got {type(raw).__name__}")
-    out = []
-    for index, item in enumerate(raw):
-        item_where = where.sub(f"cancels[{index}]")
-        if not isinstance(item, dict):
-            item_where.fail(f"expected a table, got {type(item).__name__}")
-        _no_unknown_keys(item, _CANCELS_KEYS, item_where)
-        kind = _identifier(item, "kind", item_where)
-        same = item.get("same", [])
-        if not isinstance(same, list) or not all(isinstance(s, str) for s in same):
-            item_where.fail("same: expected a list of parameter names")
-        out.append(Cancels(kind=kind, same=tuple(same)))
-    return tuple(out)
-
-
-def _cancel_entry(
-    raw: dict[str, Any],
-    where: _Where,
-    ident: str,
-    label: str,
-    help_text: str,
-    params: tuple[Param, ...],
-    cancels: tuple[Cancels, ...],
-) -> Entry:
+def _cancel_entry(raw: _EntryTable, where: _Where, params: tuple[Param, ...], cancels: tuple[Cancels, ...]) -> Entry:
     for key in ("asp", "window_param", "window_minutes", "cancels"):
-        if key in raw:
+        if getattr(raw, key) is not None:
             where.fail(f"{key}: a cancel entry has no {key}")
     if len(params) != 1 or params[0].type != CONSTRAINT:
         where.fail("params: a cancel entry takes exactly one parameter, of type constraint")
-    return Entry(id=ident, label=label, help=help_text, effect=CANCEL, params=params, cancels=cancels)
+    return Entry(id=raw.id, label=raw.label, help=raw.help, effect=CANCEL, params=params, cancels=cancels)
 
 
-def _add_entry(
-    raw: dict[str, Any],
-    where: _Where,
-    ident: str,
-    label: str,
-    help_text: str,
-    params: tuple[Param, ...],
-    cancels: tuple[Cancels, ...],
-) -> Entry:
+def _add_entry(raw: _EntryTable, where: _Where, params: tuple[Param, ...], cancels: tuple[Cancels, ...]) -> Entry:
     for param in params:
         if param.type == CONSTRAINT:
             where.fail(f"params: {param.name} is of type constraint, which only a cancel entry takes")
-    window_param = raw.get("window_param")
-    window_minutes = _integer(raw, "window_minutes", where)
+    window_param, window_minutes = raw.window_param, raw.window_minutes
     if (window_param is None) == (window_minutes is None):
         where.fail("needs exactly one of window_param (a parameter in minutes) and window_minutes (fixed)")
     if window_param is not None:
@@ -345,20 +360,21 @@ def _add_entry(
             where.fail(f"window_param: {window_param!r} is not an int parameter of this entry")
         if param.min < 1 or param.max > MAX_WINDOW_MINUTES:
             where.fail(
-                f"window_param: {window_param} must range within [1, {MAX_WINDOW_MINUTES}] minutes, not [{param.min}, "
-                f"{param.max}]"
+                f"window_param: {window_param} must range within [1, {MAX_WINDOW_MINUTES}] minutes,"
+                f" not [{param.min}, {param.max}]"
             )
     elif not 1 <= window_minutes <= MAX_WINDOW_MINUTES:
         where.fail(f"window_minutes: {window_minutes} is outside [1, {MAX_WINDOW_MINUTES}]")
-    asp = _text(raw, "asp", where, limit=_MAX_TEMPLATE)
-    _check_template(asp, params, window_param, where.sub("asp"))
+    if raw.asp is None:
+        where.fail("asp: required")
+    _check_template(raw.asp, params, window_param, where.sub("asp"))
     return Entry(
-        id=ident,
-        label=label,
-        help=help_text,
+        id=raw.id,
+        label=raw.label,
+        help=raw.help,
         effect=ADD,
         params=params,
-        asp=asp,
+        asp=raw.asp,
         window_param=window_param,
         window_minutes=window_minutes,
         cancels=cancels,

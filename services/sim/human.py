@@ -42,9 +42,14 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
+
+from msgspec import Meta
+
+from protocol.errors import ProtocolError
+from protocol.validation import check_fields
 
 from .streams import Streams
 
@@ -52,50 +57,49 @@ METHODS = ("arroch", "no-feedback", "no-comm")
 FOCUS_READINGS = ("faithful", "strict")  # see the module docstring
 
 
+Probability = Annotated[float, Meta(ge=0.0, le=1.0)]
+Positive = Annotated[float, Meta(gt=0.0)]
+NonNegative = Annotated[float, Meta(ge=0.0)]
+Count = Annotated[int, Meta(ge=0)]
+Minutes = Annotated[int, Meta(ge=1)]
+
+
 @dataclass(frozen=True)
 class HumanConfig:
     """The human model's parameters. Defaults: the paper's values where it gives them (0.6 per
     minute in no-comm, 0.9 for a2 at a focus interval's start); otherwise chosen to fit the
-    office site (a delivery mission of a few robots takes 5–15 minutes)."""
+    office site (a delivery mission of a few robots takes 5–15 minutes). Each field's type states
+    its limits, checked when a config is made (in code or from a file)."""
 
-    task_mean: float = 600.0  # s of work her own task needs (Gaussian mean; chosen: the paper gives no figure)
-    task_std: float = 60.0  # s (Gaussian standard deviation)
-    task_min: float = 60.0  # s; the Gaussian is clipped here so a draw is never absurd
-    walk_speed: float = 1.0  # m/s between her desk and a door
-    open_time: float = 3.0  # s at the door to open it
-    declare_time: float = 1.0  # s on the tablet to declare a2(N): one tap on a card (chosen)
-    door_probability: float = 0.5  # chance per waiting robot per decision interval (AR methods)
-    decision_interval: float = 10.0  # s between two decisions about one waiting robot
-    no_comm_probability: float = 0.6  # chance per no_comm_interval (paper: 0.6 each minute)
-    no_comm_interval: float = 60.0  # s
-    focus_count: int = 2  # focus intervals drawn before she finishes
-    focus_min_minutes: int = 2  # a focus interval lasts a whole number of minutes in [min, max]
-    focus_max_minutes: int = 4
-    declare_probability: float = 0.9  # chance of a2(N) at a focus interval's start (paper: 0.9)
-    focus_reading: str = "faithful"  # faithful: only a declared focus interval keeps her from doors; strict: any
-    interruption_cost: float = 0.0  # s of her task lost each time she leaves it during a focus interval (chosen: 0)
-    feedback_timeout: float = 2.0  # s to wait for the restrictor's ack of one attempt (wall time)
-    feedback_retries: int = 3  # further attempts after the first goes unanswered
+    task_mean: Positive = 600.0  # s of work her own task needs (Gaussian mean; chosen: the paper gives no figure)
+    task_std: NonNegative = 60.0  # s (Gaussian standard deviation)
+    task_min: NonNegative = 60.0  # s; the Gaussian is clipped here so a draw is never absurd
+    walk_speed: Positive = 1.0  # m/s between her desk and a door
+    open_time: NonNegative = 3.0  # s at the door to open it
+    declare_time: NonNegative = 1.0  # s on the tablet to declare a2(N): one tap on a card (chosen)
+    door_probability: Probability = 0.5  # chance per waiting robot per decision interval (AR methods)
+    decision_interval: Positive = 10.0  # s between two decisions about one waiting robot
+    no_comm_probability: Probability = 0.6  # chance per no_comm_interval (paper: 0.6 each minute)
+    no_comm_interval: Positive = 60.0  # s
+    focus_count: Count = 2  # focus intervals drawn before she finishes
+    focus_min_minutes: Minutes = 2  # a focus interval lasts a whole number of minutes in [min, max]
+    focus_max_minutes: Minutes = 4
+    declare_probability: Probability = 0.9  # chance of a2(N) at a focus interval's start (paper: 0.9)
+    # faithful: only a declared focus interval keeps her from doors; strict: any
+    focus_reading: Literal[FOCUS_READINGS] = "faithful"  # type: ignore[valid-type]
+    interruption_cost: NonNegative = (
+        0.0  # s of her task lost each time she leaves it during a focus interval (chosen: 0)
+    )
+    feedback_timeout: Positive = 2.0  # s to wait for the restrictor's ack of one attempt (wall time)
+    feedback_retries: Count = 3  # further attempts after the first goes unanswered
 
     def __post_init__(self) -> None:
-        problems = []
-        for name in ("door_probability", "no_comm_probability", "declare_probability"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                problems.append(f"{name} must be within [0, 1]")
-        for name in ("task_mean", "walk_speed", "decision_interval", "no_comm_interval", "feedback_timeout"):
-            if not getattr(self, name) > 0.0:
-                problems.append(f"{name} must be > 0")
-        if self.focus_reading not in FOCUS_READINGS:
-            problems.append(f"focus_reading must be one of {', '.join(FOCUS_READINGS)} (got {self.focus_reading!r})")
-        for name in ("task_std", "task_min", "open_time", "declare_time", "interruption_cost"):
-            if not getattr(self, name) >= 0.0:
-                problems.append(f"{name} must be >= 0")
-        if self.focus_count < 0 or self.feedback_retries < 0:
-            problems.append("focus_count and feedback_retries must be >= 0")
-        if not 1 <= self.focus_min_minutes <= self.focus_max_minutes:
-            problems.append("focus minutes need 1 <= focus_min_minutes <= focus_max_minutes")
-        if problems:
-            raise ValueError("human config: " + "; ".join(problems))
+        try:
+            check_fields(type(self), asdict(self))
+        except ProtocolError as exc:
+            raise ValueError(f"human config: {exc}") from None
+        if not self.focus_min_minutes <= self.focus_max_minutes:
+            raise ValueError("human config: focus minutes need 1 <= focus_min_minutes <= focus_max_minutes")
 
     @classmethod
     def from_toml(cls, path: str | Path, **overrides: Any) -> HumanConfig:
@@ -109,26 +113,10 @@ class HumanConfig:
             raise FileNotFoundError(f"human config {path} does not exist") from None
         except tomllib.TOMLDecodeError as exc:
             raise ValueError(f"human config {path}: {exc}") from None
-        table = data.get("human", data)
-        known = {f.name: f.type for f in fields(cls)}
-        unknown = sorted(set(table) - set(known))
-        if unknown:
-            raise ValueError(f"human config {path}: unknown key(s) {', '.join(unknown)}; known: {', '.join(known)}")
-        values: dict[str, Any] = {}
-        for name, value in table.items():
-            if known[name] in ("str", str):
-                if not isinstance(value, str):
-                    raise ValueError(f"human config {path}: {name} must be a string")
-                values[name] = value
-                continue
-            want = int if known[name] in ("int", int) else float
-            if (
-                isinstance(value, bool)
-                or not isinstance(value, (int, float))
-                or (want is int and not isinstance(value, int))
-            ):
-                raise ValueError(f"human config {path}: {name} must be a{'n integer' if want is int else ' number'}")
-            values[name] = want(value)
+        try:
+            values = check_fields(cls, data.get("human", data))
+        except ProtocolError as exc:
+            raise ValueError(f"human config {path}: {exc}") from None
         return replace(cls(**values), **{k: v for k, v in overrides.items() if v is not None})
 
     def as_dict(self) -> dict[str, Any]:

@@ -1,7 +1,7 @@
 """Hypothesis strategies and sample values derived from the wire records' own declarations.
 
-Everything here reads the dataclass fields, their type hints and their :func:`protocol.schema.spec`
-limits, so a message added to ``protocol/messages.py`` is covered without touching the tests.
+Everything here reads the Struct fields, their type hints and the limits their types declare
+(:mod:`protocol.schema`), so a message added to ``protocol/messages.py`` is covered without touching the tests.
 
 - :func:`strategy_for` draws valid records (within every limit);
 - :func:`minimal_wire` gives one small valid wire map per class (the base of malformed-payload tests);
@@ -10,31 +10,108 @@ limits, so a message added to ``protocol/messages.py`` is covered without touchi
 
 from __future__ import annotations
 
-import dataclasses
+import functools
+import operator
 import types
 import typing
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Literal
 
 import msgpack
+import msgspec
 from hypothesis import strategies as st
 
 from protocol.codec import decode
 from protocol.messages import Message
-from protocol.schema import ID_PATTERN, MAX_BYTES, MAX_JSON_DEPTH, MAX_LIST, MAX_STR, Json
+from protocol.schema import (
+    ID_PATTERN,
+    ID_REGEX,
+    MAX_BYTES,
+    MAX_JSON_DEPTH,
+    MAX_LIST,
+    MAX_MAP,
+    MAX_STR,
+    JsonTree,
+    Lengths,
+    Row,
+)
+
+
+class Json:
+    """Stands for a JSON-like tree field (``protocol.schema.Json``) in the plain hints below."""
+
+
+@dataclass(frozen=True)
+class Field:
+    """A wire field in the terms the strategies use: its name, plain type hint and limits."""
+
+    name: str
+    required: bool
+    metadata: dict[str, Any]
+
 
 INT_MIN, INT_MAX = -(2**63), 2**64 - 1  # what msgpack can carry
 # Keep drawn collections small: limits are exercised by the dedicated oversize tests.
 DRAW_LIST, DRAW_STR, DRAW_BYTES, DRAW_MAP = 4, 24, 32, 3
 
 
-def fields_of(cls: type) -> list[tuple[dataclasses.Field, Any]]:
-    """(field, type hint) of every wire field of a record class, in declaration order."""
-    hints = typing.get_type_hints(cls)
-    return [(f, hints[f.name]) for f in dataclasses.fields(cls) if f.init and not f.name.startswith("_")]
+def describe(hint: Any) -> tuple[Any, dict[str, Any]]:
+    """A declared field type as a plain hint (``list[float]``, ``str``, a record, :class:`Json`)
+    and its limits: ``lo``, ``hi``, ``max_len``, ``choices``, ``ident``, ``row_len``, ``lengths``."""
+    meta: dict[str, Any] = {}
+    marks: tuple[Any, ...] = ()
+    if typing.get_origin(hint) is typing.Annotated:
+        hint, *rest = typing.get_args(hint)
+        marks = tuple(rest)
+    for mark in marks:
+        if isinstance(mark, msgspec.Meta):
+            meta["lo"], meta["hi"] = mark.ge, mark.le
+            if mark.max_length is not None:
+                meta["max_len"] = mark.max_length
+            if mark.min_length is not None and mark.min_length == mark.max_length:
+                meta["lengths"] = (mark.min_length,)
+            if mark.pattern == ID_REGEX:
+                meta["ident"] = True
+        elif isinstance(mark, Lengths):
+            meta["lengths"] = mark.allowed
+        elif isinstance(mark, JsonTree):
+            return Json, meta
+    if typing.get_origin(hint) is Literal:
+        return str, meta | {"choices": typing.get_args(hint)}
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin is list:
+        item, item_meta = describe(args[0])
+        if typing.get_origin(args[0]) is typing.Annotated and any(isinstance(m, Row) for m in typing.get_args(args[0])):
+            row_list = typing.get_args(args[0])[0]  # list[<the element's annotated type>]
+            number, number_meta = describe(typing.get_args(row_list)[0])
+            return list[list[number]], meta | {"row_len": item_meta["lengths"][0]} | _item_limits(number_meta)
+        return list[item], meta | _item_limits(item_meta)
+    if origin is dict:
+        return dict[str, describe(args[1])[0]], meta
+    if origin in (types.UnionType, typing.Union):
+        return functools.reduce(operator.or_, (describe(a)[0] for a in args)), meta
+    return hint, meta
 
 
-def is_required(f: dataclasses.Field) -> bool:
-    return f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+def _item_limits(meta: dict[str, Any]) -> dict[str, Any]:
+    return {k: meta[k] for k in ("lo", "hi", "choices", "ident") if meta.get(k) is not None}
+
+
+def fields_of(cls: type) -> list[tuple[Field, Any]]:
+    """(field, plain type hint) of every wire field of a record class, in declaration order
+    (the envelope's ``v`` aside: it is the codec's, like ``type``)."""
+    hints = typing.get_type_hints(cls, include_extras=True)
+    out = []
+    for info in msgspec.inspect.type_info(cls).fields:
+        if info.name == "v" and issubclass(cls, Message):
+            continue
+        plain, meta = describe(hints[info.name])
+        out.append((Field(info.name, info.required, meta), plain))
+    return out
+
+
+def is_required(f: Field) -> bool:
+    return f.required
 
 
 def _optional_inner(hint: Any) -> Any | None:
@@ -86,7 +163,7 @@ def value_strategy(hint: Any, meta: typing.Mapping[str, Any]) -> st.SearchStrate
         return st.binary(max_size=min(max_len or MAX_BYTES, DRAW_BYTES))
     if hint is Json:
         return _json(min(3, MAX_JSON_DEPTH))
-    if dataclasses.is_dataclass(hint):
+    if isinstance(hint, type) and issubclass(hint, msgspec.Struct):
         return strategy_for(hint)
     if origin in (types.UnionType, typing.Union):  # a union of scalars (Scalar)
         return st.one_of([value_strategy(a, {}) for a in args])
@@ -101,7 +178,7 @@ def value_strategy(hint: Any, meta: typing.Mapping[str, Any]) -> st.SearchStrate
         return st.lists(item, max_size=min(max_len or MAX_LIST, DRAW_LIST))
     if origin is dict:
         return st.dictionaries(
-            st.text(max_size=8), value_strategy(args[1], {}), max_size=min(max_len or 4096, DRAW_MAP)
+            st.text(max_size=8), value_strategy(args[1], {}), max_size=min(max_len or MAX_MAP, DRAW_MAP)
         )
     raise TypeError(f"no strategy for {hint!r}")
 
@@ -133,7 +210,7 @@ def sample_value(hint: Any, meta: typing.Mapping[str, Any]) -> Any:
         return b"\x00\x01"
     if hint is Json:
         return {"k": [1, 2.5, "x", None]}
-    if dataclasses.is_dataclass(hint):
+    if isinstance(hint, type) and issubclass(hint, msgspec.Struct):
         return minimal_wire(hint, envelope=False)
     if origin in (types.UnionType, typing.Union):
         return sample_value(args[0], {})
@@ -171,7 +248,7 @@ def wrong_type_value(hint: Any) -> Any:
         return "not bytes"
     if hint is Json:
         return b"bytes are not JSON"
-    if dataclasses.is_dataclass(hint):
+    if isinstance(hint, type) and issubclass(hint, msgspec.Struct):
         return 5
     if origin in (types.UnionType, typing.Union):
         return [1]
@@ -204,7 +281,7 @@ def oversized_value(hint: Any, meta: typing.Mapping[str, Any]) -> Any | None:
         )
         return [item] * (limit + 1)
     if origin is dict:
-        limit = meta.get("max_len") or 4096
+        limit = meta.get("max_len") or MAX_MAP
         value = sample_value(args[1], {})
         return {f"k{i}": value for i in range(limit + 1)}
     return None

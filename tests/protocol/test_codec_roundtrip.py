@@ -3,17 +3,17 @@ from the message declarations themselves)."""
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import msgpack
+import msgspec
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from protocol.codec import decode, decoder_for, encode, encoder_for, validator_for
 from protocol.messages import ALL_MESSAGES, BY_TYPE, Intent, RobotPose
-from protocol.schema import plan_for, record_to_wire
+from protocol.schema import record_to_wire
 from tests.protocol.strategies import fields_of, minimal_wire, pack, sample_message, strategy_for
 
 ROUND_TRIP = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -47,22 +47,22 @@ def test_types_are_unique_and_registered():
 
 
 @pytest.mark.parametrize("cls", ALL_MESSAGES, ids=lambda c: c.TYPE)
-def test_generated_paths_agree_with_the_generic_ones(cls):
-    """The per-class generated encoder/decoder give what the generic record functions give."""
+def test_per_class_paths_agree_with_the_generic_ones(cls):
+    """The per-class encoder/decoder give what the generic record functions give."""
     msg = sample_message(cls)
     wire = record_to_wire(msg)
     assert msgpack.unpackb(encoder_for(cls)(msg)) == {**wire, "v": cls.VERSION, "type": cls.TYPE}
     assert decoder_for(cls)(pack(minimal_wire(cls))) == msg
 
 
-def test_whole_record_fast_path_and_field_by_field_path_agree():
-    """A plain pose passes the all-at-once check; a value needing conversion (an int in a float
-    field) or a field left out to its default misses it and goes field by field: all agree."""
+def test_conversions_defaults_and_unknown_fields_decode_alike():
+    """An int in a float field is converted, a field left out takes its default, an unknown field
+    is ignored: each decodes to the same pose."""
     base = minimal_wire(RobotPose) | {"x": 1.5, "vel": 0.5, "omega": -0.25}
     fast = decode(pack(base), RobotPose)
     assert (fast.x, fast.vel, fast.omega) == (1.5, 0.5, -0.25)
-    assert decode(pack(base | {"x": 2}), RobotPose) == dataclasses.replace(fast, x=2.0)
-    assert decode(pack({k: v for k, v in base.items() if k != "omega"}), RobotPose) == dataclasses.replace(
+    assert decode(pack(base | {"x": 2}), RobotPose) == msgspec.structs.replace(fast, x=2.0)
+    assert decode(pack({k: v for k, v in base.items() if k != "omega"}), RobotPose) == msgspec.structs.replace(
         fast, omega=0.0
     )
     assert decode(pack(base | {"unknown": [1, 2]}), RobotPose) == fast
@@ -75,7 +75,7 @@ def test_int_in_a_float_field_decodes_as_float():
 
 
 def test_missing_optional_fields_take_their_defaults():
-    required = {fp.name for fp in plan_for(RobotPose) if fp.required}
+    required = {f.name for f, _ in fields_of(RobotPose) if f.required}
     data = {k: v for k, v in minimal_wire(RobotPose).items() if k in required | {"v", "type", "src", "seq", "stamp"}}
     pose = decode(pack(data), RobotPose)
     assert (pose.vel, pose.omega) == (0.0, 0.0)
@@ -166,6 +166,20 @@ def test_camera_frame_gravity_is_optional_and_old_frames_still_decode():
         gravity=[0.1, 9.8, 0.2],
     )
     assert decode(encode(new), CameraFrame).gravity == [0.1, 9.8, 0.2]
-    bad = dataclasses.replace(new, gravity=[0.0, 9.8])
+    bad = msgspec.structs.replace(new, gravity=[0.0, 9.8])
     with pytest.raises(Exception, match="gravity"):
         decode(encode(bad), CameraFrame)
+
+
+def test_numpy_values_go_on_the_wire_as_plain_numbers():
+    """Poses and camera parameters are often computed with numpy: they encode as msgpack numbers."""
+    import numpy as np
+
+    from protocol.messages import CameraTruth
+
+    pose = RobotPose(robot="r0", x=np.float64(1.5), y=np.float32(2.0), theta=np.int64(0))
+    assert msgpack.unpackb(encode(pose))["x"] == 1.5 and decode(encode(pose), RobotPose).y == 2.0
+    truth = CameraTruth(camera="c", frame_seq=1, position=np.array([1.0, 2.0, 3.0]), quaternion=[0.0, 0.0, 0.0, 1.0])
+    assert msgpack.unpackb(encode(truth))["position"] == [1.0, 2.0, 3.0]
+    with pytest.raises(TypeError, match="cannot put a object on the wire"):
+        encode(RobotPose(robot="r0", x=object(), y=0.0, theta=0.0))  # type: ignore[arg-type]

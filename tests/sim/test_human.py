@@ -271,7 +271,7 @@ def test_config_file_is_read_and_checked(tmp_path):
         15.0,
     )
     bad.write_text("[human]\nfocus_count = 1.5\n")
-    with pytest.raises(ValueError, match="focus_count must be an integer"):
+    with pytest.raises(ValueError, match="focus_count: expected an integer, got 1.5"):
         HumanConfig.from_toml(bad)
     with pytest.raises(ValueError, match="door_probability"):
         HumanConfig(door_probability=1.5)

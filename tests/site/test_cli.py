@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import tomllib
 from pathlib import Path
@@ -80,3 +81,24 @@ def test_generate_writes_a_valid_deterministic_site(tmp_path: Path) -> None:
 @pytest.mark.parametrize("argv", [("site",), ("site", "show", "x.toml")])
 def test_usage_errors_exit_2(argv: tuple[str, ...]) -> None:
     assert run(*argv).returncode == 2
+
+
+def test_schema_prints_the_json_schema_of_site_files() -> None:
+    out = run("site", "schema")
+    assert out.returncode == 0, out.stderr
+    schema = json.loads(out.stdout)
+    defs = schema["$defs"]
+    assert schema["$ref"] == "#/$defs/SiteFile"
+    assert set(defs["SiteFile"]["required"]) == {"site", "rooms", "robots", "human"}
+    assert defs["SiteFile"]["properties"]["robots"]["minItems"] == 1
+    door = defs["DoorTable"]["properties"]
+    assert door["width"]["exclusiveMinimum"] == 0 and door["center"]["minItems"] == door["center"]["maxItems"] == 2
+    assert defs["LandmarkTable"]["properties"]["tag"]["maximum"] == 586
+    # Every key the packaged site uses is declared, table by table.
+    office = tomllib.loads(default_site_path().read_text(encoding="utf-8"))
+    tables = {"site": "SiteTable", "params": "ParamsTable", "human": "HumanTable", "rooms": "RoomTable"}
+    tables |= {"doors": "DoorTable", "landmarks": "LandmarkTable", "robots": "RobotTable", "objects": "ObjectTable"}
+    for key, name in tables.items():
+        entries = office[key] if isinstance(office[key], list) else [office[key]]
+        for entry in entries:
+            assert set(entry) <= set(defs[name]["properties"]), (key, entry)

@@ -22,9 +22,12 @@ Server → page:
 - ``world`` a few times a second (robots, intents, doors: the map view) and ``constraints`` on change;
 - viewer mode: the sim's frames as binary ``b"ARV1"`` + seq + JPEG, each followed by its ``overlay``.
 
-Anything else — a binary message that is not a frame, a JPEG the header of which does not parse or
-is too large, text that is not a JSON object of a known type, a malformed feedback — is a protocol
-violation: :class:`Violation` carries the WebSocket close code, and the session closes that client.
+The page's text messages are declared as msgspec Structs (:data:`PAGE_MESSAGES`) and checked like
+every other input (a refusal names the field: ``feedback: params.minutes: expected int or float or
+str, got list``). Anything else — a binary message that is not a frame, a JPEG the header of which
+does not parse or is too large, text that is not a JSON object of a known type, a malformed
+feedback — is a protocol violation: :class:`Violation` carries the WebSocket close code, and the
+session closes that client.
 """
 
 from __future__ import annotations
@@ -32,11 +35,16 @@ from __future__ import annotations
 import json
 import math
 import struct
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Any
+
+import msgspec
+from msgspec import Meta, Struct
 
 from protocol.messages import Overlay
+from protocol.validation import field_error
 
 FRAME_MAGIC = b"ARF1"
 GRAVITY_FRAME_MAGIC = b"ARF2"
@@ -158,49 +166,49 @@ def pack_frame(
 # --------------------------------------------------------------------------- JSON from the page
 
 
-def parse_text(text: str) -> dict[str, Any]:
-    """A text message as a JSON object with a string ``type``."""
+ParamName = Annotated[str, Meta(min_length=1, max_length=MAX_STRING)]
+ParamValue = (
+    Annotated[int, Meta(gt=-(2**53), lt=2**53)]  # what a page's JavaScript numbers hold exactly
+    | Annotated[float, Meta(ge=-sys.float_info.max, le=sys.float_info.max)]  # finite
+    | Annotated[str, Meta(max_length=MAX_STRING)]
+)
+
+
+class FeedbackRequest(Struct, frozen=True, kw_only=True):
+    """``{"type": "feedback", ...}``: the shape of a feedback request; its meaning is the restrictor's to judge."""
+
+    id: Annotated[int, Meta(ge=0, lt=2**53)]
+    kind: Annotated[str, Meta(min_length=1, max_length=MAX_STRING)]
+    params: Annotated[dict[ParamName, ParamValue], Meta(max_length=MAX_PARAMS)]
+
+
+class Ping(Struct, frozen=True, kw_only=True):
+    """``{"type": "ping", "t": x}``: answered with a pong carrying ``t`` back."""
+
+    t: int | float
+
+
+PAGE_MESSAGES: dict[str, type[Struct]] = {"feedback": FeedbackRequest, "ping": Ping}
+
+
+def parse_text(text: str) -> FeedbackRequest | Ping:
+    """A text message from the page, checked against its type's declaration (:data:`PAGE_MESSAGES`)."""
     if len(text) > MAX_TEXT_BYTES:
         raise Violation(CLOSE_TOO_BIG, f"text message of {len(text)} characters exceeds {MAX_TEXT_BYTES}")
     try:
-        data = json.loads(text)
-    except (ValueError, RecursionError):
+        data = msgspec.json.decode(text)
+    except (msgspec.DecodeError, RecursionError):
         raise Violation(CLOSE_BAD_DATA, "text message is not JSON") from None
     if not isinstance(data, dict) or not isinstance(data.get("type"), str):
         raise Violation(CLOSE_POLICY, "text message is not an object with a 'type'")
-    return data
-
-
-@dataclass(frozen=True)
-class FeedbackRequest:
-    id: int
-    kind: str
-    params: dict[str, int | float | str]
-
-
-def parse_feedback(data: dict[str, Any]) -> FeedbackRequest:
-    """The shape of a feedback request; its meaning is the restrictor's to judge."""
-    request_id, kind, params = data.get("id"), data.get("kind"), data.get("params")
-    if isinstance(request_id, bool) or not isinstance(request_id, int) or not 0 <= request_id < 2**53:
-        raise Violation(CLOSE_POLICY, "feedback: 'id' must be a non-negative integer")
-    if not isinstance(kind, str) or not 0 < len(kind) <= MAX_STRING:
-        raise Violation(CLOSE_POLICY, "feedback: 'kind' must be a short string")
-    if not isinstance(params, dict) or len(params) > MAX_PARAMS:
-        raise Violation(CLOSE_POLICY, f"feedback: 'params' must be an object of at most {MAX_PARAMS} entries")
-    clean: dict[str, int | float | str] = {}
-    for name, value in params.items():
-        if not 0 < len(name) <= MAX_STRING:
-            raise Violation(CLOSE_POLICY, "feedback: parameter names must be short strings")
-        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
-            raise Violation(CLOSE_POLICY, f"feedback: parameter {name[:MAX_STRING]!r} must be a number or a string")
-        if isinstance(value, str) and len(value) > MAX_STRING:
-            raise Violation(CLOSE_POLICY, f"feedback: parameter {name[:MAX_STRING]!r} is too long")
-        if isinstance(value, float) and not math.isfinite(value):
-            raise Violation(CLOSE_POLICY, f"feedback: parameter {name[:MAX_STRING]!r} is not finite")
-        if isinstance(value, int) and not -(2**53) < value < 2**53:
-            raise Violation(CLOSE_POLICY, f"feedback: parameter {name[:MAX_STRING]!r} is out of range")
-        clean[name] = value
-    return FeedbackRequest(id=request_id, kind=kind, params=clean)
+    kind = data["type"]
+    cls = PAGE_MESSAGES.get(kind)
+    if cls is None:
+        raise Violation(CLOSE_POLICY, f"unknown message type {kind[:32]!r}")
+    try:
+        return msgspec.convert(data, cls)
+    except msgspec.ValidationError as exc:
+        raise Violation(CLOSE_POLICY, f"{kind}: {field_error(exc, cls, data)}") from None
 
 
 # --------------------------------------------------------------------------- JSON to the page

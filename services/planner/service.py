@@ -77,6 +77,7 @@ from .dispatcher import FINISHED_STATES, Dispatched, Dispatcher
 from .motion import polyline_distance
 from .plan import TeamResult
 from .planner import PlannerSettings, TaskPlanner
+from .teammotion import TeamMotion
 from .world import InProgress, RobotState, World
 
 SETTLE = 0.03  # s without a new trigger before replanning (one replan for a burst)
@@ -99,6 +100,7 @@ class ServiceSettings:
     method: str = "iidp"
     planner: PlannerSettings = field(default_factory=lambda: PlannerSettings(time_limit=5.0))
     off_track: float = OFF_TRACK
+    collision_free: bool = True  # time trajectories against each other (services/planner/teammotion.py)
 
 
 class PlannerService(Service):
@@ -117,6 +119,8 @@ class PlannerService(Service):
         self.settings = settings or ServiceSettings()
         self.planner = TaskPlanner(site, self.settings.planner)
         self.dispatcher = Dispatcher(self.planner.builder, self.planner.motion)
+        if self.settings.collision_free:
+            self.dispatcher.team = TeamMotion(self.planner.motion)
         self.poses: dict[str, tuple[float, float, float]] = {}
         self.statuses: dict[str, RobotStatus] = {}
         self.doors: dict[str, DoorState] = {}
@@ -668,6 +672,8 @@ class PlannerService(Service):
         )
         if result is None:
             front = {rid: d.action_id for rid, d in self.dispatcher.current.items()}
+        else:
+            kept = self.result = self.dispatcher.with_waits(kept)  # the plan's times include the waits
         # Commands first: a simulator in lockstep waits for the commands a plan names before it runs on.
         for cmd in commands:
             self.publish(self.keys.robot_command(cmd.robot), cmd)

@@ -32,6 +32,7 @@ from protocol.site.model import Site
 
 from .doors import Doors
 from .objects import Objects
+from .right_of_way import RightOfWay
 
 
 @dataclass(frozen=True)
@@ -45,6 +46,7 @@ class RobotConfig:
     auto_open_distance: float = 1.5  # m of path ahead within which an automatic door is asked to open
     start_tolerance: float = START_TOLERANCE  # m; a trajectory may start at most this far from the robot
     reach: float = REACH  # m from the robot's centre within which it can pick up an object
+    robot_margin: float = 0.05  # m a driving robot keeps between its disc and another robot's
 
 
 @dataclass(frozen=True)
@@ -80,6 +82,7 @@ class Robot:
     detail: str = ""
     progress: float = 0.0
     wait_time: float = 0.0  # s spent waiting at doors, over the whole mission
+    yield_time: float = 0.0  # s spent stopped for another robot or on a hold of its trajectory
     # execution of the current command
     phase: str = "idle"  # idle, drive, wait_open, dwell, done, failed
     follower: PurePursuit | None = None
@@ -97,6 +100,8 @@ class RobotExecutor:
         self.doors = doors
         self.objects = objects
         self.config = config
+        self.fleet: dict[str, Robot] = {}  # every robot, for the right of way (set by the engine)
+        self.right_of_way = RightOfWay(config.radius, config.robot_margin)
 
     # ------------------------------------------------------------------ commands
 
@@ -156,6 +161,7 @@ class RobotExecutor:
         """Advance one robot by ``dt``; ``now`` is the time at the start of the step."""
         if robot.phase == "drive":
             return self._drive(robot, now, dt)
+        self.right_of_way.forget(robot.id)  # waits for no robot
         if robot.phase == "wait_open":
             return self._wait_open(robot, dt)
         if robot.phase == "dwell":
@@ -187,11 +193,24 @@ class RobotExecutor:
                 and math.dist((robot.x, robot.y), opening.center) <= cfg.auto_open_distance + cfg.radius
             ):
                 self.doors.request_open(opening.id, robot.id)
+        hold = follower.path.hold_limit(now)
+        if hold < s_limit:
+            s_limit, blocking = hold, ""  # the plan says wait here (for another robot) until then
         step = follower.step(robot.x, robot.y, robot.theta, dt, s_limit)
         if blocking and not step.held and self._breaks_guard(robot, step, blocking):
             step = Step(robot.x, robot.y, robot.theta, 0.0, 0.0, held=True)
+        if step.held:
+            self.right_of_way.forget(robot.id)  # waits for a door or a hold, not for a robot
+        elif self.right_of_way.blocker(robot, step.x, step.y, self.fleet, now):
+            step = Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
+            robot.yield_time += dt
         robot.x, robot.y, robot.theta, robot.v, robot.omega = step.x, step.y, step.theta, step.v, step.omega
         robot.progress = min(follower.s / follower.path.length, 1.0) if follower.path.length > 0 else 1.0
+        if step.held and not blocking:
+            robot.yield_time += dt
+            if robot.state == "waiting_at_door":
+                self._set(robot, state="moving", waiting_door="")
+            return []
         if step.held:
             robot.wait_time += dt
             if robot.state != "waiting_at_door" or robot.waiting_door != blocking:

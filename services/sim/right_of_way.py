@@ -24,7 +24,6 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
 
-
 PARKED = ("done", "idle", "failed")
 
 
@@ -72,6 +71,12 @@ class RightOfWay:
         else:
             self.forget(robot.id)
         return found
+
+    def gives_way_to(self, robot: str) -> str:
+        """The robot that won a cycle against ``robot`` and is coming at it ("" if none): ``robot``
+        should back away from it, since it will not stop."""
+        other = self.blocked_by.get(robot, "")
+        return other if other and self.blocked_by.get(other) is None and other < robot else ""
 
     def _out_of_patience(self, me: str, other: Body, now: float) -> bool:
         if other.phase not in PARKED:

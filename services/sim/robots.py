@@ -102,6 +102,8 @@ class RobotExecutor:
         self.config = config
         self.fleet: dict[str, Robot] = {}  # every robot, for the right of way (set by the engine)
         self.right_of_way = RightOfWay(config.radius, config.robot_margin)
+        # where a robot's centre may go when it backs away (doors open: it only backs over its own path)
+        self._free = site.occupancy_grid(resolution=0.05, open_doors=tuple(site.door_leaves), inflate=config.radius)
 
     # ------------------------------------------------------------------ commands
 
@@ -202,7 +204,7 @@ class RobotExecutor:
         if step.held:
             self.right_of_way.forget(robot.id)  # waits for a door or a hold, not for a robot
         elif self.right_of_way.blocker(robot, step.x, step.y, self.fleet, now):
-            step = Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
+            step = self._back_away(robot, dt)
             robot.yield_time += dt
         robot.x, robot.y, robot.theta, robot.v, robot.omega = step.x, step.y, step.theta, step.v, step.omega
         robot.progress = min(follower.s / follower.path.length, 1.0) if follower.path.length > 0 else 1.0
@@ -222,6 +224,19 @@ class RobotExecutor:
         if step.arrived:
             return self._arrived(robot, now + dt)
         return []
+
+    def _back_away(self, robot: Robot, dt: float) -> Step:
+        """Stop; or, when the robot it stops for has the right of way and comes on, reverse straight
+        back (as far as free space allows) so that the two do not touch."""
+        winner = self.fleet.get(self.right_of_way.gives_way_to(robot.id))
+        if winner is not None:
+            speed = self.config.controller.speed
+            bx = robot.x - speed * dt * math.cos(robot.theta)
+            by = robot.y - speed * dt * math.sin(robot.theta)
+            away = math.hypot(bx - winner.x, by - winner.y) > math.hypot(robot.x - winner.x, robot.y - winner.y)
+            if away and self._free.is_free(bx, by):
+                return Step(bx, by, robot.theta, -speed, 0.0)
+        return Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
 
     def _breaks_guard(self, robot: Robot, step: Step, door_id: str) -> bool:
         a, b = self.doors[door_id].opening.endpoints

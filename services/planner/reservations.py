@@ -47,16 +47,28 @@ class ReservationTable:
         """After this time every reserved robot stands still (at the end of its trajectory)."""
         return max((float(r[-1, 0]) for r in self._rows.values()), default=-np.inf)
 
-    def positions(self, times: np.ndarray, exclude: str = "") -> np.ndarray:
-        """Centres of every reserved robot but ``exclude`` at ``times``: shape (len(times), robots, 2)."""
+    def positions(
+        self, times: np.ndarray, exclude: str = "", near: tuple[float, float, float, float] | None = None
+    ) -> np.ndarray:
+        """Centres of every reserved robot but ``exclude`` at ``times``: shape (len(times), robots, 2).
+        ``near`` (x0, y0, x1, y1): only robots whose whole trajectory comes within a clearance of it."""
         out = [
             np.stack([np.interp(times, rows[:, 0], rows[:, 1]), np.interp(times, rows[:, 0], rows[:, 2])], axis=-1)
             for rid, rows in sorted(self._rows.items())
-            if rid != exclude
+            if rid != exclude and (near is None or self._comes_near(rows, near))
         ]
         if not out:
             return np.zeros((len(times), 0, 2))
         return np.stack(out, axis=1)
+
+    def _comes_near(self, rows: np.ndarray, box: tuple[float, float, float, float]) -> bool:
+        c = self.clearance
+        return bool(
+            rows[:, 1].min() <= box[2] + c
+            and rows[:, 1].max() >= box[0] - c
+            and rows[:, 2].min() <= box[3] + c
+            and rows[:, 2].max() >= box[1] - c
+        )
 
     def first_conflict(self, robot: str, rows: Rows, until: float | None = None) -> tuple[float, str] | None:
         """The first instant (and robot) at which ``robot`` following ``rows`` (then standing at their

@@ -39,7 +39,7 @@ from .reservations import DT, ReservationTable
 
 Point = tuple[float, float]
 ROW_EVERY = 5  # steps between two rows while driving (0.5 m at 0.5 m/s)
-SPOTS_TRIED = 6  # safe spots tried before giving up on a clear timing
+SPOTS_TRIED = 4  # safe spots tried before giving up on a clear timing
 
 
 @dataclass(frozen=True)
@@ -52,11 +52,11 @@ class Timed:
 class PathTimer:
     """Times paths against a reservation table (see the module docstring)."""
 
-    def __init__(self, table: ReservationTable, speed: float, *, max_wait: float = 90.0) -> None:
+    def __init__(self, table: ReservationTable, speed: float, *, max_wait: float = 60.0) -> None:
         self.table = table
         self.speed = speed
         self.max_wait = max_wait
-        self.stats = {"timed": 0, "waited": 0, "unclear": 0}
+        self.stats = {"timings": 0, "waited": 0, "yielded": 0}  # searches; clear ones with a wait; pull-asides
 
     def samples(self, points: Sequence[Point]) -> tuple[list[Point], list[float]]:
         """Points along the path at most one step apart (the path's corners kept), and headings."""
@@ -80,7 +80,7 @@ class PathTimer:
     ) -> Timed:
         """Rows along ``points`` from ``now``: hold until ``not_before`` (the plan's start for this
         action), then drive, waiting wherever the reserved robots require."""
-        self.stats["timed"] += 1
+        self.stats["timings"] += 1
         start = max(now, not_before if not_before is not None else now)
         pts, heads = self.samples(points)
         n = len(pts)
@@ -89,8 +89,9 @@ class PathTimer:
         horizon = max(self.table.horizon() - start, 0.0)
         steps = int(math.ceil((min(horizon, self.max_wait) + self.max_wait) / DT)) + n
         times = start + DT * np.arange(steps + 1)
-        others = self.table.positions(times, exclude=robot)
         xy = np.asarray(pts)
+        box = (float(xy[:, 0].min()), float(xy[:, 1].min()), float(xy[:, 0].max()), float(xy[:, 1].max()))
+        others = self.table.positions(times, exclude=robot, near=box)
         if others.shape[1]:
             # A robot already closer than the clearance (two robots that stopped near each other)
             # only must not come closer still.
@@ -105,15 +106,17 @@ class PathTimer:
         reach[0, 0] = True
         goal_free_after = np.flip(np.logical_and.accumulate(np.flip(free[:, -1])))
         arrival = -1
-        for k in range(1, steps + 1):
-            row = reach[k - 1].copy()
-            row[1:] |= reach[k - 1][:-1]
-            reach[k] = row & free[k]
-            if reach[k, -1] and goal_free_after[k]:
-                arrival = k
-                break
+        if goal_free_after.any():  # else someone stays on the goal: no timing can be clear
+            for k in range(1, steps + 1):
+                row = reach[k - 1].copy()
+                row[1:] |= reach[k - 1][:-1]
+                reach[k] = row & free[k]
+                if reach[k, -1] and goal_free_after[k]:
+                    arrival = k
+                    break
+                if not reach[k].any():
+                    break  # trapped: every point it could be at is taken
         if arrival < 0:
-            self.stats["unclear"] += 1
             return Timed(self._rows(list(range(n)), pts, heads, start, now, theta0), 0.0, False)
         index = [n - 1]
         i = n - 1
@@ -151,8 +154,7 @@ class PathTimer:
                 continue
             detour = self.time(robot, via, now, theta0=theta0, not_before=not_before)
             if detour.clear:
-                self.stats["unclear"] -= 1
-                self.stats["yielded"] = self.stats.get("yielded", 0) + 1
+                self.stats["yielded"] += 1
                 return detour
         return timed
 

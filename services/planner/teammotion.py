@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections import Counter
 from dataclasses import dataclass, field, replace
 from itertools import pairwise
 
@@ -33,6 +34,7 @@ from .world import World
 log = logging.getLogger(__name__)
 SPOT_RADII = (0.7, 1.0, 1.4, 1.9)  # m from the start at which safe spots are looked for
 SPOT_ANGLES = 16
+LEAVE_PATH = 1.0  # m before an occupied goal where the way to a spot near it leaves the path
 
 
 @dataclass
@@ -42,6 +44,9 @@ class TeamMotion:
     timer: PathTimer = field(init=False)
     delays: dict[str, int] = field(default_factory=dict)  # robot -> s its front action ends late by
     _lanes: list[tuple[Point, Point]] | None = None
+    # trajectories timed: clear (waits and pull-asides included), goal_moved (to a spot near an
+    # occupied goal), unclear (sent with the plain timing)
+    stats: Counter = field(default_factory=Counter)
 
     def __post_init__(self) -> None:
         self.table = ReservationTable(self.motion.site.params.robot_radius)
@@ -86,8 +91,12 @@ class TeamMotion:
         timed = self.timer.time_or_yield(
             rid, points, now, self._route, self.spots, theta0=theta0, not_before=not_before
         )
+        outcome = "clear" if timed.clear else "unclear"
         if not timed.clear and movable_goal:
-            timed = self._elsewhere(rid, points, now, theta0, not_before) or timed
+            moved = self._elsewhere(rid, points, now, theta0, not_before)
+            if moved is not None:
+                timed, outcome = moved, "goal_moved"
+        self.stats[outcome] += 1
         out = timed.rows
         if not timed.clear:
             conflict = self.table.first_conflict(rid, out)
@@ -109,15 +118,14 @@ class TeamMotion:
         for spot in self.spots(goal, nearest_first=True)[:SPOTS_TRIED]:
             if room is not None and self.motion.site.room_at(*spot) is not room:
                 continue
+            # from the last point well short of the goal (for a gothrough: still before the opening)
+            cut = max([i for i, p in enumerate(points) if math.dist(p, goal) >= LEAVE_PATH] or [0])
             try:
-                via = [*points[:-2], *self._route(points[-2], spot)] if len(points) >= 2 else [*points, spot]
+                via = [*points[:cut], *self._route(points[cut], spot)]
             except NoPath:
                 continue
-            timed = self.timer.time_or_yield(
-                rid, via, now, self._route, self.spots, theta0=theta0, not_before=not_before
-            )
+            timed = self.timer.time(rid, via, now, theta0=theta0, not_before=not_before)
             if timed.clear:
-                self.timer.stats["goal_moved"] = self.timer.stats.get("goal_moved", 0) + 1
                 return timed
         return None
 

@@ -206,6 +206,8 @@ class RobotExecutor:
         elif self.right_of_way.blocker(robot, step.x, step.y, self.fleet, now):
             step = self._back_away(robot, dt)
             robot.yield_time += dt
+        if (step.x, step.y) != (robot.x, robot.y) and any(self._breaks_guard(robot, step, d) for d in self._shut()):
+            step = Step(robot.x, robot.y, robot.theta, 0.0, 0.0)  # whatever moved it: never into a shut doorway
         robot.x, robot.y, robot.theta, robot.v, robot.omega = step.x, step.y, step.theta, step.v, step.omega
         robot.progress = min(follower.s / follower.path.length, 1.0) if follower.path.length > 0 else 1.0
         if step.held and not blocking:
@@ -227,7 +229,7 @@ class RobotExecutor:
 
     def _back_away(self, robot: Robot, dt: float) -> Step:
         """Stop; or, when the robot it stops for has the right of way and comes on, reverse straight
-        back (as far as free space allows) so that the two do not touch."""
+        back (as far as free space and shut doors allow) so that the two do not touch."""
         winner = self.fleet.get(self.right_of_way.gives_way_to(robot.id))
         if winner is not None:
             speed = self.config.controller.speed
@@ -237,6 +239,9 @@ class RobotExecutor:
             if away and self._free.is_free(bx, by):
                 return Step(bx, by, robot.theta, -speed, 0.0)
         return Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
+
+    def _shut(self) -> list[str]:
+        return [d for d in self.doors.doors if not self.doors.passable(d)]
 
     def _breaks_guard(self, robot: Robot, step: Step, door_id: str) -> bool:
         a, b = self.doors[door_id].opening.endpoints

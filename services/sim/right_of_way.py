@@ -54,10 +54,12 @@ class RightOfWay:
             if other.id == robot.id:
                 continue
             after = math.hypot(nx - other.x, ny - other.y)
-            if after >= limit or after >= math.hypot(robot.x - other.x, robot.y - other.y) - 1e-9:
+            if after >= limit:
+                continue
+            patient = True  # another robot is near: the patience clock keeps running (turning in place too)
+            if after >= math.hypot(robot.x - other.x, robot.y - other.y) - 1e-9:
                 continue
             if self._out_of_patience(robot.id, other, now):
-                patient = True  # keep the clock running: it goes on while that robot stays parked
                 continue
             if self._cycle_won(robot.id, other.id):
                 continue
@@ -72,11 +74,12 @@ class RightOfWay:
             self.forget(robot.id)
         return found
 
-    def gives_way_to(self, robot: str) -> str:
+    def gives_way_to(self, robot: str, fleet: Mapping[str, Body]) -> str:
         """The robot that won a cycle against ``robot`` and is coming at it ("" if none): ``robot``
         should back away from it, since it will not stop."""
         other = self.blocked_by.get(robot, "")
-        return other if other and self.blocked_by.get(other) is None and other < robot else ""
+        coming = other in fleet and fleet[other].phase == "drive" and self.blocked_by.get(other) is None
+        return other if coming and other < robot else ""
 
     def _out_of_patience(self, me: str, other: Body, now: float) -> bool:
         if other.phase not in PARKED:

@@ -206,8 +206,12 @@ class RobotExecutor:
         elif self.right_of_way.blocker(robot, step.x, step.y, self.fleet, now):
             step = self._back_away(robot, dt)
             robot.yield_time += dt
-        if (step.x, step.y) != (robot.x, robot.y) and any(self._breaks_guard(robot, step, d) for d in self._shut()):
-            step = Step(robot.x, robot.y, robot.theta, 0.0, 0.0)  # whatever moved it: never into a shut doorway
+        if (step.x, step.y) != (robot.x, robot.y) and any(
+            self._breaks_guard(robot, step, d, 0.0) for d in self._shut()
+        ):
+            # whatever moved it (backing off, a hold, a corner): its disc never enters a shut doorway;
+            # passing beside one (a corridor along a row of doors) is allowed
+            step = Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
         robot.x, robot.y, robot.theta, robot.v, robot.omega = step.x, step.y, step.theta, step.v, step.omega
         robot.progress = min(follower.s / follower.path.length, 1.0) if follower.path.length > 0 else 1.0
         if step.held and not blocking:
@@ -230,7 +234,7 @@ class RobotExecutor:
     def _back_away(self, robot: Robot, dt: float) -> Step:
         """Stop; or, when the robot it stops for has the right of way and comes on, reverse straight
         back (as far as free space and shut doors allow) so that the two do not touch."""
-        winner = self.fleet.get(self.right_of_way.gives_way_to(robot.id))
+        winner = self.fleet.get(self.right_of_way.gives_way_to(robot.id, self.fleet))
         if winner is not None:
             speed = self.config.controller.speed
             bx = robot.x - speed * dt * math.cos(robot.theta)
@@ -243,9 +247,9 @@ class RobotExecutor:
     def _shut(self) -> list[str]:
         return [d for d in self.doors.doors if not self.doors.passable(d)]
 
-    def _breaks_guard(self, robot: Robot, step: Step, door_id: str) -> bool:
+    def _breaks_guard(self, robot: Robot, step: Step, door_id: str, margin: float | None = None) -> bool:
         a, b = self.doors[door_id].opening.endpoints
-        limit = self.config.radius + self.config.guard_margin
+        limit = self.config.radius + (self.config.guard_margin if margin is None else margin)
         before = segment_distance((robot.x, robot.y), a, b)
         after = segment_distance((step.x, step.y), a, b)
         return after < limit and after < before

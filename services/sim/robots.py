@@ -206,9 +206,7 @@ class RobotExecutor:
         elif self.right_of_way.blocker(robot, step.x, step.y, self.fleet, now):
             step = self._back_away(robot, dt)
             robot.yield_time += dt
-        if (step.x, step.y) != (robot.x, robot.y) and any(
-            self._breaks_guard(robot, step, d, 0.0) for d in self._shut()
-        ):
+        if (step.x, step.y) != (robot.x, robot.y) and self._into_shut_doorway(robot, step):
             # whatever moved it (backing off, a hold, a corner): its disc never enters a shut doorway;
             # passing beside one (a corridor along a row of doors) is allowed
             step = Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
@@ -244,8 +242,19 @@ class RobotExecutor:
                 return Step(bx, by, robot.theta, -speed, 0.0)
         return Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
 
-    def _shut(self) -> list[str]:
-        return [d for d in self.doors.doors if not self.doors.passable(d)]
+    def _into_shut_doorway(self, robot: Robot, step: Step) -> bool:
+        """Whether ``step`` brings the robot's disc into the gap of a door that is not passable, or
+        (a leaf on the move) into the area the leaf sweeps."""
+        for door in self.doors.doors.values():
+            if door.passable:
+                continue
+            if self._breaks_guard(robot, step, door.id, 0.0):
+                return True
+            moving = 0.0 < door.fraction < 1.0 or (door.fraction >= 1.0 and not door.target_open)
+            if moving and self.doors.doorway_clear(door, [(robot.x, robot.y)]):
+                if not self.doors.doorway_clear(door, [(step.x, step.y)]):
+                    return True
+        return False
 
     def _breaks_guard(self, robot: Robot, step: Step, door_id: str, margin: float | None = None) -> bool:
         a, b = self.doors[door_id].opening.endpoints

@@ -34,6 +34,9 @@ from .world import World
 log = logging.getLogger(__name__)
 SPOT_RADII = (0.7, 1.0, 1.4, 1.9)  # m from the start at which safe spots are looked for
 SPOT_ANGLES = 16
+# searches per dispatch (about 10 ms each) after which no more spots are tried: a count, not a
+# time, so a lockstep run gives the same trajectories on a loaded machine as on a quiet one
+BUDGET = 20
 LEAVE_PATH = 1.0  # m before an occupied goal where the way to a spot near it leaves the path
 
 
@@ -43,7 +46,9 @@ class TeamMotion:
     table: ReservationTable = field(init=False)
     timer: PathTimer = field(init=False)
     delays: dict[str, int] = field(default_factory=dict)  # robot -> s its front action ends late by
+    budget: int = BUDGET
     _lanes: list[tuple[Point, Point]] | None = None
+    _searches_at_start: int = 0
     # trajectories timed: clear (waits and pull-asides included), goal_moved (to a spot near an
     # occupied goal), unclear (sent with the plain timing)
     stats: Counter = field(default_factory=Counter)
@@ -57,6 +62,7 @@ class TeamMotion:
         self.table = ReservationTable(self.table.radius, self.table.margin)
         self.timer.table = self.table
         self.delays = {}
+        self._searches_at_start = self.timer.stats["timings"]
         for rid, state in sorted(world.robots.items()):
             rows = committed.get(rid)
             x, y, theta = state.pose
@@ -88,9 +94,14 @@ class TeamMotion:
         if not points:
             return rows
         theta0 = rows[0][3]
-        timed = self.timer.time_or_yield(
-            rid, points, now, self._route, self.spots, theta0=theta0, not_before=not_before
-        )
+        if self.timer.stats["timings"] - self._searches_at_start > self.budget:
+            # past the budget: waits on the path only (one search), no spots to pull aside to
+            timed = self.timer.time(rid, points, now, theta0=theta0, not_before=not_before)
+            movable_goal = False
+        else:
+            timed = self.timer.time_or_yield(
+                rid, points, now, self._route, self.spots, theta0=theta0, not_before=not_before
+            )
         outcome = "clear" if timed.clear else "unclear"
         if not timed.clear and movable_goal:
             moved = self._elsewhere(rid, points, now, theta0, not_before)

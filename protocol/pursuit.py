@@ -8,8 +8,11 @@ down so as to keep the curvature (it never widens a corner by turning less). A b
 ``turn_in_place`` (e.g. the first row points behind the robot) is met by turning on the spot.
 
 The path is followed in space, not in time: a trajectory's timestamps are the planner's forecast,
-and a robot held at a door is late on them by the time it waited. ``s_limit`` caps how far along
-the path the robot may go (a closed door ahead); the step never carries it past that point.
+and a robot held at a door is late on them by the time it waited. The one exception is a *hold*:
+two rows at the same point (the second later) mean "wait here until then" - the planner's way of
+making a robot give way to another (services/planner/reservations.py) - and :meth:`Path.hold_limit`
+says how far the robot may go at a given time. ``s_limit`` caps how far along the path the robot
+may go (a closed door ahead, a hold); the step never carries it past that point.
 
 Integration is exact for constant (v, omega) over a step, so results do not drift with the tick.
 """
@@ -19,7 +22,6 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass
-from itertools import pairwise
 
 from .plane import segment_intersection, wrap
 
@@ -40,15 +42,25 @@ class Path:
 
     def __init__(self, rows: list[list[float]]) -> None:
         points: list[tuple[float, float]] = []
+        self.holds: list[tuple[float, float]] = []  # (arc length, time): stay there until then
+        self.s = [0.0]
         for row in rows:
             p = (float(row[1]), float(row[2]))
             if not points or math.hypot(p[0] - points[-1][0], p[1] - points[-1][1]) > 1e-6:
+                if points:
+                    self.s.append(self.s[-1] + math.hypot(p[0] - points[-1][0], p[1] - points[-1][1]))
                 points.append(p)
+            else:
+                self.holds.append((self.s[-1], float(row[0])))
         self.points = points
         self.final_theta = float(rows[-1][3]) if rows else 0.0
-        self.s = [0.0]
-        for a, b in pairwise(points):
-            self.s.append(self.s[-1] + math.hypot(b[0] - a[0], b[1] - a[1]))
+
+    def hold_limit(self, now: float) -> float:
+        """How far along the path a robot may be at ``now``: the first hold not over yet, else no limit."""
+        for s, until in self.holds:
+            if until > now + 1e-9:
+                return s
+        return math.inf
 
     @property
     def length(self) -> float:

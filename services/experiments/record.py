@@ -39,6 +39,7 @@ TRIAL_FIELDS = KEY_FIELDS + (
     "robot_wait_time",  # s, all robots together, waiting at doors
     "human_time_away",  # s she spent walking to doors and opening them
     "actions_failed",
+    "robot_overlaps",  # times two robots' discs started to intersect (services/sim/overlaps.py; 0 is safe)
     "sim_time",  # s of simulated time when the mission ended
 )
 
@@ -129,6 +130,7 @@ def trial_row(spec: SweepSpec, outcome: TrialOutcome) -> dict[str, str]:
         robot_wait_time=_t(sum(float(r.get("wait_time") or 0.0) for r in (m.get("robots") or {}).values())),
         human_time_away=_t(human.get("time_away")),
         actions_failed=_n((m.get("actions") or {}).get("failed")),
+        robot_overlaps=_n(m.get("robot_overlaps")),
         sim_time=_t(m.get("time")),
     )
     return row

@@ -33,6 +33,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="M",
         help="distance from the trajectory that triggers a replan (default 1.0 m)",
     )
+    svc.add_argument(
+        "--collision-free",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="time each robot's trajectory against the others' so robots never meet: they wait or pull aside "
+        "(default on; --no-collision-free plans each trajectory on its own)",
+    )
     svc.set_defaults(func=_run_service)
 
     one = subparsers.add_parser(
@@ -121,7 +128,9 @@ def _run_service(args: argparse.Namespace) -> int:
         site = load_site(args.site)
         if args.off_track <= 0:
             raise ValueError("--off-track must be positive")
-        settings = ServiceSettings(method=args.method, planner=_settings(args), off_track=args.off_track)
+        settings = ServiceSettings(
+            method=args.method, planner=_settings(args), off_track=args.off_track, collision_free=args.collision_free
+        )
         return PlannerService(
             site, args.namespace or site.name, options_from(args), clock=make_clock(args.clock), settings=settings
         )

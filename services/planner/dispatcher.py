@@ -8,12 +8,16 @@ reports, so a restarted planner does not repeat one). A front action that is the
 the robot is already executing keeps its id and is not sent again, so a replan caused by another
 robot does not restart a robot's load or make it stop and go; it is sent anew when the robot has
 left its trajectory (``force``), or when the robot reports that action over.
+
+With ``team`` (collision-free motion, on in the service by default), every new trajectory is timed
+against the trajectories already sent (:mod:`services.planner.teammotion`), and
+:meth:`Dispatcher.with_waits` moves each robot's plan by the waits that added.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from protocol.actions import Action
 from protocol.messages import Intent, RobotCommand
@@ -21,6 +25,7 @@ from protocol.messages import Intent, RobotCommand
 from .motion import MotionPlanner, Point
 from .plan import RobotPlan, Step, TeamResult
 from .problem import ProblemBuilder
+from .teammotion import TeamMotion, delay_plan
 from .world import World
 
 FINISHED_STATES = ("done", "failed", "idle")
@@ -45,6 +50,7 @@ class Dispatcher:
     # index of each robot's front step in its plan (1 when a leading opendoor is skipped)
     front_index: dict[str, int] = field(default_factory=dict)
     _next_id: dict[str, int] = field(default_factory=dict)
+    team: TeamMotion | None = None  # collision-free motion (None: each trajectory on its own)
 
     def note_reported_id(self, robot: str, action_id: int) -> None:
         """Keep new ids above anything the robot has seen (e.g. from before a planner restart)."""
@@ -71,6 +77,9 @@ class Dispatcher:
         command must be sent again (e.g. far off their trajectory)."""
         commands: list[RobotCommand] = []
         front_ids: dict[str, int] = {}
+        if self.team is not None:
+            kept = {rid: d.trajectory for rid, d in self.current.items() if rid not in finished | force}
+            self.team.begin(world, kept)
         for rid, plan in sorted(result.plans.items()):
             if plan.empty:
                 self.forget(rid)
@@ -87,6 +96,15 @@ class Dispatcher:
                 front_ids[rid] = now_cmd.action_id
                 continue
             trajectory, duration = self.trajectory(rid, plan, step, world)
+            if self.team is not None and trajectory:
+                trajectory = self.team.timed(
+                    rid,
+                    trajectory,
+                    world.now,
+                    not_before=result.base + step.start if step.action == "gothrough" else None,
+                    planned_end=result.base + step.end - duration,
+                    movable_goal=step.action in ("approach", "gothrough"),
+                )
             action_id = self._new_id(rid)
             cmd = RobotCommand(
                 robot=rid,
@@ -101,6 +119,16 @@ class Dispatcher:
             front_ids[rid] = action_id
             commands.append(cmd)
         return commands, front_ids
+
+    def with_waits(self, result: TeamResult) -> TeamResult:
+        """``result`` with each robot's plan moved by the wait its new trajectory added (if any)."""
+        if self.team is None or not self.team.delays:
+            return result
+        plans = dict(result.plans)
+        for rid, seconds in self.team.delays.items():
+            if rid in plans:
+                plans[rid] = delay_plan(plans[rid], self.front_index.get(rid, 0), seconds)
+        return replace(result, plans=plans)
 
     @staticmethod
     def front(plan: RobotPlan, world: World) -> int:

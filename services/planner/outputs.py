@@ -48,10 +48,12 @@ class PlanOutputs:
         versions: tuple[int, int],
         finished: set[str],
         force: set[str],
-    ) -> None:
+    ) -> TeamResult | None:
         """Publish ``kept`` (the plan being executed, None before the first) as the next TeamPlan for
         ``versions`` (world, constraints); ``new``: it was just made or continued, so the front
-        actions are dispatched (else the commands under way stay as they are)."""
+        actions are dispatched (else the commands under way stay as they are). Returns the plan as
+        published: a dispatched one carries the waits team motion added (its times then agree with
+        the trajectories sent)."""
         self.plan_id += 1
         world_version, cs_version = versions
         if kept is None:
@@ -63,9 +65,10 @@ class PlanOutputs:
                 diagnostic=diagnostic[:4096],
             )
             self.publish(self.keys.plan(), self.message)
-            return
+            return None
         if new:
             commands, front = self.dispatcher.dispatch(kept, world, self.plan_id, finished=finished, force=force)
+            kept = self.dispatcher.with_waits(kept)  # the plan's times include the waits
         else:
             commands, front = [], {rid: d.action_id for rid, d in self.dispatcher.current.items()}
         # Commands first: a simulator in lockstep waits for the commands a plan names before it runs on.
@@ -91,6 +94,7 @@ class PlanOutputs:
             kept.solve_time,
             f" ({diagnostic})" if diagnostic else "",
         )
+        return kept
 
     def repeat(self, repeat: Repeat) -> None:
         """Publish the last TeamPlan again (a lockstep simulator paused at the version it answers)."""

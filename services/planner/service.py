@@ -42,6 +42,7 @@ from .plan import TeamResult
 from .planner import PlannerSettings, TaskPlanner
 from .readiness import Readiness
 from .scheduler import ReplanScheduler
+from .teammotion import TeamMotion
 from .triggers import ActionEnded, DoorChanged, NewConstraints, NewWorldVersion, OffTrack, Start, StatusChanged, Trigger
 from .world import World
 from .world_cache import WorldCache
@@ -54,6 +55,7 @@ class ServiceSettings:
     method: str = "iidp"
     planner: PlannerSettings = field(default_factory=lambda: PlannerSettings(time_limit=5.0))
     off_track: float = OFF_TRACK
+    collision_free: bool = True  # time trajectories against each other (services/planner/teammotion.py)
 
 
 class PlannerService(Service):
@@ -72,6 +74,8 @@ class PlannerService(Service):
         self.settings = settings or ServiceSettings()
         self.planner = TaskPlanner(site, self.settings.planner)
         self.dispatcher = Dispatcher(self.planner.builder, self.planner.motion)
+        if self.settings.collision_free:
+            self.dispatcher.team = TeamMotion(self.planner.motion)
         self.cache = WorldCache(site, self.planner.builder.beside_distance)
         self.scheduler = ReplanScheduler()
         self.lockstep = LockstepFollower()
@@ -337,7 +341,9 @@ class PlannerService(Service):
             self._finished.clear()
             self.off_track.take()
         versions = (self.world_version, self.constraints_version)
-        self.outputs.plan(world, self.result, result is not None, diagnostic, versions, finished, force)
+        kept = self.outputs.plan(world, self.result, result is not None, diagnostic, versions, finished, force)
+        if kept is not None:
+            self.result = kept  # with the waits team motion added to its times
 
     def publish_conflict(self, ids: list[str], reason: str) -> None:
         self.outputs.conflict(ids, reason, self.constraints_version)

@@ -179,7 +179,7 @@ def _short(value: Any, limit: int = 300) -> str:
     return text if len(text) <= limit else text[: limit - 1] + "…"
 
 
-WARNING_EVENTS = ("action_failed", "plan_conflict", "closed_door_crossing")
+WARNING_EVENTS = ("action_failed", "plan_conflict", "closed_door_crossing", "robot_overlap")
 
 
 def describe(msg: Feedback | FeedbackAck | Event) -> tuple[str, str]:

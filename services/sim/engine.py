@@ -30,6 +30,7 @@ from .doors import DoorChange, DoorConfig, Doors
 from .human import Declare, HumanConfig, HumanModel, OpenDoor, TaskDone
 from .metrics import MetricsRecorder
 from .objects import Objects
+from .overlaps import OverlapWatch
 from .robots import Outcome, Robot, RobotConfig, RobotExecutor
 from .streams import Streams
 
@@ -134,9 +135,11 @@ class Engine:
             ),
         )
         self.robots: dict[str, Robot] = {rid: Robot(rid, *spec.start) for rid, spec in sorted(site.robots.items())}
+        self.executor.fleet = self.robots
         # Robots executed elsewhere (services/sim/ros2_base.py): stepped by their own object, not the executor.
         self.external: dict[str, Any] = {}
         self.closed_doors = ClosedDoorWatch(self.doors, p.robot_radius)  # safety invariant, checked every tick
+        self.overlaps = OverlapWatch(site, p.robot_radius)  # robot-robot contact, checked every tick
         her_room = site.human.room
         self.human_doors = sorted(d.id for d in site.doors.values() if d.human_operated and her_room in d.rooms)
         self.human = HumanModel(
@@ -204,6 +207,20 @@ class Engine:
                 robot=crossing.robot,
                 door=crossing.door,
                 data={"depth": crossing.depth, "fraction": crossing.fraction, "pose": list(crossing.pose)},
+            )
+        for overlap in self.overlaps.check(self.robots.values()):
+            self.metrics.overlap(overlap.robots, overlap.place)
+            self._emit(
+                "robot_overlap",
+                robot=overlap.robots[0],
+                data={
+                    "robots": list(overlap.robots),
+                    "place": overlap.place,
+                    "depth": overlap.depth,
+                    "poses": [list(p) for p in overlap.poses],
+                    # what each was doing: says whether the plan or the execution let them meet
+                    "actions": [self._doing(rid) for rid in overlap.robots],
+                },
             )
         self._track_waiting(t1)
         waiting: dict[str, dict[str, float]] = {d: {} for d in self.human_doors}
@@ -274,6 +291,12 @@ class Engine:
         return self.human.pose()
 
     # ------------------------------------------------------------------ internals
+
+    def _doing(self, rid: str) -> str:
+        robot = self.robots[rid]
+        cmd = robot.command
+        action = f"{cmd.action}({','.join(cmd.args)})#{cmd.action_id}" if cmd is not None else "-"
+        return f"{action} {robot.phase}"
 
     def _emit(
         self,
@@ -366,6 +389,7 @@ class Engine:
                 "completion_time": self.metrics.robot_done.get(rid),
                 "delivered": list(r.delivered),
                 "wait_time": round(r.wait_time, 6),
+                "yield_time": round(r.yield_time, 6),
             }
             for rid, r in self.robots.items()
         }

@@ -6,7 +6,8 @@
 - door openings by the human (her a1 actions), and door openings of every kind per door;
 - feedback sent, accepted, refused and unanswered (a2 declarations, ARROCH only);
 - safety: robots that entered the doorway of a closed door (:mod:`services.sim.crossings`; 0 in
-  every correct run);
+  every correct run); robot-robot overlaps (two discs intersecting, :mod:`services.sim.overlaps`),
+  in total, per pair and per place (room or opening);
 plus what explains them (robots' waiting time at doors, the human's time away and focus intervals,
 world versions) and every parameter of the run, so a metrics file is self-describing.
 """
@@ -31,6 +32,10 @@ class MetricsRecorder:
     actions_done: int = 0
     actions_failed: int = 0
     closed_door_crossings: int = 0
+    overlaps: Counter = field(default_factory=Counter)  # ((robot, robot), place) -> overlaps
+
+    def overlap(self, pair: tuple[str, str], place: str) -> None:
+        self.overlaps[(pair, place)] += 1
 
     def opened(self, door: str, by: str) -> None:
         self.door_openings[(door, "human" if by == "human" else "robot")] += 1
@@ -59,6 +64,11 @@ class MetricsRecorder:
         per_door: dict[str, dict[str, int]] = {}
         for (door, by), n in sorted(self.door_openings.items()):
             per_door.setdefault(door, {})[by] = n
+        per_pair: Counter = Counter()
+        per_place: Counter = Counter()
+        for (pair, place), n in self.overlaps.items():
+            per_pair["-".join(pair)] += n
+            per_place[place] += n
         return {
             "completed": completed,
             "time": round(time, 6),
@@ -74,6 +84,9 @@ class MetricsRecorder:
             },
             "actions": {"done": self.actions_done, "failed": self.actions_failed},
             "closed_door_crossings": self.closed_door_crossings,
+            "robot_overlaps": sum(self.overlaps.values()),
+            "robot_overlaps_by_pair": dict(sorted(per_pair.items())),
+            "robot_overlaps_by_place": dict(sorted(per_place.items())),
             "world_versions": world_versions,
             "robots": robots,
             "human": human,

@@ -32,6 +32,7 @@ from protocol.site.model import Site
 
 from .doors import Doors
 from .objects import Objects
+from .right_of_way import RightOfWay
 
 
 @dataclass(frozen=True)
@@ -45,6 +46,7 @@ class RobotConfig:
     auto_open_distance: float = 1.5  # m of path ahead within which an automatic door is asked to open
     start_tolerance: float = START_TOLERANCE  # m; a trajectory may start at most this far from the robot
     reach: float = REACH  # m from the robot's centre within which it can pick up an object
+    robot_margin: float = 0.05  # m a driving robot keeps between its disc and another robot's
 
 
 @dataclass(frozen=True)
@@ -80,6 +82,7 @@ class Robot:
     detail: str = ""
     progress: float = 0.0
     wait_time: float = 0.0  # s spent waiting at doors, over the whole mission
+    yield_time: float = 0.0  # s spent stopped for another robot or on a hold of its trajectory
     # execution of the current command
     phase: str = "idle"  # idle, drive, wait_open, dwell, done, failed
     follower: PurePursuit | None = None
@@ -97,6 +100,10 @@ class RobotExecutor:
         self.doors = doors
         self.objects = objects
         self.config = config
+        self.fleet: dict[str, Robot] = {}  # every robot, for the right of way (set by the engine)
+        self.right_of_way = RightOfWay(config.radius, config.robot_margin)
+        # where a robot's centre may go when it backs away (doors open: it only backs over its own path)
+        self._free = site.occupancy_grid(resolution=0.05, open_doors=tuple(site.door_leaves), inflate=config.radius)
 
     # ------------------------------------------------------------------ commands
 
@@ -157,6 +164,7 @@ class RobotExecutor:
         """Advance one robot by ``dt``; ``now`` is the time at the start of the step."""
         if robot.phase == "drive":
             return self._drive(robot, now, dt)
+        self.right_of_way.forget(robot.id)  # waits for no robot
         if robot.phase == "wait_open":
             return self._wait_open(robot, dt)
         if robot.phase == "dwell":
@@ -188,11 +196,28 @@ class RobotExecutor:
                 and math.dist((robot.x, robot.y), opening.center) <= cfg.auto_open_distance + cfg.radius
             ):
                 self.doors.request_open(opening.id, robot.id)
+        hold = follower.path.hold_limit(now)
+        if hold < s_limit:
+            s_limit, blocking = hold, ""  # the plan says wait here (for another robot) until then
         step = follower.step(robot.x, robot.y, robot.theta, dt, s_limit)
         if blocking and not step.held and self._breaks_guard(robot, step, blocking):
             step = Step(robot.x, robot.y, robot.theta, 0.0, 0.0, held=True)
+        if step.held:
+            self.right_of_way.forget(robot.id)  # waits for a door or a hold, not for a robot
+        elif self.right_of_way.blocker(robot, step.x, step.y, self.fleet, now):
+            step = self._back_away(robot, dt)
+            robot.yield_time += dt
+        if (step.x, step.y) != (robot.x, robot.y) and self._into_shut_doorway(robot, step):
+            # whatever moved it (backing off, a hold, a corner): its disc never enters a shut doorway;
+            # passing beside one (a corridor along a row of doors) is allowed
+            step = Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
         robot.x, robot.y, robot.theta, robot.v, robot.omega = step.x, step.y, step.theta, step.v, step.omega
         robot.progress = min(follower.s / follower.path.length, 1.0) if follower.path.length > 0 else 1.0
+        if step.held and not blocking:
+            robot.yield_time += dt
+            if robot.state == "waiting_at_door":
+                self._set(robot, state="moving", waiting_door="")
+            return []
         if step.held:
             robot.wait_time += dt
             if robot.state != "waiting_at_door" or robot.waiting_door != blocking:
@@ -205,9 +230,36 @@ class RobotExecutor:
             return self._arrived(robot, now + dt)
         return []
 
-    def _breaks_guard(self, robot: Robot, step: Step, door_id: str) -> bool:
+    def _back_away(self, robot: Robot, dt: float) -> Step:
+        """Stop; or, when the robot it stops for has the right of way and comes on, reverse straight
+        back (as far as free space and shut doors allow) so that the two do not touch."""
+        winner = self.fleet.get(self.right_of_way.gives_way_to(robot.id, self.fleet))
+        if winner is not None:
+            speed = self.config.controller.speed
+            bx = robot.x - speed * dt * math.cos(robot.theta)
+            by = robot.y - speed * dt * math.sin(robot.theta)
+            away = math.hypot(bx - winner.x, by - winner.y) > math.hypot(robot.x - winner.x, robot.y - winner.y)
+            if away and self._free.is_free(bx, by):
+                return Step(bx, by, robot.theta, -speed, 0.0)
+        return Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
+
+    def _into_shut_doorway(self, robot: Robot, step: Step) -> bool:
+        """Whether ``step`` brings the robot's disc into the gap of a door that is not passable, or
+        (a leaf on the move) into the area the leaf sweeps."""
+        for door in self.doors.doors.values():
+            if door.passable:
+                continue
+            if self._breaks_guard(robot, step, door.id, 0.0):
+                return True
+            moving = 0.0 < door.fraction < 1.0 or (door.fraction >= 1.0 and not door.target_open)
+            if moving and self.doors.doorway_clear(door, [(robot.x, robot.y)]):
+                if not self.doors.doorway_clear(door, [(step.x, step.y)]):
+                    return True
+        return False
+
+    def _breaks_guard(self, robot: Robot, step: Step, door_id: str, margin: float | None = None) -> bool:
         a, b = self.doors[door_id].opening.endpoints
-        limit = self.config.radius + self.config.guard_margin
+        limit = self.config.radius + (self.config.guard_margin if margin is None else margin)
         before = segment_distance((robot.x, robot.y), a, b)
         after = segment_distance((step.x, step.y), a, b)
         return after < limit and after < before

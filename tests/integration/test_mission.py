@@ -60,6 +60,10 @@ def test_default_mission_completes(spawn, tmp_path: Path, mode: list[str]):
     events = [json.loads(line) for line in (run / "events.jsonl").read_text().splitlines()]
     kinds = Counter(e["kind"] for e in events)
     assert kinds["mission_done"] == 1 and kinds["delivered"] == 9
+    # robot-robot contacts are counted, each once, and filed under a place (the goal, 0, is not met yet:
+    # docs/architecture.md, "Collision-free team motion")
+    overlaps = metrics["robot_overlaps"]
+    assert overlaps == kinds["robot_overlap"] == sum(metrics["robot_overlaps_by_place"].values())
     failed = [e["data"] for e in events if e["kind"] == "action_failed"]
     if "lockstep" in mode:
         assert failed == []

@@ -36,9 +36,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     svc.add_argument(
         "--collision-free",
         action=argparse.BooleanOptionalAction,
-        default=True,
-        help="time each robot's trajectory against the others' so robots never meet: they wait or pull aside "
-        "(default on; --no-collision-free plans each trajectory on its own)",
+        default=False,
+        help="time each robot's trajectory against the others' (space-time reservations): robots wait or pull "
+        "aside (default off: on generated 6-robot sites it meets more and can stall the task planner; "
+        "see docs/architecture.md)",
     )
     svc.set_defaults(func=_run_service)
 

@@ -9,7 +9,7 @@ the robot is already executing keeps its id and is not sent again, so a replan c
 robot does not restart a robot's load or make it stop and go; it is sent anew when the robot has
 left its trajectory (``force``), or when the robot reports that action over.
 
-With ``team`` (collision-free motion, on in the service by default), every new trajectory is timed
+With ``team`` (collision-free motion, opt-in: ``arroch planner --collision-free``), every new trajectory is timed
 against the trajectories already sent (:mod:`services.planner.teammotion`), and
 :meth:`Dispatcher.with_waits` moves each robot's plan by the waits that added.
 """

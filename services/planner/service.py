@@ -55,7 +55,7 @@ class ServiceSettings:
     method: str = "iidp"
     planner: PlannerSettings = field(default_factory=lambda: PlannerSettings(time_limit=5.0))
     off_track: float = OFF_TRACK
-    collision_free: bool = True  # time trajectories against each other (services/planner/teammotion.py)
+    collision_free: bool = False  # time trajectories against each other (teammotion.py; opt-in, see the docs)
 
 
 class PlannerService(Service):

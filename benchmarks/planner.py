@@ -31,6 +31,7 @@ target (any other) is measured and reported the same way.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import platform
@@ -46,6 +47,7 @@ from services.planner.constraints import ConstraintProgram, unavailable  # noqa:
 from services.planner.dispatcher import Dispatcher  # noqa: E402
 from services.planner.planner import PlannerSettings, TaskPlanner  # noqa: E402
 from services.planner.replay import world_at  # noqa: E402
+from services.planner.solver import WORK, ClingoWork  # noqa: E402
 from services.planner.teammotion import TeamMotion  # noqa: E402
 from services.planner.validator import Windows, validate_result  # noqa: E402
 from services.planner.world import initial_world  # noqa: E402
@@ -91,11 +93,38 @@ def summary(values: list[float]) -> dict:
     )
 
 
+def timed(plan, *args, **kwargs):
+    """Run ``plan(*args, **kwargs)``: its result, wall and CPU seconds, and the clingo work it did."""
+    before = dataclasses.replace(WORK)
+    t0, c0 = time.perf_counter(), time.process_time()
+    result = plan(*args, **kwargs)
+    return result, time.perf_counter() - t0, time.process_time() - c0, WORK.since(before)
+
+
+def clingo_split(runs: list[tuple[float, ClingoWork]]) -> dict:
+    """Where the plans' wall time went, as medians over the plans (``runs``: wall seconds and clingo
+    work of each): programs grounded, and the shares of making the programs (Control, encoding,
+    parsing the facts' text), grounding them and solving."""
+    if not runs:
+        return {}
+
+    def share(part: str) -> float:
+        return round(statistics.median(getattr(w, part) / max(t, 1e-9) for t, w in runs), 3)
+
+    return {
+        "programs_median": statistics.median(w.programs for _, w in runs),
+        "build_share_median": share("build_seconds"),
+        "ground_share_median": share("ground_seconds"),
+        "solve_share_median": share("solve_seconds"),
+    }
+
+
 def run_size(
     robots: int, seeds: int, replans: int, joint_limit: float, time_limit: float, first_limit: float, validate: bool
 ) -> dict:
     cold_times, makespans, openings, rounds = [], [], [], []
     replan_times, constraint_times, cpu_times, solves = [], [], [], []
+    first_work, replan_work = [], []
     invalid = 0
     joint_rows = []
     dispatch = {True: [], False: []}  # collision-free -> dispatch wall times
@@ -104,9 +133,9 @@ def run_size(
         site = loads_site(generate_site(robots, 3, seed=seed))
         planner = TaskPlanner(site, PlannerSettings(time_limit=time_limit, joint_time_limit=joint_limit))
         world = initial_world(site)
-        t0 = time.perf_counter()
-        first = planner.plan(world, time_limit=first_limit)
-        cold_times.append(time.perf_counter() - t0)
+        first, took, _, work = timed(planner.plan, world, time_limit=first_limit)
+        cold_times.append(took)
+        first_work.append((took, work))
         makespans.append(first.makespan)
         openings.append(first.door_openings)
         rounds.append(first.iterations)
@@ -116,10 +145,10 @@ def run_size(
         for k in range(1, replans + 1):
             t = first.makespan * k / (replans + 1)
             w = world_at(planner.builder, current_world, current, t)
-            t0, c0 = time.perf_counter(), time.process_time()
-            nxt = planner.plan(w, warm=current)
-            replan_times.append(time.perf_counter() - t0)
-            cpu_times.append(time.process_time() - c0)
+            nxt, took, cpu, work = timed(planner.plan, w, warm=current)
+            replan_times.append(took)
+            cpu_times.append(cpu)
+            replan_work.append((took, work))
             solves.append(nxt.solves)
             if validate and validate_result(site, w, nxt):
                 invalid += 1
@@ -130,10 +159,10 @@ def run_size(
             start = int(t)
             item = unavailable("d_storage", start, start + 120, "bench")
             program = ConstraintProgram.build([item])
-            t0, c0 = time.perf_counter(), time.process_time()
-            constrained = planner.plan(w, program, warm=nxt)
-            constraint_times.append(time.perf_counter() - t0)
-            cpu_times.append(time.process_time() - c0)
+            constrained, took, cpu, work = timed(planner.plan, w, program, warm=nxt)
+            constraint_times.append(took)
+            cpu_times.append(cpu)
+            replan_work.append((took, work))
             solves.append(constrained.solves)
             if validate and validate_result(site, w, constrained, Windows.from_asp([item.asp])):
                 invalid += 1
@@ -173,6 +202,8 @@ def run_size(
         "dispatch_seconds_plain": summary(dispatch[False]),
         "replan_plus_collision_free_dispatch_seconds": summary(with_dispatch),
         "replan_solves": {"median": statistics.median(solves), "total": sum(solves)} if solves else {},
+        "first_plan_clingo": clingo_split(first_work),
+        "replan_clingo": clingo_split(replan_work),
         "makespan": {"median": statistics.median(makespans), "values": makespans},
         "door_openings": {"median": statistics.median(openings), "values": openings},
         "iidp_rounds": {"median": statistics.median(rounds), "values": rounds},

@@ -35,6 +35,30 @@ ENCODING = {
 DIAGNOSE_LIMIT = 2.0  # s for each satisfiability check while shrinking a conflict
 
 
+@dataclass
+class ClingoWork:
+    """Clingo work done in this process so far: read it before and after a plan to see where the
+    plan's time went (``benchmarks/planner.py``). ``build``: a ``Control`` made and the encoding and
+    facts added (the facts' text parsed); ``ground``: grounding; ``solve``: optimising, and the
+    satisfiability checks of a diagnosis."""
+
+    programs: int = 0
+    build_seconds: float = 0.0
+    ground_seconds: float = 0.0
+    solve_seconds: float = 0.0
+
+    def since(self, before: ClingoWork) -> ClingoWork:
+        return ClingoWork(
+            self.programs - before.programs,
+            self.build_seconds - before.build_seconds,
+            self.ground_seconds - before.ground_seconds,
+            self.solve_seconds - before.solve_seconds,
+        )
+
+
+WORK = ClingoWork()  # the process's totals; single-threaded use, like the planner itself
+
+
 @functools.cache
 def encoding_text(part: str) -> str:
     return (HERE / ENCODING[part]).read_text(encoding="utf-8")
@@ -78,6 +102,7 @@ def parts_for(constraints: ConstraintProgram | None, *, joint: bool = False) -> 
 def _grounded(
     facts: str, parts: Sequence[str], constraints: ConstraintProgram | None, args: list[str], extra: str = ""
 ) -> clingo.Control:
+    t0 = time.perf_counter()
     ctl = clingo.Control(args)
     with ast.ProgramBuilder(ctl) as builder:
         for part in parts:
@@ -88,7 +113,11 @@ def _grounded(
         ctl.add("base", [], extra)
     if constraints is not None:
         constraints.add_to(ctl)
+    t1 = time.perf_counter()
     ctl.ground([("base", [])])
+    WORK.programs += 1
+    WORK.build_seconds += t1 - t0
+    WORK.ground_seconds += time.perf_counter() - t1
     # An #external atom is false unless released; free ones can then be assumed true or false per solve.
     for i in constraints.active if constraints else []:
         ctl.assign_external(ConstraintProgram.guard_symbol(i), None)  # None: free
@@ -109,11 +138,13 @@ def _optimise(
         best[:] = [model.symbols(shown=True), tuple(model.cost)]
 
     on_core = core.extend if core is not None else None
+    t1 = time.perf_counter()
     with ctl.solve(assumptions=assumptions, on_model=on_model, on_core=on_core, async_=True) as handle:
         finished = handle.wait(limit)
         if not finished:
             handle.cancel()
         result = handle.get()
+    WORK.solve_seconds += time.perf_counter() - t1
     out = Outcome(status="unknown", seconds=time.perf_counter() - t0, ground_seconds=ground)
     if best:
         out.atoms, out.cost = best[0], best[1]
@@ -184,11 +215,15 @@ def solve_each(
 def _check(ctl: clingo.Control, constraints: ConstraintProgram, on: set[int]) -> bool | None:
     """Satisfiable with exactly the constraints ``on``? None when the check runs out of time."""
     assumptions = [(ConstraintProgram.guard_symbol(i), i in on) for i in constraints.active]
-    with ctl.solve(assumptions=assumptions, async_=True) as handle:
-        if not handle.wait(DIAGNOSE_LIMIT):
-            handle.cancel()
-            return None
-        return bool(handle.get().satisfiable)
+    t0 = time.perf_counter()
+    try:
+        with ctl.solve(assumptions=assumptions, async_=True) as handle:
+            if not handle.wait(DIAGNOSE_LIMIT):
+                handle.cancel()
+                return None
+            return bool(handle.get().satisfiable)
+    finally:
+        WORK.solve_seconds += time.perf_counter() - t0
 
 
 def _explain(ctl: clingo.Control, constraints: ConstraintProgram | None, core: list[int], out: Outcome) -> None:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import random
+import signal
 import threading
 import time
 from collections import Counter, defaultdict
@@ -163,6 +164,8 @@ def make_plan(client_src: str) -> Plan:
 
 def start_mission(spawn, run_dir: Path, endpoint: str, namespace: str) -> Proc:
     # --no-record: the fuzz counts what the mission's services drop; a recorder hears every key.
+    # --linger: the services stay up after the mission until the counters have been read (the
+    # mission's second half can be shorter than the time the counters take to settle).
     proc = spawn(
         arroch(
             "up",
@@ -175,6 +178,7 @@ def start_mission(spawn, run_dir: Path, endpoint: str, namespace: str) -> Proc:
             "--seed",
             str(MISSION_SEED),
             "--until-done",
+            "--linger",
             "--no-record",
             "--run-dir",
             str(run_dir),
@@ -194,11 +198,13 @@ def start_mission(spawn, run_dir: Path, endpoint: str, namespace: str) -> Proc:
 
 
 def finish(proc: Proc, run_dir: Path) -> tuple[dict[str, Any], dict[str, Any]]:
-    """Wait for ``up`` to end the mission; (metrics.json, run.json)."""
-    deadline = time.monotonic() + MISSION_TIMEOUT + 10
+    """Wait for the mission's end, then stop the lingering ``up`` as Ctrl-C does; (metrics.json, run.json)."""
+    proc.wait_for("stay up until Ctrl-C (--linger)", timeout=MISSION_TIMEOUT + 10)
+    proc.signal(signal.SIGINT)
+    deadline = time.monotonic() + 20
     while proc.alive() and time.monotonic() < deadline:
         time.sleep(0.1)
-    assert not proc.alive(), f"mission not done within {MISSION_TIMEOUT} s:\n{proc.output[-3000:]}"
+    assert not proc.alive(), f"arroch up did not stop on SIGINT after the mission:\n{proc.output[-3000:]}"
     assert proc.popen.returncode == 0, proc.output[-3000:]
     (run,) = [p for p in run_dir.iterdir() if p.is_dir()]
     return json.loads((run / "metrics.json").read_text()), json.loads((run / "run.json").read_text())

@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
-from importlib.metadata import PackageNotFoundError, version
 
 from protocol.runner import setup_logging
 
@@ -51,10 +50,23 @@ def modules_for(argv: list[str]) -> list[str]:
 
 def installed_version() -> str:
     """The installed distribution's version (``pip install -e .`` included)."""
+    from importlib.metadata import PackageNotFoundError, version  # only for --version: ~60 ms a lookup
+
     try:
         return version("arroch")
     except PackageNotFoundError:  # run from a source tree that was never installed
         return "unknown (not installed: pip install -e .)"
+
+
+class _VersionAction(argparse.Action):
+    """``--version``: looks the version up only when asked (every service starts through this parser)."""
+
+    def __init__(self, option_strings: list[str], dest: str = argparse.SUPPRESS, **kwargs: object) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, help="print the version and exit")
+
+    def __call__(self, parser: argparse.ArgumentParser, *_args: object, **_kwargs: object) -> None:
+        print(f"{parser.prog} {installed_version()}")
+        parser.exit()
 
 
 def build_parser(modules: list[str] | None = None) -> argparse.ArgumentParser:
@@ -62,7 +74,7 @@ def build_parser(modules: list[str] | None = None) -> argparse.ArgumentParser:
         prog="arroch",
         description="ARROCH: AR for robots collaborating with a human. Services and tools.",
     )
-    parser.add_argument("--version", action="version", version=f"%(prog)s {installed_version()}")
+    parser.add_argument("--version", action=_VersionAction)
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for module_name in COMMANDS if modules is None else modules:
         try:

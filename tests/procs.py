@@ -101,3 +101,9 @@ class Proc:
 def arroch(*args: str) -> list[str]:
     """argv running the ``arroch`` CLI with this interpreter (no reliance on PATH)."""
     return [sys.executable, "-m", "services.cli", *args]
+
+
+def restrictor_argv(namespace: str, router: str, state_dir: Path, *extra: str) -> list[str]:
+    """argv of a restrictor on ``namespace`` through ``router``, on the wall clock, its store in ``state_dir``."""
+    connection = ("--namespace", namespace, "--connect", router)
+    return arroch("restrictor", *connection, "--clock", "wall", "--state-dir", str(state_dir), *extra)

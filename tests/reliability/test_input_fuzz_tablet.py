@@ -26,7 +26,7 @@ from hypothesis import strategies as st
 from protocol.messages import ConstraintSet
 from services.ar_client.web import wire
 from services.sim.camera import encode_jpeg
-from tests.procs import arroch
+from tests.procs import restrictor_argv
 from tests.restrictor.test_validate import INJECTIONS
 from tests.tablet.helpers import insecure, snapshots, start_tablet, write_calibration
 
@@ -205,17 +205,7 @@ def test_the_tablet_socket_answers_or_closes_and_keeps_serving(
     router, namespace, client, spawn, tmp_path: Path
 ) -> None:
     restrictor = spawn(
-        arroch(
-            "restrictor",
-            "--namespace",
-            namespace,
-            "--connect",
-            router,
-            "--clock",
-            "wall",
-            "--state-dir",
-            str(tmp_path / "restrictor"),
-        ),
+        restrictor_argv(namespace, router, tmp_path / "restrictor"),
         name="restrictor",
     )
     calibration = write_calibration(tmp_path / "intrinsics.json", snapshots(1))

@@ -21,7 +21,7 @@ from protocol.feedback_client import fetch_constraints, send_feedback
 from protocol.site import load_site
 from services.cli import main
 from services.restrictor.library import load_library
-from tests.procs import arroch
+from tests.procs import restrictor_argv
 from tests.reliability.fuzzing import contained, hostile_feedback
 from tests.restrictor.helpers import valid_params
 from tests.restrictor.test_validate import INJECTIONS, NUMERIC_INJECTIONS
@@ -37,17 +37,7 @@ def test_smuggled_asp_through_queries_and_the_command_line_is_refused(
     router, namespace, client, spawn, tmp_path: Path
 ) -> None:
     restrictor = spawn(
-        arroch(
-            "restrictor",
-            "--namespace",
-            namespace,
-            "--connect",
-            router,
-            "--clock",
-            "wall",
-            "--state-dir",
-            str(tmp_path / "state"),
-        ),
+        restrictor_argv(namespace, router, tmp_path / "state"),
         name="restrictor",
     )
     restrictor.wait_for("up on namespace", timeout=30)

@@ -29,7 +29,7 @@ from protocol.messages import DoorState, Feedback, FeedbackAck, Intent, RobotPos
 from services.ar_client.overlay import AVATAR_HEIGHT, OverlayBuilder
 from services.sim.camera import CameraSpec, frame_message
 from tests.conftest import wait_for_message
-from tests.procs import arroch
+from tests.procs import restrictor_argv
 from tests.tablet.helpers import (
     ROBOT_XY,
     SITE,
@@ -132,17 +132,7 @@ def test_ar_page_overlays_where_the_robot_is_and_feedback_round_trips(
     router, namespace, client, spawn, browser, tmp_path
 ):
     restrictor = spawn(
-        arroch(
-            "restrictor",
-            "--namespace",
-            namespace,
-            "--connect",
-            router,
-            "--clock",
-            "wall",
-            "--state-dir",
-            str(tmp_path / "restrictor"),
-        ),
+        restrictor_argv(namespace, router, tmp_path / "restrictor"),
         name="restrictor",
     )
     shots = snapshots()

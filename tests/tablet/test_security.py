@@ -19,7 +19,7 @@ import pytest
 
 from services.ar_client.web import wire
 from services.sim.camera import encode_jpeg
-from tests.procs import ROOT, arroch
+from tests.procs import ROOT, arroch, restrictor_argv
 from tests.tablet.helpers import insecure, run, snapshots, start_tablet, write_calibration
 
 pytestmark = pytest.mark.integration
@@ -190,17 +190,7 @@ def test_a_refusal_and_its_reason_reach_the_client(router, namespace, spawn, tmp
             # No restrictor yet: no buttons. Once one is up, its library reaches the open page.
             assert hello["library"] is None
             restrictor = spawn(
-                arroch(
-                    "restrictor",
-                    "--namespace",
-                    namespace,
-                    "--connect",
-                    router,
-                    "--clock",
-                    "wall",
-                    "--state-dir",
-                    str(tmp_path / "restrictor"),
-                ),
+                restrictor_argv(namespace, router, tmp_path / "restrictor"),
                 name="restrictor",
             )
             restrictor.wait_for("up on namespace", timeout=30)

@@ -76,6 +76,13 @@ class Proc:
     def alive(self) -> bool:
         return self.popen.poll() is None
 
+    def wait(self, timeout: float | None = None) -> int:
+        """Wait for the exit (``subprocess.TimeoutExpired`` after ``timeout``) and for the reader to
+        drain the pipe, so :attr:`output` holds the last lines; returns the exit code."""
+        code = self.popen.wait(timeout)
+        self._reader.join(5)  # EOF follows the exit unless a grandchild still holds the pipe
+        return code
+
     def signal(self, sig: int) -> None:
         if self.alive():
             os.killpg(self.popen.pid, sig)

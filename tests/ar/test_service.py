@@ -89,7 +89,7 @@ def test_frames_in_overlays_out_and_bad_frames_do_not_kill_it(router, namespace,
     assert lost.position == [] and lost.lost_age > 0.0
 
     ar.signal(signal.SIGTERM)
-    assert ar.popen.wait(10) == 0
+    assert ar.wait(10) == 0
     assert "stopped" in ar.output
 
 
@@ -122,7 +122,7 @@ def test_a_folder_of_images_is_processed_recorded_and_the_service_ends(router, n
         ),
         name="ar",
     )
-    assert ar.popen.wait(60) == 0, ar.output
+    assert ar.wait(60) == 0, ar.output
     assert "source finished after 5 frames" in ar.output
     got = []
     deadline = time.monotonic() + 5
@@ -145,9 +145,9 @@ def test_a_folder_of_images_is_processed_recorded_and_the_service_ends(router, n
 
 def test_bad_configuration_is_refused_before_any_session(spawn, tmp_path):
     missing = spawn(arroch("ar", "--site", str(HALL_FILE), "--source", f"images:{tmp_path / 'nowhere'}"), name="ar")
-    assert missing.popen.wait(30) == 2
+    assert missing.wait(30) == 2
     assert "does not exist" in missing.output
     (tmp_path / "a.png").write_bytes(b"x")
     no_calibration = spawn(arroch("ar", "--site", str(HALL_FILE), "--source", f"images:{tmp_path}"), name="ar")
-    assert no_calibration.popen.wait(30) == 2
+    assert no_calibration.wait(30) == 2
     assert "--intrinsics" in no_calibration.output

@@ -123,8 +123,8 @@ def test_messages_cross_hosts_through_the_tls_router_and_an_intruder_gets_nothin
         name="intruder",
     )
     intruder.wait_for("no ping server answered", timeout=30)
-    assert intruder.popen.wait(10) == 1
+    assert intruder.wait(10) == 1
 
     for proc in (ar, planning):
         proc.signal(signal.SIGINT)
-        assert proc.popen.wait(20) == 0, proc.output
+        assert proc.wait(20) == 0, proc.output

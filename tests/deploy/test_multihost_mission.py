@@ -113,7 +113,7 @@ def test_the_mission_completes_across_hosts_and_unauthorised_commands_never_reac
 
     report = json.loads(peer.wait_for('"sim_stats"', timeout=60))
     try:
-        code = sim.popen.wait(MISSION_TIMEOUT + 10)
+        code = sim.wait(MISSION_TIMEOUT + 10)
     except subprocess.TimeoutExpired:
         raise AssertionError(f"the mission did not end:\n{sim.output[-3000:]}") from None
     assert code == 0, sim.output[-3000:]
@@ -142,4 +142,4 @@ def test_the_mission_completes_across_hosts_and_unauthorised_commands_never_reac
 
     for proc in (ar, planning):
         proc.signal(signal.SIGINT)
-        assert proc.popen.wait(20) == 0, proc.output[-3000:]
+        assert proc.wait(20) == 0, proc.output[-3000:]

@@ -67,7 +67,7 @@ def wait_count(proc: Proc, text: str, count: int, timeout: float = 20.0) -> None
 
 def exit_code(proc: Proc, timeout: float = 20.0) -> int:
     try:
-        return proc.popen.wait(timeout)
+        return proc.wait(timeout)
     except subprocess.TimeoutExpired:
         raise AssertionError(f"supervisor still running after {timeout} s:\n{proc.output}") from None
 

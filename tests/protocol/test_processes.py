@@ -102,7 +102,7 @@ def test_ping_send_without_a_server_fails_in_time(module_router, namespace):
 
 def test_bad_configuration_is_reported_not_hung(spawn, tmp_path):
     proc = spawn(arroch("ping", "serve", "--namespace", "x", "--zenoh-config", str(tmp_path / "missing.json5")))
-    assert proc.popen.wait(15) != 0
+    assert proc.wait(15) != 0
     assert "missing.json5" in proc.output
 
 
@@ -147,7 +147,7 @@ def test_service_stops_within_2s_and_leaves_nothing(spawn, module_router, namesp
     below = descendants(proc.popen.pid)
     started = time.monotonic()
     os.kill(proc.popen.pid, sig)  # the process alone, as a supervisor or systemd would
-    code = proc.popen.wait(10)
+    code = proc.wait(10)
     elapsed = time.monotonic() - started
     assert code == 0, proc.output
     assert elapsed < 2.0, f"took {elapsed:.2f} s to stop"
@@ -178,7 +178,7 @@ def test_ping_send_stops_on_sigint_with_what_it_measured(spawn, module_router, n
     time.sleep(1.5)
     started = time.monotonic()
     os.kill(send.popen.pid, signal.SIGINT)
-    assert send.popen.wait(10) == 0
+    assert send.wait(10) == 0
     assert time.monotonic() - started < 2.0
     send.stop()
     summary = json.loads(next(line for line in send.output.splitlines() if line.startswith("{")))
@@ -194,11 +194,11 @@ def test_service_stops_promptly_after_losing_its_router(spawn, namespace):
     router.wait_for("router ready", timeout=20)
     proc = start_serve(spawn, "--connect", endpoint, "--namespace", namespace)
     os.kill(router.popen.pid, signal.SIGKILL)
-    router.popen.wait(5)
+    router.wait(5)
     time.sleep(0.3)
     started = time.monotonic()
     os.kill(proc.popen.pid, signal.SIGTERM)
-    assert proc.popen.wait(10) == 0
+    assert proc.wait(10) == 0
     assert time.monotonic() - started < 2.0
     assert group_is_empty(proc.popen.pid)
 
@@ -238,7 +238,7 @@ def test_a_burst_of_signals_still_stops_the_process(spawn, module_router, namesp
         storm = threading.Thread(target=signal_storm, args=(proc.popen.pid,), daemon=True)
         storm.start()
         try:
-            code = proc.popen.wait(10)
+            code = proc.wait(10)
         except subprocess.TimeoutExpired:
             pytest.fail(f"attempt {attempt}: {what} still runs 10 s into a storm of SIGTERMs")
         finally:

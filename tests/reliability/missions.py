@@ -181,7 +181,7 @@ class UpMission:
         """Wait for the run to end (``--until-done``, or its ``--timeout``) and read what it left."""
         remaining = self.timeout + 30.0 - (time.monotonic() - self.started)
         try:
-            code = self.proc.popen.wait(max(remaining, 1.0))
+            code = self.proc.wait(max(remaining, 1.0))
         except Exception:
             raise AssertionError(f"arroch up did not end within its --timeout:\n{self.tail()}") from None
         run = self.run_dir

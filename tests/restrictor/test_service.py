@@ -149,7 +149,7 @@ def test_feedback_is_acknowledged_and_the_set_published_and_served(start_restric
 
     # 7. SIGINT: a clean stop
     proc.signal(signal.SIGINT)
-    assert proc.popen.wait(10) == 0
+    assert proc.wait(10) == 0
     assert "restrictor" in proc.wait_for("stopped", timeout=1)
 
 
@@ -202,7 +202,7 @@ def test_a_restart_restores_exactly_the_active_set(
     assert before.version == 4 and [c.id for c in before.constraints] == ["c2", "c3"]
 
     first.signal(signal.SIGKILL)  # no chance to save anything on the way out
-    first.popen.wait(5)
+    first.wait(5)
     second = start_restrictor(name="restrictor-2")
     sets = client.collect(client.keys.constraints(), ConstraintSet)
     time.sleep(SETTLE)
@@ -225,7 +225,7 @@ def test_a_restart_restores_exactly_the_active_set(
     assert wait_for_message(sets, lambda s: s.version == 5).constraints[-1].id == "c4"
     assert "2 active constraint(s), version 4" in second.output
     second.signal(signal.SIGTERM)
-    assert second.popen.wait(10) == 0
+    assert second.wait(10) == 0
 
     # --fresh (a new mission): the same directory, an empty set, the version goes on
     third = spawn(
@@ -334,7 +334,7 @@ def test_the_command_line_sends_feedback_and_shows_the_set(start_restrictor, spa
     )
     time.sleep(1.5)
     start_restrictor()
-    assert early.popen.wait(40) == 0, early.output
+    assert early.wait(40) == 0, early.output
     assert "accepted: added c1: door_unavailable(door=d_storage, minutes=4) during [" in early.output
     assert "sending again" in early.output  # it did retry, with the same seq: c1 was added once
 

@@ -120,7 +120,7 @@ def test_sigterm_stops_the_base(spawn, router, namespace, client, base):
     driver = start_driver(spawn, router, namespace)
     drive(client, base)
     assert_stops_in_time(base, lambda: driver.signal(signal.SIGTERM), "SIGTERM")
-    assert driver.popen.wait(10) == 0
+    assert driver.wait(10) == 0
     assert base.twists[-1].zero
 
 

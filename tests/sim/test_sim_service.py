@@ -99,7 +99,7 @@ def test_two_seeded_lockstep_runs_give_identical_event_logs(router, client, spaw
                 assert all(c.time == 0.0 and c.paused and c.mode == "lockstep" for c in [first, *later])
                 assert later[-1].world_version == 1 and later[-1].awaiting == "plan"  # what the planner answers at once
             with Running(StandInPlanner(site, namespace, router)) as planner:
-                assert sim.popen.wait(60) == 0, sim.output
+                assert sim.wait(60) == 0, sim.output
                 feedback.append([(f.kind, dict(f.params), f.src) for f in planner.feedback])
             time.sleep(0.3)
             wire.append(drain(events))
@@ -172,7 +172,7 @@ def test_human_feedback_reaches_the_real_restrictor(router, client, spawn, tmp_p
     )
     sim.wait_for("up on namespace")
     with Running(StandInPlanner(site, namespace, router, restrictor=False)):
-        assert sim.popen.wait(60) == 0, sim.output
+        assert sim.wait(60) == 0, sim.output
     answered = wait_for_message(events, lambda e: e.kind == "feedback_answered", timeout=5)
     assert answered.data["accepted"] is True and answered.data["constraints_version"] >= 1
     cs = wait_for_message(sets, lambda s: any(c.kind == "door_unavailable" for c in s.constraints), timeout=5)
@@ -217,7 +217,7 @@ def test_bad_input_is_refused_counted_and_survived_then_sigterm_exits_cleanly(ro
     assert stats.data["commands_refused"] == 1 and stats.data["commands_unknown_robot"] == 1
     assert sim.alive()
     sim.signal(signal.SIGTERM)
-    assert sim.popen.wait(10) == 0
+    assert sim.wait(10) == 0
     assert "stopped" in sim.output
 
 
@@ -237,7 +237,7 @@ def test_rate_mode_runs_k_times_real_time_and_sigint_exits_cleanly(router, clien
     stamps = [p.stamp for p in drain(poses)]
     assert len(stamps) / (stamps[-1] - stamps[0]) == pytest.approx(10.0, rel=0.15)
     sim.signal(signal.SIGINT)
-    assert sim.popen.wait(10) == 0
+    assert sim.wait(10) == 0
     assert "received SIGINT" in sim.output
 
 
@@ -254,13 +254,13 @@ def test_rate_mode_runs_k_times_real_time_and_sigint_exits_cleanly(router, clien
 )
 def test_bad_configuration_exits_2_before_any_session(args, message, spawn):
     proc = spawn(arroch("sim", "--connect", "tcp/127.0.0.1:9", *args), name="sim")
-    assert proc.popen.wait(20) == 2
+    assert proc.wait(20) == 2
     assert message in proc.output
 
 
 def test_help(spawn):
     proc = spawn(arroch("sim", "--help"), name="help")
-    assert proc.popen.wait(20) == 0
+    assert proc.wait(20) == 0
     for option in (
         "--method",
         "--mode",
@@ -307,7 +307,7 @@ def test_feedback_nobody_acknowledges_ends_lockstep_loudly_as_failed(router, cli
     )
     sim.wait_for("up on namespace")
     with Running(StandInPlanner(site, client.keys.site, router, restrictor=False)):  # and no restrictor at all
-        assert sim.popen.wait(60) == 3, sim.output
+        assert sim.wait(60) == 3, sim.output
     assert "lockstep aborted" in sim.output and "no ack of the human's feedback door_unavailable" in sim.output
     assert (
         "no ack for feedback" not in sim.output
@@ -336,7 +336,7 @@ def test_baselines_complete_without_feedback(router, client, spawn, tmp_path, me
     )
     sim.wait_for("up on namespace")
     with Running(StandInPlanner(load_site(None), client.keys.site, router)) as planner:
-        assert sim.popen.wait(60) == 0, sim.output
+        assert sim.wait(60) == 0, sim.output
         assert planner.feedback == []
     m = json.loads(metrics.read_text())
     assert m["completed"] and m["feedback"]["sent"] == 0 and m["params"]["method"] == method
@@ -384,7 +384,7 @@ def test_tablet_camera_publishes_frames_and_their_truth(router, client, spawn):
         # Held at her desk (or on her way to the door, 0.5 m in front of it).
         assert np.hypot(t.position[0] - site.human.position[0], t.position[1] - site.human.position[1]) < 4.0
     sim.signal(signal.SIGTERM)
-    assert sim.popen.wait(10) == 0
+    assert sim.wait(10) == 0
 
 
 def test_snapshot_subcommand_is_wired(spawn, tmp_path):
@@ -404,6 +404,6 @@ def test_snapshot_subcommand_is_wired(spawn, tmp_path):
         ),
         name="snapshot",
     )
-    assert proc.popen.wait(60) == 0, proc.output
+    assert proc.wait(60) == 0, proc.output
     assert out.stat().st_size > 1000
     assert json.loads(truth.read_text())["position"] == [9.0, 1.5, 1.3]

@@ -235,14 +235,14 @@ def test_certificate_reused_token_fresh_clean_exit(router, namespace, spawn, tmp
     assert _served_certificate(port) == ssl.PEM_cert_to_DER_cert(pem.decode())
     assert oct((state / "tablet.key").stat().st_mode & 0o777) == "0o600"
     first.proc.signal(signal.SIGTERM)
-    assert first.proc.popen.wait(10) == 0
+    assert first.proc.wait(10) == 0
     assert "tablet" in first.proc.output and "stopped" in first.proc.output
 
     second = start_tablet(spawn, router, namespace, state, "--no-qr")
     assert (state / "tablet.pem").read_bytes() == pem  # made once, reused
     assert second.token != first.token  # a new key every run
     second.proc.signal(signal.SIGINT)
-    assert second.proc.popen.wait(10) == 0
+    assert second.proc.wait(10) == 0
 
 
 @pytest.mark.parametrize(

@@ -31,6 +31,12 @@ def segment_distance(p: Point, a: Point, b: Point) -> float:
     return math.hypot(p[0] - (ax + t * dx), p[1] - (ay + t * dy))
 
 
+def line_side(a: Point, b: Point, p: Point) -> float:
+    """Which side of the line through ``a`` and ``b`` the point ``p`` lies on: the sign of the cross
+    product (positive on the left going from a to b, 0 on the line), scaled by the line's length."""
+    return (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
+
+
 def segment_intersection(p0: Point, p1: Point, q0: Point, q1: Point) -> float | None:
     """Where segment ``p0``-``p1`` meets segment ``q0``-``q1``, as the fraction along ``p``.
 

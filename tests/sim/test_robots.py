@@ -156,6 +156,26 @@ def test_robot_starting_right_at_an_automatic_door_waits_for_its_swing(engine):
     assert r0.y == pytest.approx(6.6, abs=0.02)
 
 
+def test_a_robot_back_in_front_of_a_door_it_had_reached_waits_for_it_again(engine):
+    """Progress along a path never goes back, but a robot can (it backs away from a robot with the
+    right of way): one that is in front of a door again asks an automatic door to open and reports
+    that it waits, instead of pushing against the shut leaf for ever unseen."""
+    engine.apply_command(command("r0", 1, "approach", ["d_office"], [(1.0, 5.0), (1.0, 5.1)]))
+    run_until(engine, lambda ev: kinds(ev, "action_done"))
+    r0 = engine.robots["r0"]
+    r0.x, r0.y, r0.theta = 3.0, 5.4, math.pi / 2
+    engine.apply_command(command("r0", 2, "gothrough", ["d_office"], [(3.0, 5.4), (3.0, 7.0)], now=engine.time))
+    run_until(engine, lambda ev: r0.y > 6.05)  # its centre just through the door line
+    assert r0.follower is not None and r0.follower.s > r0.crossings[0][0]
+    r0.y = 5.0  # set back in front of it, and the door shut behind its back
+    door = engine.doors["d_office"]
+    door.target_open, door.fraction = False, 0.0
+    events = run_until(engine, lambda ev: kinds(ev, "action_done"), limit=engine.time + 60.0)
+    waited, opened = kinds(events, "waiting_at_door"), kinds(events, "door_opened")
+    assert waited and waited[0].door == "d_office" and opened and waited[0].time <= opened[0].time
+    assert r0.y == pytest.approx(7.0, abs=0.02)
+
+
 def test_human_door_stays_open_while_the_doorway_is_occupied(engine):
     engine.doors.human_open("d_storage", 0.0)
     events = run_until(engine, lambda ev: kinds(ev, "door_opened"))

@@ -28,6 +28,9 @@ import msgspec
 from msgspec import Meta, Struct
 
 from protocol.asp_vocabulary import ASP_INT_MAX, ASP_INT_MIN, UnsafeProgram, check_program, is_asp_constant
+
+# The limits of a library as the wire carries it: a file the restrictor loads must fit in one.
+from protocol.constraint_library import MAX_ENTRIES, MAX_HELP, MAX_LABEL, MAX_PARAMS
 from protocol.errors import ProtocolError
 from protocol.schema import Says
 from protocol.validation import Words, field_error
@@ -53,10 +56,6 @@ WINDOW_NAMES = ("t0", "t1")
 MAX_WINDOW_MINUTES = 7 * 24 * 60
 
 _ID = re.compile(r"^[a-z][a-z0-9_]{0,63}$")
-_MAX_ENTRIES = 100
-_MAX_PARAMS = 16
-_MAX_LABEL = 80
-_MAX_HELP = 300
 _MAX_TEMPLATE = 4096
 
 
@@ -213,8 +212,8 @@ class _CancelsTable(_Table, kw_only=True):
 class _ParamTable(_Table, kw_only=True):
     name: Identifier
     type: Literal[PARAM_TYPES]  # type: ignore[valid-type]
-    label: _text(_MAX_LABEL, required=True)
-    help: _text(_MAX_HELP, required=False) = ""
+    label: _text(MAX_LABEL, required=True)
+    help: _text(MAX_HELP, required=False) = ""
     min: int | None = None
     max: int | None = None
     human_operated: bool | None = None
@@ -222,10 +221,10 @@ class _ParamTable(_Table, kw_only=True):
 
 class _EntryTable(_Table, kw_only=True):
     id: Identifier
-    label: _text(_MAX_LABEL, required=True)
-    help: _text(_MAX_HELP, required=True)
+    label: _text(MAX_LABEL, required=True)
+    help: _text(MAX_HELP, required=True)
     effect: Literal[EFFECTS] = ADD  # type: ignore[valid-type]
-    params: Annotated[list[_ParamTable], Meta(max_length=_MAX_PARAMS)] = []
+    params: Annotated[list[_ParamTable], Meta(max_length=MAX_PARAMS)] = []
     asp: _text(_MAX_TEMPLATE, required=True) | None = None
     window_param: str | None = None
     window_minutes: int | None = None
@@ -234,7 +233,7 @@ class _EntryTable(_Table, kw_only=True):
 
 class _LibraryFile(_Table, kw_only=True):
     version: Any = 1
-    entry: Annotated[list[_EntryTable], Meta(min_length=1, max_length=_MAX_ENTRIES)]
+    entry: Annotated[list[_EntryTable], Meta(min_length=1, max_length=MAX_ENTRIES)]
 
 
 _LABEL = re.compile(r"(?P<name>entry|params|cancels)\[(?P<i>\d+)\]")

@@ -23,7 +23,7 @@ import bisect
 import math
 from dataclasses import dataclass
 
-from .plane import segment_intersection, wrap
+from .plane import line_side, segment_intersection, wrap
 
 
 @dataclass(frozen=True)
@@ -120,6 +120,25 @@ def path_crossings(
                 found.append((path.s[i] + t * (path.s[i + 1] - path.s[i]), gap_id))
                 break
     return sorted(found)
+
+
+def crossing_behind(
+    path: Path,
+    s_cross: float,
+    gap: tuple[tuple[float, float], tuple[float, float]],
+    progress: float,
+    x: float,
+    y: float,
+) -> bool:
+    """Whether a robot at (x, y), ``progress`` m along ``path``, is through the gap (``(end a, end
+    b)``) that the path crosses at ``s_cross``. Progress alone cannot tell: it never goes back, but
+    the robot can (backing away from another robot), and one back in front of a door its progress
+    had passed must wait for that door again."""
+    if s_cross >= progress:
+        return False
+    a, b = gap
+    side_beyond = line_side(a, b, path.point_at(min(s_cross + 0.05, path.length)))
+    return side_beyond == 0.0 or line_side(a, b, (x, y)) * side_beyond > 0.0
 
 
 @dataclass

@@ -8,8 +8,9 @@ through ROS 2 makes the moves a simulated one makes. Phases, as in the simulator
 
 It commands zero velocity whenever the robot must not move: no command or the command is over,
 a command it refused, a closed door ahead (it holds ``radius + stop_margin`` short of the leaf's
-line, ``waiting_at_door``), and whenever the service tells it to hold (stale pose, planner lost,
-shutting down).
+line, ``waiting_at_door``), a hold in the trajectory not over yet (the planner making it give way
+to another robot, :meth:`protocol.pursuit.Path.hold_limit`), and whenever the service tells it to
+hold (stale pose, planner lost, shutting down).
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from msgspec.structs import replace
 
 from protocol.execution import REACH, START_TOLERANCE, command_problem, dwell_problem
 from protocol.messages import RobotCommand, RobotStatus
-from protocol.pursuit import ControllerConfig, Path, PurePursuit, path_crossings
+from protocol.pursuit import ControllerConfig, Path, PurePursuit, crossing_behind, path_crossings
 from protocol.site.model import Site
 
 
@@ -134,15 +135,23 @@ class Driver:
             self._arrived(pose, now, door_open)
             return 0.0, 0.0
         cfg = self.config
+        x, y, theta = pose
         s_limit, blocking = math.inf, ""
         for s_cross, door_id in self._crossings:
-            if s_cross >= follower.s and not door_open(door_id):
+            gap = self.site.doors[door_id].endpoints
+            if not crossing_behind(follower.path, s_cross, gap, follower.s, x, y) and not door_open(door_id):
                 s_limit, blocking = s_cross - (cfg.radius + cfg.stop_margin), door_id
                 break
-        x, y, theta = pose
+        hold = follower.path.hold_limit(now)
+        if hold < s_limit:
+            s_limit, blocking = hold, ""  # the plan says wait here (for another robot) until then
         step = follower.step(x, y, theta, cfg.control_period, s_limit)
         length = follower.path.length
         self.s.progress = min(follower.s / length, 1.0) if length > 0 else 1.0
+        if step.held and not blocking:
+            if self.s.state == "waiting_at_door":
+                self._set(state="moving", waiting_door="")
+            return 0.0, 0.0
         if step.held:
             self._set(state="waiting_at_door", waiting_door=blocking)
             return 0.0, 0.0

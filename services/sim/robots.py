@@ -26,8 +26,8 @@ from typing import Any
 
 from protocol.execution import REACH, START_TOLERANCE, command_problem, dwell_problem
 from protocol.messages import RobotCommand
-from protocol.plane import line_side, segment_distance
-from protocol.pursuit import ControllerConfig, Path, PurePursuit, Step, path_crossings
+from protocol.plane import segment_distance
+from protocol.pursuit import ControllerConfig, Path, PurePursuit, Step, crossing_behind, path_crossings
 from protocol.site.model import Site
 
 from .doors import Doors
@@ -179,7 +179,9 @@ class RobotExecutor:
         cfg = self.config
         s_limit, blocking = math.inf, ""
         for s_cross, door_id in robot.crossings:
-            if self._through(robot, s_cross, door_id):
+            if crossing_behind(
+                follower.path, s_cross, self.doors[door_id].opening.endpoints, follower.s, robot.x, robot.y
+            ):
                 continue  # behind the robot's centre already
             if s_cross - follower.s <= cfg.auto_open_distance + cfg.radius:
                 self.doors.request_open(door_id, robot.id)
@@ -229,19 +231,6 @@ class RobotExecutor:
         if step.arrived:
             return self._arrived(robot, now + dt)
         return []
-
-    def _through(self, robot: Robot, s_cross: float, door_id: str) -> bool:
-        """Whether the robot's centre is through the door its path crosses at ``s_cross``. Progress
-        along the path cannot tell on its own: it never goes back, and a robot that backs away
-        (giving way to another) can end up in front of a door its progress had already passed."""
-        follower = robot.follower
-        assert follower is not None
-        if s_cross >= follower.s:
-            return False
-        a, b = self.doors[door_id].opening.endpoints
-        beyond = follower.path.point_at(min(s_cross + 0.05, follower.path.length))
-        side_beyond = line_side(a, b, beyond)
-        return side_beyond == 0.0 or line_side(a, b, (robot.x, robot.y)) * side_beyond > 0.0
 
     def _back_away(self, robot: Robot, dt: float) -> Step:
         """Stop; or, when the robot it stops for has the right of way and comes on, reverse straight

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import math
 
+import pytest
+
 from protocol.messages import RobotCommand
 from protocol.pursuit import ControllerConfig, integrate
 from protocol.site import load_site
@@ -141,3 +143,34 @@ def test_refusals():
     run(d, start, 0.2)
     assert d.s.state == "failed" and "m away" in d.s.detail  # arrived out of reach of the object
     assert d.control(start, 1.0, lambda door: True) == (0.0, 0.0)
+
+
+def test_keeps_a_hold_in_its_trajectory():
+    """Two rows at one point mean "wait here until the second row's time" (the planner making it give
+    way to another robot): the driver stands still until then, still "moving", then goes on."""
+    d = make()
+    x, y, th = SITE.robots["r1"].start
+    rows = [[0.0, x, y, th], [1.0, x, y - 0.5, th], [6.0, x, y - 0.5, th], [7.0, x, y - 1.0, th]]
+    cmd = RobotCommand(robot="r1", plan_id=1, action_id=1, action="approach", args=["d_lab"], trajectory=rows)
+    assert d.assign(cmd, (x, y, th), 0.0) == "accepted"
+    pose, t, _ = run(d, (x, y, th), 4.0)
+    assert d.s.state == "moving" and pose[1] == pytest.approx(y - 0.5, abs=0.03)  # held at the hold's point
+    pose, _, _ = run(d, pose, 4.0, t)
+    assert d.s.state == "done" and math.dist(pose[:2], (x, y - 1.0)) <= 0.02
+
+
+def test_waits_again_for_a_door_it_is_back_in_front_of():
+    """Its progress along the path had passed the door line, but the robot is in front of it again
+    (pushed back, or it backed away): a closed door there holds it, as if never reached."""
+    d = make()
+    start = SITE.robots["r1"].start
+    cmd = RobotCommand(
+        robot="r1", plan_id=1, action_id=1, action="gothrough", args=["d_lab"], trajectory=line(start, (12.5, 5.0))
+    )
+    assert d.assign(cmd, start, 0.0) == "accepted"
+    pose, t, _ = run(d, start, 4.5, doors={"d_lab": True})
+    assert pose[1] < 5.95  # through the door line (y = 6)
+    back = (pose[0], 6.8, pose[2])
+    pose, t, _ = run(d, back, 4.0, t)  # the door is shut now
+    assert d.s.state == "waiting_at_door" and d.s.waiting_door == "d_lab"
+    assert pose[1] - 6.0 >= SITE.params.robot_radius + 0.15 - 0.01

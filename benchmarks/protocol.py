@@ -11,7 +11,10 @@ Prints one JSON object on stdout (progress goes to stderr):
     thread; the pose is stamped before the clock starts, as the raw side's bytes are made before);
   - ``protocol_worker``: the same through the Service's worker thread (``ping serve --worker``,
     which decodes, queues, and re-encodes on the worker);
-  - ``raw``: a plain zenoh-python echo of the very same payload bytes, no codec and no Service.
+  - ``raw``: a plain zenoh-python echo of the very same payload bytes, no codec and no Service;
+  - ``protocol_sender`` and ``protocol_echo``: where the protocol's extra time goes, each end alone.
+    ``protocol_sender`` is the PingSender against the raw echo (the pinger's encoding, decoding and
+    hand-off); ``protocol_echo`` is the raw pinger against ``arroch ping serve`` (the relay's check).
   Like is compared with like: the raw side uses the Service's publisher options
   (:func:`protocol.service.publisher_options`), its session options (the same command-line and
   environment path, shared memory off in every process; the raw and protocol pingers even share
@@ -54,6 +57,7 @@ import timeit
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from importlib import metadata
 from pathlib import Path
 
@@ -72,7 +76,8 @@ from protocol.transport import ZenohOptions, build_config, free_tcp_port, on_zen
 
 FLOOR_RATIO = 1.1
 FLOOR_POSE_CODEC_US = 20.0
-VARIANTS = ("protocol", "protocol_worker", "raw")
+VARIANTS = ("protocol", "protocol_worker", "raw", "protocol_sender", "protocol_echo")
+AGAINST_RAW = ("protocol", "protocol_worker", "protocol_sender", "protocol_echo")
 
 
 def progress(text: str) -> None:
@@ -266,35 +271,47 @@ class Run:
         return [a / b for a, b in zip(self.batch_p50[name], self.batch_p50["raw"], strict=True) if b > 0]
 
 
+def _peer_pair(endpoint: str) -> tuple[ZenohOptions, list[str]]:
+    """This process's options listening on ``endpoint``, and the echo's options connecting to it."""
+    return ZenohOptions(mode="peer", listen=[endpoint], shared_memory=False), ["--mode", "peer", "--connect", endpoint]
+
+
 def one_run(args: argparse.Namespace, index: int, rounds: int) -> tuple[Run, dict]:
     """Fresh echo processes, then ``rounds`` rounds of one batch per variant in random order."""
     arroch = [sys.executable, "-m", "services.cli"]
     children = Children()
     run_id = uuid.uuid4().hex[:6]
     # Namespaces of equal length, so the three variants' keys are the same size on the wire.
-    ns = {"protocol": f"bp{run_id}", "protocol_worker": f"bw{run_id}", "raw": f"br{run_id}"}
+    ns = {
+        "protocol": f"bp{run_id}",
+        "protocol_worker": f"bw{run_id}",
+        "raw": f"br{run_id}",
+        "protocol_sender": f"bs{run_id}",
+        "protocol_echo": f"be{run_id}",
+    }
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     pingers: list = []
     try:
         if args.router:
             children.start(([*arroch, "router", "--listen", endpoint], "router ready"))
-            mine = worker_mine = ZenohOptions(mode="client", connect=[endpoint], shared_memory=False)
-            theirs = worker_theirs = ["--mode", "client", "--connect", endpoint]
+            mine = worker_mine = lone_mine = ZenohOptions(mode="client", connect=[endpoint], shared_memory=False)
+            theirs = worker_theirs = lone_theirs = ["--mode", "client", "--connect", endpoint]
             transport = "client → arroch router → client, TCP loopback"
         else:
-            # The protocol and raw pairs share this process's listening session (so both take the
-            # same links); the worker pair has its own, so no variant is routed through another.
-            worker_endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-            mine = ZenohOptions(mode="peer", listen=[endpoint], shared_memory=False)
-            worker_mine = ZenohOptions(mode="peer", listen=[worker_endpoint], shared_memory=False)
-            theirs = ["--mode", "peer", "--connect", endpoint]
-            worker_theirs = ["--mode", "peer", "--connect", worker_endpoint]
+            # The protocol, raw and protocol_echo pingers share this process's listening session (so
+            # they take the same links); the two other PingSenders each have their own, so no variant
+            # is routed through another.
+            mine, theirs = _peer_pair(endpoint)
+            worker_mine, worker_theirs = _peer_pair(f"tcp/127.0.0.1:{free_tcp_port()}")
+            lone_mine, lone_theirs = _peer_pair(f"tcp/127.0.0.1:{free_tcp_port()}")
             transport = "peer ↔ peer, TCP loopback"
 
         sender = PingSender(ns["protocol"], mine).open()
         pingers.append(sender)
         worker_sender = PingSender(ns["protocol_worker"], worker_mine).open()
         pingers.append(worker_sender)
+        lone_sender = PingSender(ns["protocol_sender"], lone_mine).open()
+        pingers.append(lone_sender)
 
         def raw_payload(n: int) -> bytes:
             # What PingSender puts on the wire for its n-th ping: the same bytes, made beforehand.
@@ -303,23 +320,34 @@ def one_run(args: argparse.Namespace, index: int, rounds: int) -> tuple[Run, dic
             return encode(msg)
 
         raw = RawPinger(sender.session, ns["raw"], raw_payload)
-        pingers.insert(0, raw)  # closed before the session it uses
+        raw_to_protocol = RawPinger(sender.session, ns["protocol_echo"], raw_payload)
+        pingers[:0] = [raw, raw_to_protocol]  # closed before the session they use
+        serve = [*arroch, "ping", "serve", "--namespace"]
+        raw_echo = [sys.executable, __file__, "--raw-echo", "--namespace"]
         children.start(
-            ([*arroch, "ping", "serve", "--namespace", ns["protocol"], *theirs], "ping serve ready"),
+            ([*serve, ns["protocol"], *theirs], "ping serve ready"),
             (
                 [*arroch, "ping", "serve", "--worker", "--namespace", ns["protocol_worker"], *worker_theirs],
                 "ping serve ready",
             ),
-            ([sys.executable, __file__, "--raw-echo", "--namespace", ns["raw"], *theirs], "raw echo ready"),
+            ([*raw_echo, ns["raw"], *theirs], "raw echo ready"),
+            ([*raw_echo, ns["protocol_sender"], *lone_theirs], "raw echo ready"),
+            ([*serve, ns["protocol_echo"], *theirs], "ping serve ready"),
         )
-        for name, pinger in (("protocol", sender), ("protocol_worker", worker_sender), ("raw", raw)):
+        pinger_of = {
+            "protocol": sender,
+            "protocol_worker": worker_sender,
+            "raw": raw,
+            "protocol_sender": lone_sender,
+            "protocol_echo": raw_to_protocol,
+        }
+        for name, pinger in pinger_of.items():
             if not pinger.wait_for_server(15):
                 raise RuntimeError(f"the {name} echo never answered")
 
         batches: dict[str, Callable[[int], list[float]]] = {
-            "protocol": lambda n: sender.run_pings(n, 0, warmup=0),
-            "protocol_worker": lambda n: worker_sender.run_pings(n, 0, warmup=0),
-            "raw": raw.run_pings,
+            name: (pinger.run_pings if isinstance(pinger, RawPinger) else partial(pinger.run_pings, rate=0, warmup=0))
+            for name, pinger in pinger_of.items()
         }
         for run_batch in batches.values():  # warm-up, uncounted
             run_batch(args.warmup)
@@ -381,7 +409,7 @@ def bench_latency(args: argparse.Namespace) -> dict:
     per_run: list[dict] = [
         {f"{name}_p50_us": round(statistics.median(run.samples[name]), 1) for name in VARIANTS} for run in runs
     ]
-    for name in ("protocol", "protocol_worker"):
+    for name in AGAINST_RAW:
         for q in ("p50", "p99"):
             result[f"{name}_over_raw_{q}"] = round(result[name][f"{q}_us"] / result["raw"][f"{q}_us"], 3)
         result[f"{name}_over_raw_p50_paired"] = round(

@@ -33,7 +33,8 @@ def test_protocol_benchmark_prints_its_json():
     latency = report["latency"]
     assert latency["shared_memory"] is False
     assert latency["raw_payload_bytes"] == latency["payload_bytes"]  # the raw side sends as much
-    for variant in ("protocol", "protocol_worker", "raw"):
+    # raw, the protocol at both ends, and each end alone against a raw other end
+    for variant in ("protocol", "protocol_worker", "raw", "protocol_sender", "protocol_echo"):
         figures = latency[variant]
         assert figures["received"] == figures["sent"] == 200
         assert 0 < figures["p50_us"] <= figures["p99_us"]
@@ -42,7 +43,7 @@ def test_protocol_benchmark_prints_its_json():
     )
     # Two runs, each with its own echo processes; the floor is checked on the median of their ratios.
     assert latency["runs"] == len(latency["per_run"]) == 2
-    for name in ("protocol", "protocol_worker"):
+    for name in ("protocol", "protocol_worker", "protocol_sender", "protocol_echo"):
         per_run = [run[f"{name}_over_raw_p50_paired"] for run in latency["per_run"]]
         assert all(r > 0 for r in per_run)
         assert latency[f"{name}_over_raw_p50_runs_median"] == pytest.approx(statistics.median(per_run), abs=0.002)

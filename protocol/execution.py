@@ -3,9 +3,10 @@ simulator's robots (services/sim/robots.py) and real robots' drivers (services/r
 
 :func:`command_problem` says why a command cannot be executed from where the robot stands (an
 unknown opening, a trajectory that starts too far away, crosses a wall, or does not go through the
-opening it names), or returns ``""``; :func:`dwell_problem` why a ``load``/``unload`` that has
-arrived cannot start its dwell (the object out of reach, the robot outside the object's
-destination room). Who may load what (ownership, capacity) belongs to whoever tracks the objects.
+opening it names while the robot is not in that doorway already), or returns ``""``;
+:func:`dwell_problem` why a ``load``/``unload`` that has arrived cannot start its dwell (the object
+out of reach, the robot outside the object's destination room). Who may load what (ownership,
+capacity) belongs to whoever tracks the objects.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from itertools import pairwise
 
 from .actions import STEPS, Action
 from .messages import RobotCommand
-from .plane import segment_intersection
+from .plane import segment_distance, segment_intersection
 from .site.model import Site
 
 START_TOLERANCE = 1.5  # m; a trajectory may start at most this far from the robot
@@ -46,7 +47,10 @@ def command_problem(site: Site, x: float, y: float, cmd: RobotCommand, start_tol
                 return f"trajectory segment {_fmt(a)}->{_fmt(b)} crosses a wall"
     if cmd.action == Action.GOTHROUGH:
         ea, eb = site.opening(target).endpoints
-        if not any(segment_intersection(a, b, ea, eb) is not None for a, b in pairwise(points)):
+        crosses = any(segment_intersection(a, b, ea, eb) is not None for a, b in pairwise(points))
+        # A robot in the doorway (its disc over the opening's line) may be given the rest of its
+        # passage: re-commanded off its trajectory, its centre may already be past the line.
+        if not crosses and segment_distance((x, y), ea, eb) > site.params.robot_radius:
             return f"gothrough: trajectory does not cross {target!r}"
     return ""
 

@@ -176,6 +176,22 @@ def test_a_robot_back_in_front_of_a_door_it_had_reached_waits_for_it_again(engin
     assert r0.y == pytest.approx(7.0, abs=0.02)
 
 
+def test_a_robot_in_the_doorway_may_be_given_the_rest_of_its_passage(engine):
+    """Re-commanded while its disc is over the door's line (its centre already past it), a robot gets
+    a gothrough whose trajectory no longer crosses the line: that finishes the passage. Out of the
+    doorway, the same command is refused."""
+    door = engine.doors["d_office"]
+    door.target_open, door.fraction = True, 1.0
+    r0 = engine.robots["r0"]
+    r0.x, r0.y, r0.theta = 3.0, 6.1, math.pi / 2  # the line is y = 6; the disc's radius 0.25
+    engine.apply_command(command("r0", 1, "gothrough", ["d_office"], [(3.0, 6.1), (3.0, 7.0)], now=engine.time))
+    events = run_until(engine, lambda ev: kinds(ev, "action_done") or kinds(ev, "action_failed"))
+    assert kinds(events, "action_done") and r0.y == pytest.approx(7.0, abs=0.02)
+    engine.apply_command(command("r0", 2, "gothrough", ["d_office"], [(3.0, 7.0), (3.0, 7.5)], now=engine.time))
+    failed = kinds(run_until(engine, lambda ev: kinds(ev, "action_failed")), "action_failed")
+    assert "does not cross" in failed[0].data["reason"]
+
+
 def test_human_door_stays_open_while_the_doorway_is_occupied(engine):
     engine.doors.human_open("d_storage", 0.0)
     events = run_until(engine, lambda ev: kinds(ev, "door_opened"))

@@ -123,7 +123,8 @@ def _run_service(args: argparse.Namespace) -> int:
     from protocol.clock import make_clock
     from protocol.site import load_site
 
-    from .service import PlannerService, ServiceSettings
+    from .service import PlannerService
+    from .settings import ServiceSettings
 
     def build() -> PlannerService:
         site = load_site(args.site)

@@ -9,15 +9,22 @@ does nothing: the ack brings a ConstraintSet and a clock awaiting a plan that an
 
 A TeamPlan lost on its way would leave the simulator waiting forever, so while it stays paused at a
 version the current plan answers, the plan is due to be published again every REPEAT_AFTER seconds.
+The other way round - the simulator paused for a plan the planner does not make - is a stall
+(:meth:`LockstepFollower.stall`): a ConstraintSet that never arrived (the planner asks the restrictor
+for it again), or news with no trigger left to answer it (the version is planned for anyway). Wall
+time only decides *when* that is done, never what is planned: the answer is the one the lost
+message would have given.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 from protocol.messages import Clock, TeamPlan
 
 REPEAT_AFTER = 2.0  # wall s the simulator may stay paused at a version the plan answers before the plan is sent again
+STALL_REPORT = 10.0  # wall s of a stall before the planner says what it holds (the sim warns then too)
 
 
 @dataclass(frozen=True)
@@ -29,6 +36,26 @@ class Repeat:
     first: bool  # the first repeat in this pause
 
 
+@dataclass(frozen=True)
+class Stall:
+    """The simulator has been paused for ``paused_for`` wall seconds waiting for a plan newer than
+    the one sent, and what to do about it."""
+
+    world_version: int
+    constraints_version: int  # the one the simulator's clock names
+    paused_for: float
+    fetch_constraints: bool  # that constraints version is not held here: ask the restrictor for it
+    report: bool  # the first look at this stall past STALL_REPORT
+
+    def describe(self, world_version: int, constraints_version: int, pending: Iterable[object], missing: object) -> str:
+        """The stall in words, beside what the planner holds: what is missing shows in the difference."""
+        return (
+            f"simulator paused {self.paused_for:.0f} s for a plan answering world v{self.world_version}, "
+            f"constraints v{self.constraints_version}; held here: world v{world_version}, constraints "
+            f"v{constraints_version}, pending news {sorted(map(str, pending))}, missing {missing}"
+        )
+
+
 @dataclass
 class LockstepFollower:
     repeat_after: float = REPEAT_AFTER
@@ -36,6 +63,8 @@ class LockstepFollower:
     # (world version, sim time) the simulator is paused at, and since when (wall); None while it runs
     paused: tuple[tuple[int, float], float] | None = None
     repeated_at: float = 0.0
+    stall_seen_at: float = 0.0  # wall time of the last recovery step
+    stall_reported: float = 0.0  # when the pause that was reported began
 
     def on_clock(self, msg: Clock, now: float) -> None:
         self.clock = msg
@@ -89,3 +118,22 @@ class LockstepFollower:
         first = self.repeated_at < since
         self.repeated_at = now
         return Repeat(version, now - since, first)
+
+    def stall(self, sent: TeamPlan | None, constraints_version: int, now: float) -> Stall | None:
+        """A recovery step (at most one every REPEAT_AFTER s) when the simulator has been paused for
+        REPEAT_AFTER s or more waiting for a plan newer than ``sent``; None otherwise."""
+        clock = self.clock
+        if self.paused is None or clock is None or clock.mode != "lockstep" or clock.awaiting != "plan":
+            return None
+        (version, _), since = self.paused
+        if sent is not None and sent.world_version >= version and sent.constraints_version >= clock.constraints_version:
+            return None  # answered: a lost plan is repeat_due's business
+        if now - since < self.repeat_after or now - self.stall_seen_at < self.repeat_after:
+            return None
+        self.stall_seen_at = now
+        report = now - since >= STALL_REPORT and self.stall_reported != since
+        if report:
+            self.stall_reported = since
+        return Stall(
+            version, clock.constraints_version, now - since, constraints_version < clock.constraints_version, report
+        )

@@ -4,27 +4,22 @@ Inputs: robot poses and statuses, door states, the ConstraintSet, events (action
 the clock (its ``world_version``). Outputs (:mod:`.outputs`): the TeamPlan on ``plan`` (also served to
 late joiners), each robot's RobotCommand for its front action and its Intent, ``plan_conflict`` events.
 
-This class only wires the parts together. Every input that may call for a new plan becomes a typed
-trigger (:mod:`.triggers`: a start, a world version, constraints, a robot's status or action end, a
-human-operated door, a robot off its trajectory); the :class:`~.scheduler.ReplanScheduler` answers a
-burst with one replan; the :class:`~.world_cache.WorldCache` keeps what the messages said; the
-:class:`~.lockstep.LockstepFollower` says when a lockstep simulator has everything of a version in
-and waits for a plan (planning only then makes a lockstep mission the same on a busy machine as on
-an idle one); :class:`~.readiness.Readiness` says when enough is known to plan after a (re)start;
-:func:`~.continuation.continued` keeps the plan being executed when the news does not call for a
-solve. Every world version is answered with a TeamPlan, even if nothing changed: a lockstep
-simulator waits for it.
-
-Replanning starts from the plan being executed (IIDP warm start). When the constraints leave a
-robot no plan, ``plan_conflict`` names the constraints that conflict and planning goes on with the
-last constraint set that worked. After a restart, the actions robots are executing (their statuses
-name them) are taken over as the ones sent, so a plan that keeps them lets them run on.
+This class only wires the parts together: typed triggers (:mod:`.triggers`) for every input that may
+call for a plan; the :class:`~.scheduler.ReplanScheduler` (one replan for a burst); the
+:class:`~.world_cache.WorldCache`; the :class:`~.lockstep.LockstepFollower` (when a lockstep
+simulator has all of a version and waits for a plan: planning only then makes a lockstep mission the
+same on a busy machine as on an idle one; and what to do when it waits for one not being made);
+:class:`~.readiness.Readiness` (enough known to plan after a (re)start); :func:`~.continuation.continued`
+(the plan being executed kept when the news calls for no solve). Every world version is answered
+with a TeamPlan, even if nothing changed. Replanning starts from the plan being executed (IIDP warm
+start). When the constraints leave a robot no plan, ``plan_conflict`` names the conflicting ones and
+planning goes on with the last set that worked. After a restart, the actions robots are executing
+(their statuses name them) are taken over as the ones sent.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 
 from protocol.clock import SimClock, WallClock
 from protocol.messages import Clock, ConstraintSet, DoorState, Event, RobotPose, RobotStatus
@@ -35,27 +30,18 @@ from protocol.transport import ZenohOptions
 from .constraints import ConstraintProgram, from_constraint_set
 from .continuation import continued
 from .dispatcher import FINISHED_STATES, Dispatcher
-from .lockstep import LockstepFollower
+from .lockstep import LockstepFollower, Stall
 from .off_track import OffTrackWatch
 from .outputs import PlanOutputs, adopted
 from .plan import TeamResult
-from .planner import PlannerSettings, TaskPlanner
+from .planner import TaskPlanner
 from .readiness import Readiness
 from .scheduler import ReplanScheduler
+from .settings import ServiceSettings
 from .teammotion import TeamMotion
 from .triggers import ActionEnded, DoorChanged, NewConstraints, NewWorldVersion, OffTrack, Start, StatusChanged, Trigger
 from .world import World
 from .world_cache import WorldCache
-
-OFF_TRACK = 1.0  # m from the commanded trajectory that counts as "far off"
-
-
-@dataclass
-class ServiceSettings:
-    method: str = "iidp"
-    planner: PlannerSettings = field(default_factory=lambda: PlannerSettings(time_limit=5.0))
-    off_track: float = OFF_TRACK
-    collision_free: bool = False  # time trajectories against each other (teammotion.py; opt-in, see the docs)
 
 
 class PlannerService(Service):
@@ -110,12 +96,16 @@ class PlannerService(Service):
         self.subscribe(k.clock(), Clock, self.on_clock, ordered=True)
         self.serve(k.plan(), lambda _query: self.outputs.message)
         self.every(0.02, self.tick)
-        try:  # a restarted planner picks up the active constraints at once
-            for cs in self.query(k.constraints(), ConstraintSet, timeout=1.0):
-                self.on_constraints(cs, k.constraints())
-        except Exception as exc:  # no restrictor yet: its first ConstraintSet will come by pub/sub
-            self.log.debug("no constraints to fetch at start: %s", exc)
+        self._fetch_constraints()  # a restarted planner picks up the active constraints at once
         self.trigger(Start())
+
+    def _fetch_constraints(self) -> None:
+        """Ask the restrictor for the active ConstraintSet (none there yet: it comes by pub/sub)."""
+        try:
+            for cs in self.query(self.keys.constraints(), ConstraintSet, timeout=1.0):
+                self.on_constraints(cs, self.keys.constraints())
+        except Exception as exc:
+            self.log.debug("no constraints to fetch: %s", exc)
 
     def trigger(self, trigger: Trigger) -> None:
         self.scheduler.add(trigger, time.monotonic())
@@ -176,13 +166,8 @@ class PlannerService(Service):
             return
         self.dispatcher.current[msg.robot] = taken
         self.counters["actions_adopted"] += 1
-        self.log.info(
-            "%s is executing action %d (%s %s) of an earlier plan: taken over",
-            msg.robot,
-            msg.action_id,
-            msg.action,
-            " ".join(msg.args),
-        )
+        action = " ".join([msg.action, *msg.args])
+        self.log.info("%s is executing action %d (%s) of an earlier plan: taken over", msg.robot, msg.action_id, action)
 
     def on_door(self, msg: DoorState, _key: str) -> None:
         if msg.door not in self.site.openings:
@@ -224,6 +209,9 @@ class PlannerService(Service):
 
     def tick(self) -> None:
         # (The world version is noted in on_clock, in order with the statuses and events before it.)
+        stall = self.lockstep.stall(self.outputs.message, self.constraints_version, time.monotonic())
+        if stall is not None:
+            self._recover(stall)
         if not self.scheduler or (
             self._lockstep() and not self.lockstep.version_complete(self.world_version, self.constraints_version)
         ):
@@ -232,6 +220,18 @@ class PlannerService(Service):
         now = time.monotonic()
         if self.scheduler.settled(now):
             self._plan_now(now)
+
+    def _recover(self, stall: Stall) -> None:
+        """The lockstep simulator waits for a plan not being made (lockstep.py: Stall)."""
+        if stall.report:
+            held = (self.world_version, self.constraints_version, self.scheduler.pending, self.cache.missing())
+            self.log.warning("%s", stall.describe(*held))
+        if stall.fetch_constraints:
+            self.count("stall_constraints_fetched")
+            self._fetch_constraints()
+        if not self.scheduler and stall.world_version == self.world_version:
+            self.count("stall_replans")  # news whose trigger was lost: answer the version anyway
+            self.trigger(NewWorldVersion())
 
     def _lockstep(self) -> bool:
         return isinstance(self.clock, SimClock) and self.clock.mode == "lockstep"

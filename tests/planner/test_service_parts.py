@@ -129,6 +129,31 @@ def test_a_plan_is_repeated_every_repeat_after_while_paused_at_a_version_it_answ
     assert f.repeat_due(plan, 120.0) is None
 
 
+def test_a_simulator_paused_for_a_plan_not_being_made_is_a_stall_with_what_to_do():
+    """Paused for a plan newer than the one sent: after REPEAT_AFTER s a recovery step (fetch the
+    constraints version the clock names when it is not held here), one every REPEAT_AFTER s, reported
+    once past STALL_REPORT; never while the plan sent answers the clock, nor when it runs."""
+    f = LockstepFollower(repeat_after=2.0)
+    answered_v4 = TeamPlan(plan_id=1, world_version=4, constraints_version=1)
+    f.on_clock(clock(5, cs=2), now=100.0)
+    assert f.stall(answered_v4, 1, 101.9) is None  # not yet
+    first = f.stall(answered_v4, 1, 102.0)
+    assert first is not None and (first.world_version, first.constraints_version) == (5, 2)
+    assert first.fetch_constraints and not first.report and first.paused_for == 2.0
+    assert f.stall(answered_v4, 2, 103.0) is None  # one step every REPEAT_AFTER s
+    late = f.stall(answered_v4, 2, 110.5)
+    assert late is not None and late.report and not late.fetch_constraints
+    assert "world v5" in late.describe(4, 2, ["world_version"], []) and "pending news ['world_version']" in (
+        late.describe(4, 2, ["world_version"], [])
+    )
+    assert not f.stall(answered_v4, 2, 113.0).report  # reported once per pause
+    assert f.stall(TeamPlan(plan_id=2, world_version=5, constraints_version=2), 2, 120.0) is None  # answered
+    f.on_clock(clock(5, awaiting="feedback", cs=2), now=121.0)
+    assert f.stall(answered_v4, 2, 130.0) is None  # waiting for the feedback's ack, not for a plan
+    f.on_clock(clock(6, paused=False), now=131.0)
+    assert f.stall(answered_v4, 2, 140.0) is None  # running
+
+
 # ------------------------------------------------------------------ world cache
 
 

@@ -25,6 +25,7 @@ import csv
 import json
 import logging
 import math
+import statistics
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -484,6 +485,35 @@ def _section_drivers(results: Results) -> list[str]:
     return lines + [""]
 
 
+def _section_contacts(results: Results) -> list[str]:
+    """How often robots met: the contacts the simulator counted (services/sim/overlaps.py)."""
+    rows = []
+    for level, method, _trials in results.conditions():
+        counts = results.values(method, level, "robot_overlaps")
+        if counts:
+            zero = sum(c == 0 for c in counts)
+            rows.append(
+                [
+                    *results.level_cells(level),
+                    method,
+                    f"{zero} / {len(counts)}",
+                    _g(statistics.median(counts)),
+                    _g(max(counts)),
+                ]
+            )
+    if not rows:
+        return []
+    return [
+        "## Robot–robot contacts",
+        "",
+        "Times two robots' discs began to intersect (by more than 1 mm) in a completed trial, as the simulator "
+        "counted them (`robot_overlaps` in `trials.csv`); 0 is a mission without a collision.",
+        "",
+        *_table([*results.level_columns, "method", "trials with none", "median", "max"], rows),
+        "",
+    ]
+
+
 def _section_time(results: Results) -> list[str]:
     if not results.timing and not results.runs:
         return []
@@ -614,6 +644,7 @@ def build_report(folder: Path) -> list[Path]:
         lines += map_section(results, tested)
     lines += _section_claims(claims)
     lines += _section_drivers(results)
+    lines += _section_contacts(results)
     lines += _section_time(results)
     lines += _section_discussion(results)
     (folder / "REPORT.md").write_text("\n".join(lines).rstrip() + "\n", encoding="utf-8")

@@ -40,9 +40,11 @@ METRICS = (
     "replans",
     "world_versions",
     "robot_wait_time",
+    "robot_overlaps",
 )
 COUNTS = frozenset(
     {
+        "robot_overlaps",
         "door_openings",
         "human_door_trips",
         "human_interruptions",

@@ -73,6 +73,10 @@ def metrics_rows(m: dict[str, Any]) -> list[tuple[str, str, str]]:
             "robots that entered a closed door's doorway (0 in a correct run)",
         )
     )
+    if "robot_overlaps" in m:  # older runs' metrics have no such count
+        rows.append(
+            ("robot-robot contacts", str(m["robot_overlaps"]), "times two robots' discs began to intersect (0: none)")
+        )
     rows.append(("world versions", str(m.get("world_versions", 0)), "changes the planner had to answer (replans)"))
     return rows
 

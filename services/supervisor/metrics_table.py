@@ -28,6 +28,9 @@ SHAPES: dict[str, tuple[type, ...]] = {
     "feedback": (Mapping,),
     "actions": (Mapping,),
     "closed_door_crossings": (int,),
+    "robot_overlaps": (int,),
+    "robot_overlaps_by_place": (Mapping,),
+    "robot_overlaps_by_pair": (Mapping,),
     "world_versions": (int,),
     "robots": (Mapping,),
     "human": (Mapping,),
@@ -45,6 +48,8 @@ def _fits(key: str, value: Any) -> bool:
         return all(isinstance(t, (*_NUMBER, type(None))) for t in value.values())
     if key == "robots":
         return all(isinstance(robot, Mapping) for robot in value.values())
+    if key.startswith("robot_overlaps_by_"):
+        return all(isinstance(n, int) for n in value.values())
     return True
 
 
@@ -100,6 +105,16 @@ def _door_rows(metrics: Mapping[str, Any]) -> list[Row]:
     return rows
 
 
+def _contacts_row(metrics: Mapping[str, Any]) -> Row:
+    """Robot-robot contacts, with where they happened and between whom."""
+    meaning = "times two robots' discs began to intersect (0: no collision)"
+    for key, label in (("robot_overlaps_by_place", "where"), ("robot_overlaps_by_pair", "between")):
+        counts = metrics.get(key) or {}
+        if counts:
+            meaning += f"; {label}: " + ", ".join(f"{k} {n}" for k, n in sorted(counts.items()))
+    return ("robot-robot contacts", _count(metrics["robot_overlaps"]), "count", meaning)
+
+
 def metrics_rows(metrics: Mapping[str, Any]) -> list[Row]:
     """The table's rows, known figures first, in the order a reader asks about them."""
     feedback = metrics.get("feedback") or {}
@@ -150,6 +165,8 @@ def metrics_rows(metrics: Mapping[str, Any]) -> list[Row]:
                 "robots that entered a closed door's doorway (0 in every correct run)",
             )
         )
+    if "robot_overlaps" in metrics:
+        rows.append(_contacts_row(metrics))
     if "world_versions" in metrics:
         rows.append(
             ("world versions", _count(metrics["world_versions"]), "count", "world changes the planner was told of")

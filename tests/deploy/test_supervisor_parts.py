@@ -127,6 +127,9 @@ def test_the_final_metrics_are_a_rounded_table_with_units_and_meanings():
         "door_openings": {"d_lab": {"robot": 14}, "d_storage": {"human": 4}},
         "feedback": {"sent": 2, "accepted": 1, "refused": 1, "unanswered": 0},
         "robots": {"r0": {"wait_time": 229.85}},
+        "robot_overlaps": 6,
+        "robot_overlaps_by_place": {"storage": 4, "corridor": 2},
+        "robot_overlaps_by_pair": {"r1-r2": 5, "r0-r1": 1},
         "params": {"site": "office", "method": "arroch", "seed": 1, "human": {"task_mean": 600.0}},
         "makespan": 1.23456,
     }
@@ -138,6 +141,9 @@ def test_the_final_metrics_are_a_rounded_table_with_units_and_meanings():
     assert "14 by robots (automatic doors) + 4 by the human" in rows["door openings, all"]
     assert "1 accepted, 1 refused, 0 unanswered" in rows["feedback sent"]
     assert "waited 229.8 s at doors" in rows["r0 completion time"]
+    assert re.match(r"robot-robot contacts +6  count +times two robots' discs", rows["robot-robot contacts"])
+    assert "where: corridor 2, storage 4; between: r0-r1 1, r1-r2 5" in rows["robot-robot contacts"]
+    assert "robot_overlaps" not in table  # shown in the table, not among the other figures
     assert "run: site office, method arroch, seed 1" in table
     assert "other figures:\n  makespan: 1.235" in table  # what the table does not know is still shown
     assert metrics_table({}) == "(no metrics)"

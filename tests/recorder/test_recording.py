@@ -87,6 +87,8 @@ def test_runs_show_prints_the_summary_every_channel_and_draws_the_timeline(missi
     metrics = json.loads((mission.run / "metrics.json").read_text())
     assert f"{metrics['team_completion_time']:.1f} s" in out
     assert "human door openings" in out and "her a1 actions" in out
+    contacts = next(line for line in out.splitlines() if "robot-robot contacts" in line)
+    assert contacts.split()[2] == str(metrics["robot_overlaps"])
     for stats in channel_stats(mission.recording):
         line = next(line for line in out.splitlines() if line.strip().startswith(stats.topic + " "))
         assert f" {stats.messages} " in line and f"{stats.last:.1f}" in line, line

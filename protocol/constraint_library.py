@@ -57,8 +57,7 @@ def decode_library(payload: bytes) -> ConstraintLibrary:
         raw = msgpack.unpackb(payload, raw=False, strict_map_key=True)
     except Exception as exc:
         raise ProtocolError("", f"not MessagePack ({type(exc).__name__})", TYPE) from None
-    if not isinstance(raw, dict):
-        raise ProtocolError("", f"expected a map, got {type(raw).__name__}", TYPE)
+    _map(raw, "")
     if raw.get("type") != TYPE:
         raise ProtocolError("type", f"expected {TYPE!r}, got {raw.get('type')!r}", TYPE)
     version = raw.get("v")
@@ -75,11 +74,8 @@ def decode_library(payload: bytes) -> ConstraintLibrary:
 
 
 def _entry(raw: Any, where: str) -> dict[str, Any]:
-    if not isinstance(raw, dict):
-        raise ProtocolError(where, f"expected a map, got {type(raw).__name__}", TYPE)
-    effect = raw.get("effect")
-    if effect not in EFFECTS:
-        raise ProtocolError(f"{where}.effect", f"expected one of {', '.join(EFFECTS)}, got {effect!r}", TYPE)
+    _map(raw, where)
+    effect = _one_of(raw, "effect", f"{where}.effect", EFFECTS)
     usable = raw.get("usable")
     if not isinstance(usable, bool):
         raise ProtocolError(f"{where}.usable", f"expected a boolean, got {usable!r}", TYPE)
@@ -96,11 +92,8 @@ def _entry(raw: Any, where: str) -> dict[str, Any]:
 
 
 def _param(raw: Any, where: str) -> dict[str, Any]:
-    if not isinstance(raw, dict):
-        raise ProtocolError(where, f"expected a map, got {type(raw).__name__}", TYPE)
-    kind = raw.get("type")
-    if kind not in PARAM_TYPES:
-        raise ProtocolError(f"{where}.type", f"expected one of {', '.join(PARAM_TYPES)}, got {kind!r}", TYPE)
+    _map(raw, where)
+    kind = _one_of(raw, "type", f"{where}.type", PARAM_TYPES)
     out: dict[str, Any] = {
         "name": _text(raw, "name", f"{where}.name", MAX_ID, empty=False),
         "type": kind,
@@ -131,6 +124,18 @@ def _window(raw: Any, where: str) -> dict[str, Any] | None:
     if isinstance(raw, dict) and set(raw) == {"minutes"}:
         return {"minutes": _int(raw, "minutes", f"{where}.minutes")}
     raise ProtocolError(where, f"expected null, {{param: name}} or {{minutes: n}}, got {raw!r:.60}", TYPE)
+
+
+def _map(raw: Any, where: str) -> None:
+    if not isinstance(raw, dict):
+        raise ProtocolError(where, f"expected a map, got {type(raw).__name__}", TYPE)
+
+
+def _one_of(raw: dict[str, Any], name: str, where: str, options: tuple[str, ...]) -> str:
+    value = raw.get(name)
+    if value not in options:
+        raise ProtocolError(where, f"expected one of {', '.join(options)}, got {value!r}", TYPE)
+    return value
 
 
 def _text(raw: dict[str, Any], name: str, where: str, limit: int, *, empty: bool = True) -> str:

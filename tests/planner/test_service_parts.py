@@ -143,8 +143,9 @@ def test_a_simulator_paused_for_a_plan_not_being_made_is_a_stall_with_what_to_do
     assert f.stall(answered_v4, 2, 103.0) is None  # one step every REPEAT_AFTER s
     late = f.stall(answered_v4, 2, 110.5)
     assert late is not None and late.report and not late.fetch_constraints
-    assert "world v5" in late.describe(4, 2, ["world_version"], []) and "pending news ['world_version']" in (
-        late.describe(4, 2, ["world_version"], [])
+    words = late.describe(4, 2, ["world_version"], [])
+    assert (
+        "answering world v5" in words and "held here: world v4" in words and "pending news ['world_version']" in words
     )
     assert not f.stall(answered_v4, 2, 113.0).report  # reported once per pause
     assert f.stall(TeamPlan(plan_id=2, world_version=5, constraints_version=2), 2, 120.0) is None  # answered

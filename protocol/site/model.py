@@ -112,6 +112,14 @@ class Opening:
         nx, ny = self.normal_into(room_id)
         return (self.center[0] + nx * distance, self.center[1] + ny * distance)
 
+    def aside(self, room_id: str, distance: float, lateral: float) -> Point:
+        """The point ``beside(room_id, distance)`` moved ``lateral`` metres to the right of a robot
+        that crosses from ``room_id``: where it waits to cross, off the lane of robots coming the
+        other way (keep right)."""
+        nx, ny = self.normal_into(room_id)  # the crossing goes along (-nx, -ny); its right is (-ny, nx)
+        bx, by = self.beside(room_id, distance)
+        return (bx - ny * lateral, by + nx * lateral)
+
 
 @dataclass(frozen=True)
 class Landmark:

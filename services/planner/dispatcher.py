@@ -178,6 +178,16 @@ class Dispatcher:
 
     # ------------------------------------------------------------------ trajectories
 
+    def _queue_spot(self, rid: str, opening: str, room: str, world: World) -> Point:
+        """The first of the opening's queue spots on ``room``'s side that no other robot is sent to
+        (approaching it) or stands at (ProblemBuilder.queue_spots); the last one when all are taken."""
+        taken = [(state.pose[0], state.pose[1]) for other, state in world.robots.items() if other != rid]
+        for other, sent in self.current.items():
+            if other != rid and sent.action == Action.APPROACH and sent.args[:1] == (opening,) and sent.trajectory:
+                taken.append((sent.trajectory[-1][1], sent.trajectory[-1][2]))
+        spots = self.builder.queue_spots(opening, room)
+        return next((s for s in spots if all(math.dist(s, t) > 0.3 for t in taken)), spots[-1])
+
     def trajectory(self, rid: str, plan: RobotPlan, step: Step, world: World) -> tuple[list[list[float]], float]:
         """The front action's trajectory from the robot's pose, starting now, and its time in place."""
         state = world.robots[rid]
@@ -188,7 +198,7 @@ class Dispatcher:
         arg = step.args[0] if step.args else ""
         motion = self.motion
         if step.action == "approach":
-            path = motion.path(pose, self.builder.beside(arg, room), (room,))
+            path = motion.path(pose, self._queue_spot(rid, arg, room, world), (room,))
             return motion.trajectory(path.points, now, theta0=theta), 0.0
         if step.action == "opendoor":
             cx, cy = self.builder.site.opening(arg).center
@@ -200,7 +210,7 @@ class Dispatcher:
             target = target or next((p.dst for p in plan.passes if p.opening == arg and p.dst), "")
             if target not in opening.rooms:
                 target = opening.other(room) if room in opening.rooms else opening.rooms[1]
-            near = self.builder.beside(arg, opening.other(target))
+            near = self.builder.wait_point(arg, opening.other(target))
             far = self.builder.beside(arg, target)
             points: list[Point] = [pose]
             # Line up in front of the opening unless already in it or beside it.

@@ -22,15 +22,13 @@ import math
 from dataclasses import dataclass, field
 
 from protocol.actions import Action
-from protocol.site import Site
 
-from .motion import MotionPlanner, Point
+from .key_points import KeyPoints
+from .motion import Point
 from .robot_problem import Crossing, Leg, PrefixStep, RobotProblem, Route, Stop
 from .world import RobotState, World
 
 ROUTE_SLACK = 1.5  # an alternative route may be at most this many times the shortest
-BESIDE_MARGIN = 0.35  # m between the robot's edge and the wall when standing beside an opening
-DROP_SPACING = 0.7  # m between drop points in a destination room
 MAX_ROUTE_EXPANSIONS = 20_000
 
 
@@ -39,72 +37,18 @@ class PlanningError(Exception):
 
 
 @dataclass
-class ProblemBuilder:
-    """Key points and legs for one site; caches everything that does not depend on the world."""
+class ProblemBuilder(KeyPoints):
+    """Key points (:mod:`.key_points`) and legs for one site; caches everything that does not
+    depend on the world."""
 
-    site: Site
-    motion: MotionPlanner
     routes_per_leg: int = 1
-    _beside: dict[tuple[str, str], Point] = field(default_factory=dict)
-    _drop: dict[str, Point] = field(default_factory=dict)
-    _object: dict[str, Point] = field(default_factory=dict)
     _routes: dict[tuple, list[Route]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        self.params = self.site.params
-        self.beside_distance = self.params.robot_radius + BESIDE_MARGIN
+        super().__post_init__()
         self.human_doors = frozenset(d for d, o in self.site.doors.items() if o.human_operated)
 
     # ------------------------------------------------------------------ key points
-
-    def beside(self, opening: str, room: str) -> Point:
-        """The point in front of ``opening`` on ``room``'s side, where a robot approaches to."""
-        key = (opening, room)
-        p = self._beside.get(key)
-        if p is None:
-            raw = self.site.opening(opening).beside(room, self.beside_distance)
-            p = self.motion.snap(raw, room)
-            self._beside[key] = p
-        return p
-
-    def object_point(self, obj: str) -> Point:
-        p = self._object.get(obj)
-        if p is None:
-            spec = self.site.objects[obj]
-            p = self.motion.snap(spec.position, spec.room)
-            self._object[obj] = p
-        return p
-
-    def drop_point(self, obj: str) -> Point:
-        """Where ``obj`` is unloaded: one slot per object in its destination room, away from doors and the human."""
-        p = self._drop.get(obj)
-        if p is None:
-            self._place_drops(self.site.objects[obj].deliver_to)
-            p = self._drop[obj]
-        return p
-
-    def _place_drops(self, room_id: str) -> None:
-        room = self.site.rooms[room_id]
-        x0, y0, x1, y1 = room.rect
-        m = self.params.robot_radius + 0.3
-        keep_clear = [self.beside(o, room_id) for o, _ in self.site.neighbours(room_id)]
-        if self.site.human.room == room_id:
-            keep_clear.append(self.site.human.position)
-        cx, cy = room.center
-        slots: list[tuple[float, Point]] = []
-        nx = max(int((x1 - x0 - 2 * m) / DROP_SPACING) + 1, 1)
-        ny = max(int((y1 - y0 - 2 * m) / DROP_SPACING) + 1, 1)
-        for i, j in itertools.product(range(nx), range(ny)):
-            p = (x0 + m + i * DROP_SPACING, y0 + m + j * DROP_SPACING)
-            if not self.motion.is_free(p) or any(math.dist(p, q) < 1.2 for q in keep_clear):
-                continue
-            slots.append((round(math.dist(p, (cx, cy)), 6), p))
-        slots.sort()
-        if not slots:
-            slots = [(0.0, self.motion.snap((cx, cy), room_id))]
-        objs = sorted(o for o, spec in self.site.objects.items() if spec.deliver_to == room_id)
-        for n, obj in enumerate(objs):
-            self._drop[obj] = slots[n % len(slots)][1]
 
     def stop_point(self, stop: Stop) -> Point:
         return stop.point
@@ -144,7 +88,7 @@ class ProblemBuilder:
             for opening, other in self.site.neighbours(room):
                 if other in visited:
                     continue
-                near = self.beside(opening, room)
+                near = self.wait_point(opening, room)
                 far = self.beside(opening, other)
                 step = self.motion.distance(point, near, (room,)) + self.motion.distance(near, far, (room, other))
                 g2 = g + step
@@ -295,7 +239,7 @@ class ProblemBuilder:
         crossings: list[Crossing] = []
         point = p
         for k, (opening, src, dst) in enumerate(route.openings):
-            near = self.beside(opening, src)
+            near = self.wait_point(opening, src)
             far = self.beside(opening, dst)
             already = k == 0 and beside == opening
             approach = 0 if already else self.seconds(self.motion.distance(point, near, (src,)))

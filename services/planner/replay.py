@@ -46,7 +46,7 @@ def _robot_at(builder: ProblemBuilder, state: RobotState, plan: RobotPlan, resul
         room_after = _entered(builder, state, plan, result, step, fluents.room) if action is Action.GOTHROUGH else ""
         if end > t and action is Action.APPROACH:
             # part-way along the (straight, within one room) drive
-            bx, by = builder.beside(arg, fluents.room)
+            bx, by = builder.wait_point(arg, fluents.room)
             f = (t - start) / (end - start)
             x, y = x + f * (bx - x), y + f * (by - y)
             break
@@ -98,7 +98,7 @@ def _point(builder: ProblemBuilder, ends_at: EndsAt, arg: str, room: str, room_a
     """Where a step that ends at ``ends_at`` leaves the robot (None: where it was)."""
     match ends_at:
         case EndsAt.NEAR_SIDE:
-            return builder.beside(arg, room)
+            return builder.wait_point(arg, room)
         case EndsAt.FAR_SIDE:
             return builder.beside(arg, room_after)
         case EndsAt.OBJECT:

@@ -2,8 +2,9 @@
 
 Triggers arriving together (a clock tick, a status and an event for one action) are answered by one
 replan: the burst is over once SETTLE has passed without news, and at the latest MAX_DELAY after its
-first trigger. In lockstep, news a simulator does not wait for (a robot acknowledging its command)
-is held for the next world version; that version's trigger then starts a new burst.
+first trigger; at once when it holds urgent news (new constraints: the human waits for the answer).
+In lockstep, news a simulator does not wait for (a robot acknowledging its command) is held for the
+next world version; that version's trigger then starts a new burst.
 """
 
 from __future__ import annotations
@@ -36,8 +37,12 @@ class ReplanScheduler:
         return bool(self.pending)
 
     def settled(self, now: float) -> bool:
-        """Whether the burst is over: quiet for ``settle``, or ``max_delay`` after its start."""
-        return now - self.last_at >= self.settle or now - self.first_at >= self.max_delay
+        """Whether the burst is over: quiet for ``settle``, or ``max_delay`` after its start, or urgent."""
+        return (
+            now - self.last_at >= self.settle
+            or now - self.first_at >= self.max_delay
+            or any(t.urgent for t in self.pending)
+        )
 
     def answers_nothing_awaited(self) -> bool:
         """Whether none of the pending news is something a lockstep simulator waits for a plan about.

@@ -193,6 +193,7 @@ class PlannerService(Service):
         self.constraints = program if program.active else None
         self.trigger(NewConstraints(msg.version))
         self._plan_if_awaited()
+        self.tick()  # urgent: not at the next tick
 
     def on_event(self, msg: Event, _key: str) -> None:
         if msg.kind in ("action_done", "action_failed") and msg.robot in self.site.robots:

@@ -24,9 +24,9 @@ from itertools import pairwise
 
 from protocol.plane import segment_distance
 
+from .key_points import BESIDE_MARGIN
 from .motion import MotionPlanner, NoPath, Point
 from .plan import RobotPlan, Step
-from .problem import BESIDE_MARGIN
 from .reservations import ReservationTable
 from .spacetime import SPOTS_TRIED, PathTimer, Timed
 from .world import World

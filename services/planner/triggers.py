@@ -20,6 +20,9 @@ class Trigger:
 
     # a lockstep simulator waits for a plan that answers this news (others wait for its next version)
     answered_in_lockstep: ClassVar[bool] = False
+    # somebody waits for the plan that answers this news: it is planned without waiting for the burst
+    # to settle (the human who pressed a feedback button watches for the robots' answer)
+    urgent: ClassVar[bool] = False
 
     def keeps_plan(self) -> bool:
         """Whether this news alone leaves the plan being executed valid (no re-solve)."""
@@ -49,6 +52,7 @@ class NewWorldVersion(Trigger):
 class NewConstraints(Trigger):
     version: int
     answered_in_lockstep: ClassVar[bool] = True
+    urgent: ClassVar[bool] = True
 
     def __str__(self) -> str:
         return f"constraints:v{self.version}"

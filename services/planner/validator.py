@@ -31,8 +31,9 @@ import clingo
 from protocol.actions import STEPS, Action, EndsAt, Fluents
 from protocol.site import Opening, Site
 
+from .key_points import BESIDE_MARGIN, wait_offset
 from .plan import TeamResult
-from .problem import BESIDE_MARGIN, ProblemBuilder
+from .problem import ProblemBuilder
 from .world import World
 
 TIME_TOLERANCE = 1.0  # s: plan times are whole seconds
@@ -246,7 +247,8 @@ def _end_point(site: Site, ends_at: EndsAt, arg: str, room: str, room_after: str
     margin = site.params.robot_radius + BESIDE_MARGIN
     match ends_at:
         case EndsAt.NEAR_SIDE:
-            return site.opening(arg).beside(room, margin)
+            opening = site.opening(arg)
+            return opening.aside(room, margin, wait_offset(site.params.robot_radius, opening.width))
         case EndsAt.FAR_SIDE:
             return site.opening(arg).beside(room_after, margin)
         case EndsAt.OBJECT:

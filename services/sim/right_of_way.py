@@ -1,20 +1,19 @@
 """Right of way between robots executing in the simulator: a robot keeps a safety margin.
 
-The planner times trajectories so that robots never meet (services/planner/reservations.py), but
-execution drifts from the plan: a robot runs ahead of its schedule when an action ends early, or
-falls behind when it waits at a door. So each driving robot also checks, every step, the robots
-around it: a step that would bring its disc within ``margin`` of another robot's disc, and closer
-than it is now, is not taken (the robot stops for that tick; moving apart is always allowed).
+The planner sends each robot to its own spot (queue spots at openings, drop slots), but execution
+drifts from the plan: a robot runs ahead of its schedule when an action ends early, or falls behind
+when it waits at a door. So each driving robot also checks, every step, the robots around it: a
+step that would bring its disc within ``margin`` of another robot's disc, and closer than it is
+now, is not taken (the robot stops for that tick; moving apart is always allowed).
 
 Two robots that stop for each other would wait forever. Each robot remembers which robot it
 stopped for (``blocked_by``); before stopping for robot B, robot A follows that chain from B, and
 if it comes back to A (a cycle of robots waiting on one another), the robot with the highest fixed
-priority in the cycle (the smallest id) goes on instead of stopping. That breaks every cycle, so no
-set of robots waits on itself forever. Nor does a robot wait forever for one that is parked (its
-action over, waiting for nothing): once it has been stopped for ``patience`` seconds, it goes on
-past parked robots. What the rule cannot fix - two robots meeting head-on in a
-passage one robot wide - ends in contact, which :mod:`services.sim.overlaps` counts: keeping such
-robots apart in time is the planner's job.
+priority in the cycle (the smallest id) goes on instead of stopping; nor does a robot wait forever
+for one that is parked (its action over, waiting for nothing): once it has been stopped for
+``patience`` seconds, it goes on past parked robots. Going on never means touching: robots are
+solid (:mod:`services.sim.avoidance`), so a robot that goes on comes up to the other and drives
+around it where there is room.
 """
 
 from __future__ import annotations
@@ -73,13 +72,6 @@ class RightOfWay:
         else:
             self.forget(robot.id)
         return found
-
-    def gives_way_to(self, robot: str, fleet: Mapping[str, Body]) -> str:
-        """The robot that won a cycle against ``robot`` and is coming at it ("" if none): ``robot``
-        should back away from it, since it will not stop."""
-        other = self.blocked_by.get(robot, "")
-        coming = other in fleet and fleet[other].phase == "drive" and self.blocked_by.get(other) is None
-        return other if coming and other < robot else ""
 
     def _out_of_patience(self, me: str, other: Body, now: float) -> bool:
         if other.phase not in PARKED:

@@ -30,9 +30,19 @@ from protocol.plane import segment_distance
 from protocol.pursuit import ControllerConfig, Path, PurePursuit, Step, crossing_behind, path_crossings
 from protocol.site.model import Site
 
+from .avoidance import Avoidance
 from .doors import Doors
+from .doorways import Doorways, in_lane
 from .objects import Objects
 from .right_of_way import RightOfWay
+
+QUEUE_DISTANCE = 1.5  # m from the end of its approach within which a robot kept back queues there
+
+
+def _crossing(robot: Robot) -> str:
+    """The opening a robot is driving through (its command is a gothrough), else ""."""
+    cmd = robot.command
+    return cmd.args[0] if robot.phase == "drive" and cmd is not None and cmd.action == "gothrough" else ""
 
 
 @dataclass(frozen=True)
@@ -104,6 +114,8 @@ class RobotExecutor:
         self.right_of_way = RightOfWay(config.radius, config.robot_margin)
         # where a robot's centre may go when it backs away (doors open: it only backs over its own path)
         self._free = site.occupancy_grid(resolution=0.05, open_doors=tuple(site.door_leaves), inflate=config.radius)
+        self.avoidance = Avoidance(site, self._free, config.radius, config.controller)
+        self.doorways = Doorways(site)
 
     # ------------------------------------------------------------------ commands
 
@@ -111,6 +123,7 @@ class RobotExecutor:
         """Start executing ``cmd`` (preempting what ran before). Returns what that caused at once."""
         robot.command = cmd
         robot.last_action_id = cmd.action_id
+        self.doorways.forget(robot.id)
         robot.follower = None
         robot.crossings = []
         robot.v = robot.omega = 0.0
@@ -176,6 +189,22 @@ class RobotExecutor:
         follower = robot.follower
         if follower is None:
             return self._arrived(robot, now + dt)
+        lane = self.doorways.lane_to_leave(robot, self.fleet)
+        if lane is not None:
+            # in the lane of an opening another robot crosses: out of its way first
+            away = self.avoidance.out_of_the_way(
+                robot, robot.theta, now, dt, self.fleet, lambda x, y: not in_lane(lane, x, y), self._allows(robot)
+            )
+            if away is not None:
+                robot.x, robot.y, robot.theta, robot.v, robot.omega = away.x, away.y, away.theta, away.v, away.omega
+                robot.yield_time += dt
+                return []
+        opening_id = _crossing(robot)
+        if opening_id and not self.doorways.may_cross(robot, opening_id, now, self.fleet):
+            robot.v = robot.omega = 0.0  # another robot has the doorway: wait where it is
+            robot.yield_time += dt
+            self.avoidance.moving_on(robot.id)
+            return []
         cfg = self.config
         s_limit, blocking = math.inf, ""
         for s_cross, door_id in robot.crossings:
@@ -204,14 +233,30 @@ class RobotExecutor:
         step = follower.step(robot.x, robot.y, robot.theta, dt, s_limit)
         if blocking and not step.held and self._breaks_guard(robot, step, blocking):
             step = Step(robot.x, robot.y, robot.theta, 0.0, 0.0, held=True)
+        if not step.held and follower.cross_track > self.avoidance.rejoin_after:
+            self.avoidance.rejoin(robot, follower.path, follower.s, now, self.fleet)
         if step.held:
             self.right_of_way.forget(robot.id)  # waits for a door or a hold, not for a robot
-        elif self.right_of_way.blocker(robot, step.x, step.y, self.fleet, now):
-            step = self._back_away(robot, dt)
+            self.avoidance.moving_on(robot.id)
+        elif not self.avoidance.pushing(robot, self.fleet, now) and (
+            self.right_of_way.blocker(robot, step.x, step.y, self.fleet, now)
+            or not self.avoidance.clear(robot, step.x, step.y, self.fleet, now)
+            or self.avoidance.driving_around(robot.id)
+            or self.doorways.lane_taken(robot, step.x, step.y, self.fleet)
+        ):
+            if self._goal_taken(robot, follower, now):
+                robot.v = robot.omega = 0.0
+                return self._arrived(robot, now + dt)
+            step = self._kept_back(robot, follower, now, dt)
             robot.yield_time += dt
-        if (step.x, step.y) != (robot.x, robot.y) and self._into_shut_doorway(robot, step):
-            # whatever moved it (backing off, a hold, a corner): its disc never enters a shut doorway;
-            # passing beside one (a corridor along a row of doors) is allowed
+        elif step.v > 0.0:
+            self.avoidance.moving_on(robot.id)
+        moved = (step.x, step.y) != (robot.x, robot.y)
+        if moved and (
+            self._into_shut_doorway(robot, step) or not self.avoidance.clear(robot, step.x, step.y, self.fleet, now)
+        ):
+            # whatever moved it (backing off, a hold, a corner): its disc never enters a shut doorway
+            # (passing beside one, a corridor along a row of doors, is allowed) nor touches a robot
             step = Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
         robot.x, robot.y, robot.theta, robot.v, robot.omega = step.x, step.y, step.theta, step.v, step.omega
         robot.progress = min(follower.s / follower.path.length, 1.0) if follower.path.length > 0 else 1.0
@@ -232,18 +277,47 @@ class RobotExecutor:
             return self._arrived(robot, now + dt)
         return []
 
-    def _back_away(self, robot: Robot, dt: float) -> Step:
-        """Stop; or, when the robot it stops for has the right of way and comes on, reverse straight
-        back (as far as free space and shut doors allow) so that the two do not touch."""
-        winner = self.fleet.get(self.right_of_way.gives_way_to(robot.id, self.fleet))
-        if winner is not None:
-            speed = self.config.controller.speed
-            bx = robot.x - speed * dt * math.cos(robot.theta)
-            by = robot.y - speed * dt * math.sin(robot.theta)
-            away = math.hypot(bx - winner.x, by - winner.y) > math.hypot(robot.x - winner.x, robot.y - winner.y)
-            if away and self._free.is_free(bx, by):
-                return Step(bx, by, robot.theta, -speed, 0.0)
-        return Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
+    def _goal_taken(self, robot: Robot, follower: PurePursuit, now: float) -> bool:
+        """Whether a robot kept back near the end of an approach, a gothrough (through the opening)
+        or the drive of an unload (in the room the object goes to) finds another robot standing
+        there: it is done where it is (queueing behind, or unloading beside it)."""
+        cmd = robot.command
+        if cmd is None or cmd.action not in ("approach", "gothrough", "unload"):
+            return False
+        end = follower.path.end
+        if math.dist((robot.x, robot.y), end) > QUEUE_DISTANCE or self.avoidance.kept_back(robot.id, now) < 1.0:
+            return False
+        if any(in_lane(o, robot.x, robot.y) for o in self.site.openings.values()):
+            return False  # never queue in a lane: it is the way out of a doorway
+        if cmd.action == "unload" and dwell_problem(self.site, robot.x, robot.y, cmd, (robot.x, robot.y)):
+            return False
+        if cmd.action == "gothrough":
+            opening = self.site.opening(cmd.args[0])
+            if in_lane(opening, robot.x, robot.y) or not crossing_behind(
+                follower.path, follower.path.length / 2, opening.endpoints, follower.s, robot.x, robot.y
+            ):
+                return False
+        taken = 2.0 * self.config.radius + self.avoidance.clearance
+        return any(other is not robot and math.dist((other.x, other.y), end) < taken for other in self.fleet.values())
+
+    def _kept_back(self, robot: Robot, follower: PurePursuit, now: float, dt: float) -> Step:
+        """Another robot is in the way: back away from one that has the right of way and comes on,
+        else step around it after a while (:mod:`.avoidance`), else stop."""
+        step = Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
+        around = self.avoidance.around(
+            robot, robot.theta, follower.path, follower.s, now, dt, self.fleet, self._allows(robot)
+        )
+        return around if around is not None else step
+
+    def _allows(self, robot: Robot):
+        """What a step off the trajectory must not do: enter a shut doorway or a lane another robot holds."""
+
+        def allowed(candidate: Step) -> bool:
+            return not self._into_shut_doorway(robot, candidate) and not self.doorways.lane_taken(
+                robot, candidate.x, candidate.y, self.fleet
+            )
+
+        return allowed
 
     def _into_shut_doorway(self, robot: Robot, step: Step) -> bool:
         """Whether ``step`` brings the robot's disc into the gap of a door that is not passable, or

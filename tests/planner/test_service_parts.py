@@ -70,6 +70,15 @@ def test_a_burst_is_answered_once_it_settles_or_at_the_latest_after_max_delay():
     assert [str(t) for t in taken] == sorted(str(t) for t in taken) and not s
 
 
+def test_new_constraints_are_planned_at_once_and_take_the_burst_with_them():
+    s = ReplanScheduler(settle=0.03, max_delay=0.25)
+    s.add(StatusChanged("r0", "done"), now=10.0)
+    assert not s.settled(10.01)
+    s.add(NewConstraints(3), now=10.01)
+    assert s.settled(10.01)  # the human waits: no settling
+    assert [str(t) for t in s.take()] == ["constraints:v3", "status:r0:done"]
+
+
 def test_held_news_joins_the_burst_a_new_version_starts():
     s = ReplanScheduler(settle=0.03, max_delay=0.25)
     s.add(StatusChanged("r0", "moving"), now=1.0)

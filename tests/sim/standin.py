@@ -29,6 +29,7 @@ class Task:
     action: str
     args: list[str]
     target: tuple[float, float] | None  # where the trajectory ends (None: no trajectory)
+    via: tuple[float, float] | None = None  # a point the trajectory passes first (in front of the opening)
 
 
 def route(site: Site, start: str, goal: str) -> list[tuple[str, str, str]]:
@@ -64,7 +65,8 @@ def tasks_for(site: Site, robot: str) -> list[Task]:
                 out.append(Task("approach", [o.id], o.beside(a, STANDOFF)))
                 if o.kind == "door" and o.human_operated:
                     out.append(Task("opendoor", [o.id], None))
-                out.append(Task("gothrough", [o.id], o.beside(b, STANDOFF)))
+                # via the point in front of it: a robot that queued behind another is elsewhere
+                out.append(Task("gothrough", [o.id], o.beside(b, STANDOFF), o.beside(a, STANDOFF)))
             room = goal
             if final is None:
                 cx, cy = site.rooms[goal].center
@@ -75,13 +77,28 @@ def tasks_for(site: Site, robot: str) -> list[Task]:
 
 
 def trajectory(
-    start: tuple[float, float, float], target: tuple[float, float], now: float, speed: float
+    start: tuple[float, float, float],
+    target: tuple[float, float],
+    now: float,
+    speed: float,
+    via: tuple[float, float] | None = None,
 ) -> list[list[float]]:
-    """Straight line from the robot to ``target``, timed at ``speed``; rows [t, x, y, theta]."""
+    """Straight lines from the robot (through ``via`` when it is more than 5 cm away) to ``target``,
+    timed at ``speed``; rows [t, x, y, theta]."""
     x, y, theta = start
-    heading = math.atan2(target[1] - y, target[0] - x) if math.dist((x, y), target) > 1e-6 else theta
-    length = math.dist((x, y), target)
-    return [[now, x, y, heading], [now + length / speed, target[0], target[1], heading]]
+    points = [p for p in (via, target) if p is not None]
+    if via is not None and math.dist((x, y), via) <= 0.05:
+        points = [target]
+    rows = []
+    t = now
+    for p in points:
+        heading = math.atan2(p[1] - y, p[0] - x) if math.dist((x, y), p) > 1e-6 else theta
+        if not rows:
+            rows.append([t, x, y, heading])
+        t += math.dist((x, y), p) / speed
+        rows.append([t, p[0], p[1], heading])
+        x, y, theta = p[0], p[1], heading
+    return rows
 
 
 class ScriptedPlanner:
@@ -114,7 +131,8 @@ class ScriptedPlanner:
                 continue
             task = self.todo[rid][0]
             self.next_id[rid] += 1
-            rows = trajectory(poses[rid], task.target, now, self.site.params.robot_speed) if task.target else []
+            speed = self.site.params.robot_speed
+            rows = trajectory(poses[rid], task.target, now, speed, task.via) if task.target else []
             duration = self.site.params.load_time if task.action in ("load", "unload") else 0.0
             out.append(
                 RobotCommand(

@@ -1,11 +1,13 @@
 """Robot-robot contact: the simulator counts two discs that intersect (once per contact, by pair
-and place), and its robots keep a margin - they stop for a robot ahead, a robot that must give way
-backs off from one with the right of way, and a trajectory's hold is kept."""
+and place), and its robots do not touch - they stop for a robot ahead, drive around one that keeps
+them back, cross a doorway one at a time, queue behind a robot standing where they are going, and
+only push through (counted) when wedged for long; a trajectory's hold is kept."""
 
 from __future__ import annotations
 
 import math
 
+from services.sim.doorways import in_lane
 from services.sim.engine import Engine
 from tests.sim.helpers import command, small_site
 
@@ -57,35 +59,83 @@ def test_robots_that_only_come_near_are_no_overlap():
     assert overlaps(e) == [] and e.summary()["robot_overlaps"] == 0
 
 
-def test_a_robot_stops_short_of_a_parked_robot_and_goes_on_only_after_its_patience():
+def closest_approach(e: Engine, until: float, *robots: str) -> float:
+    """Run ``e`` until ``until`` (or every robot named is done); the least centre distance seen."""
+    least = math.inf
+    bodies = [e.robots[r] for r in robots]
+    while e.time < until - 1e-9 and any(b.phase == "drive" for b in bodies):
+        e.step()
+        least = min(least, min(math.dist((a.x, a.y), (b.x, b.y)) for a in bodies for b in bodies if a is not b))
+    return least
+
+
+def test_a_robot_kept_back_by_a_parked_robot_drives_around_it():
     e = engine()
     r0, r1 = e.robots["r0"], e.robots["r1"]
-    r1.x, r1.y = 6.0, 5.0  # parked on r0's way (no command)
+    r1.x, r1.y = 6.0, 5.0  # parked on r0's way (no command), in the middle of the 2 m corridor
     e.apply_command(command("r0", 1, "approach", ["d_storage"], [(1.0, 5.0), (11.0, 5.0)]))
-    run_until(e, 15.0)
+    run_until(e, 10.0)
     gap = math.dist((r0.x, r0.y), (r1.x, r1.y))
-    limit = 2 * 0.25 + e.executor.config.robot_margin
-    assert limit - 0.03 <= gap < limit + 0.03  # stopped at the margin
-    assert r0.yield_time > 3.0 and overlaps(e) == []
-    # A parked robot waits for nothing: after the patience r0 goes on (the contact is counted).
-    run_until(e, 40.0)
-    assert r0.x > 7.0 and len(overlaps(e)) == 1
+    assert 0.5 <= gap < 0.6 and r0.x < 6.0  # stopped short of it first ...
+    least = closest_approach(e, 60.0, "r0", "r1")
+    assert r0.phase == "done" and r0.x > 10.9  # ... then around it to the end of its trajectory
+    assert least >= 0.5 and overlaps(e) == [] and e.summary()["robot_overlaps"] == 0
 
 
-def test_head_on_the_robot_without_the_right_of_way_backs_off():
+def test_two_robots_head_on_in_a_corridor_pass_each_other_without_touching():
     e = engine()
     r0, r1 = e.robots["r0"], e.robots["r1"]
     r0.x, r0.y, r0.theta = 2.0, 5.0, 0.0
-    r1.x, r1.y, r1.theta = 7.0, 5.0, math.pi
-    e.apply_command(command("r0", 1, "approach", ["d_storage"], [(2.0, 5.0), (6.0, 5.0)]))
-    e.apply_command(command("r1", 1, "approach", ["d_office"], [(7.0, 5.0), (3.0, 5.0)]))
+    r1.x, r1.y, r1.theta = 10.0, 5.0, math.pi
+    e.apply_command(command("r0", 1, "approach", ["d_storage"], [(2.0, 5.0), (10.0, 5.0)]))
+    e.apply_command(command("r1", 1, "approach", ["d_office"], [(10.0, 5.0), (2.0, 5.0)]))
+    least = closest_approach(e, 90.0, "r0", "r1")
+    assert r0.phase == r1.phase == "done"
+    assert math.dist((r0.x, r0.y), (10.0, 5.0)) < 0.05 and math.dist((r1.x, r1.y), (2.0, 5.0)) < 0.05
+    assert least >= 0.5 and overlaps(e) == []
+
+
+def test_two_robots_head_on_at_a_door_cross_it_one_at_a_time():
+    e = engine()
+    r0, r1 = e.robots["r0"], e.robots["r1"]
+    door = e.site.opening("d_office")  # an automatic door at (3, 6), corridor below, office above
+    r0.x, r0.y, r0.theta = 3.0, 4.6, math.pi / 2
+    r1.x, r1.y, r1.theta = 3.0, 6.6, -math.pi / 2
+    e.apply_command(command("r0", 1, "gothrough", ["d_office"], [(3.0, 4.6), (3.0, 6.6), (2.0, 7.5)]))
+    e.apply_command(command("r1", 1, "gothrough", ["d_office"], [(3.0, 6.6), (3.0, 4.6), (2.0, 4.6)]))
+    both_in_lane = 0
     least = math.inf
-    while r0.phase == "drive" and e.time < 30.0:
+    while e.time < 90.0 and (r0.phase == "drive" or r1.phase == "drive"):
         e.step()
         least = min(least, math.dist((r0.x, r0.y), (r1.x, r1.y)))
-    assert r0.phase == "done"  # r0 (the priority) got where it was going
+        both_in_lane += in_lane(door, r0.x, r0.y) and in_lane(door, r1.x, r1.y) and abs(r0.y - r1.y) < 1.0
+    assert r0.phase == r1.phase == "done"
+    assert r0.y > 6.5 and r1.y < 5.5  # each crossed
     assert least >= 0.5 and overlaps(e) == []
-    assert r1.x > 6.0 + 0.5  # r1 backed off east to let it
+    assert both_in_lane == 0  # never both in front of the gap
+
+
+def test_robots_approaching_a_taken_spot_queue_behind_it():
+    e = engine()
+    r0, r1 = e.robots["r0"], e.robots["r1"]
+    r1.x, r1.y = 8.0, 4.6  # standing where r0's approach ends (off d_storage's lane)
+    e.apply_command(command("r0", 1, "approach", ["d_storage"], [(1.0, 5.0), (8.0, 4.6)]))
+    least = closest_approach(e, 40.0, "r0", "r1")
+    assert r0.phase == "done" and r0.state == "done" and e.time < 20.0  # done where it is, behind r1
+    assert 0.5 <= math.dist((r0.x, r0.y), (8.0, 4.6)) <= 1.5
+    assert least >= 0.5 and overlaps(e) == []
+
+
+def test_a_robot_wedged_for_long_pushes_through_and_the_contact_is_counted():
+    e = engine()
+    r0, r1 = e.robots["r0"], e.robots["r1"]
+    r1.x, r1.y = 3.0, 6.0  # parked in d_office's doorway, the only way into the office
+    r0.x, r0.y, r0.theta = 3.0, 4.6, math.pi / 2
+    e.apply_command(command("r0", 1, "gothrough", ["d_office"], [(3.0, 4.6), (3.0, 7.2)]))
+    run_until(e, 15.0)
+    assert r0.y < 5.5 and overlaps(e) == []  # kept back: nothing gets it past
+    run_until(e, 60.0)
+    assert r0.phase == "done" and len(overlaps(e)) == 1  # after give_up it pushes through
 
 
 def test_a_hold_keeps_the_robot_in_place_until_its_time():

@@ -1,0 +1,322 @@
+"""Robots are solid, and a robot kept back by others drives around them.
+
+Two rules for robots driving in the simulator, on top of the right of way
+(:mod:`services.sim.right_of_way`):
+
+- **Solid bodies.** No step may bring a robot's disc within ``contact_gap`` of another robot's
+  disc while closing in on it, whatever produced the step (following the trajectory, backing away,
+  driving around). Where the right of way lets a robot go on (it won a waiting cycle, or lost
+  patience with a parked robot) it comes up to the other robot and stops.
+- **Driving around.** A robot kept back by another robot for ``detour_after`` seconds plans a way
+  around, as the local planner of a real robot does: the first point of its trajectory ahead that
+  is clear of every other robot (within the room it is in) is the goal, and a shortest path on a
+  ``resolution`` grid of the room avoids walls and keeps ``clearance`` from every robot's disc. It
+  drives that path (turning on the spot first where the path turns sharply); its trajectory's
+  follower projects it back onto the trajectory from there. With no such point or path it waits,
+  and tries again ``retry`` seconds later.
+
+Only when neither helps for ``give_up`` seconds (robots wedged in a cluster, each waiting on the
+next) does a robot push through: a contact, which :mod:`services.sim.overlaps` counts.
+
+Both rules read other robots where they are now; robots are stepped one after another within a
+tick, so each sees the others' latest poses and the invariant holds after every robot's step.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from protocol.plane import wrap
+from protocol.pursuit import ControllerConfig, Path, Step, integrate
+from protocol.site.grid import OccupancyGrid
+from protocol.site.model import Site
+
+from .right_of_way import Body
+
+NEIGHBOURS = [(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr, dc) != (0, 0)]
+
+
+@dataclass
+class Detour:
+    """A way around: points to drive through, in order, ending on the trajectory."""
+
+    points: list[tuple[float, float]]
+    planned_at: float
+
+
+@dataclass
+class Avoidance:
+    site: Site
+    free: OccupancyGrid  # where a robot's centre may be (walls and open leaves inflated by its radius)
+    radius: float
+    controller: ControllerConfig
+    contact_gap: float = 0.005  # m: the closest two discs may come while closing in
+    clearance: float = 0.05  # m kept between discs along a way around
+    detour_after: float = 1.0  # s kept back by a robot before driving around it
+    retry: float = 1.0  # s between two attempts to plan a way around
+    give_up: float = 20.0  # s kept back after which a robot pushes through (a contact, counted)
+    progress: float = 0.5  # m a robot kept back must get from where it was to count as getting somewhere
+    rejoin_after: float = 0.3  # m off its trajectory from which a robot plans its way back
+    resolution: float = 0.1  # m: cells of the grid a way around is planned on
+    reach: float = 4.0  # m of trajectory ahead in which the goal of a way around is looked for
+    _blocked_since: dict[str, tuple[float, float, float]] = field(default_factory=dict)  # robot -> (t, x, y)
+    _detours: dict[str, Detour] = field(default_factory=dict)
+    _last_try: dict[str, float] = field(default_factory=dict)
+    _pushing: set[str] = field(default_factory=set)  # robots that gave up and push through
+    _rooms: dict[str, tuple[np.ndarray, tuple[float, float]]] = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ solid bodies
+
+    def clear(self, robot: Body, x: float, y: float, fleet: Mapping[str, Body], now: float) -> bool:
+        """Whether stepping to (x, y) keeps ``robot`` from touching any other robot (always True for
+        a robot that gave up: it has been kept back ``give_up`` seconds and pushes through)."""
+        if self._gave_up(robot, fleet, now):
+            return True
+        limit = 2.0 * self.radius + self.contact_gap
+        for other in fleet.values():
+            if other.id == robot.id:
+                continue
+            after = math.hypot(x - other.x, y - other.y)
+            if after < limit and after < math.hypot(robot.x - other.x, robot.y - other.y) - 1e-9:
+                return False
+        return True
+
+    def _gave_up(self, robot: Body, fleet: Mapping[str, Body], now: float) -> bool:
+        if robot.id in self._pushing:
+            near = 2.0 * self.radius + self.clearance
+            if all(math.hypot(robot.x - o.x, robot.y - o.y) >= near for o in fleet.values() if o.id != robot.id):
+                self._pushing.discard(robot.id)  # through: solid again
+                self.moving_on(robot.id)
+            return robot.id in self._pushing
+        if now - self._since(robot, now) >= self.give_up:
+            self._pushing.add(robot.id)
+            return True
+        return False
+
+    # ------------------------------------------------------------------ driving around
+
+    def pushing(self, robot: Body, fleet: Mapping[str, Body], now: float) -> bool:
+        """Whether the robot gave up waiting and pushes through (nothing keeps it back)."""
+        return self._gave_up(robot, fleet, now)
+
+    def moving_on(self, robot: str) -> None:
+        """The robot follows its trajectory again (or waits for a door or a hold, not a robot)."""
+        self._blocked_since.pop(robot, None)
+        self._detours.pop(robot, None)
+
+    def _since(self, robot: Body, now: float) -> float:
+        """Since when the robot has been kept back without getting anywhere: the clock starts again
+        once it is ``progress`` metres from where it started (around the others, it got somewhere)."""
+        since, x, y = self._blocked_since.get(robot.id, (now, robot.x, robot.y))
+        if math.hypot(robot.x - x, robot.y - y) > self.progress:
+            since, x, y = now, robot.x, robot.y
+        self._blocked_since[robot.id] = (since, x, y)
+        return since
+
+    def kept_back(self, robot: str, now: float) -> float:
+        """Seconds the robot has been kept back by other robots (0 if it is not)."""
+        since = self._blocked_since.get(robot)
+        return 0.0 if since is None else now - since[0]
+
+    def driving_around(self, robot: str) -> bool:
+        return robot in self._detours
+
+    def around(
+        self,
+        robot: Body,
+        theta: float,
+        path: Path,
+        progress: float,
+        now: float,
+        dt: float,
+        fleet: Mapping[str, Body],
+        allowed: Callable[[Step], bool],
+    ) -> Step | None:
+        """A step on the way around whatever keeps ``robot`` back, or None (it waits).
+        ``allowed`` vetoes steps the caller knows are wrong (into a shut doorway)."""
+        since = self._since(robot, now)
+        detour = self._detours.get(robot.id)
+        if detour is None:
+            if now - since < self.detour_after or now - self._last_try.get(robot.id, -math.inf) < self.retry:
+                return None
+            self._last_try[robot.id] = now
+            points = self._plan(robot, path, progress, fleet)
+            if not points:
+                return None
+            detour = self._detours[robot.id] = Detour(points, now)
+        return self._follow(robot, theta, detour, now, dt, fleet, allowed)
+
+    def rejoin(self, robot: Body, path: Path, progress: float, now: float, fleet: Mapping[str, Body]) -> None:
+        """Plan a way back to the trajectory for a robot ``rejoin_after`` metres off it (after it got
+        out of another robot's way): heading straight back could cut a doorway's jamb."""
+        if robot.id in self._detours or now - self._last_try.get(robot.id, -math.inf) < self.retry:
+            return
+        self._last_try[robot.id] = now
+        points = self._plan(robot, path, progress, fleet)
+        if points:
+            self._detours[robot.id] = Detour(points, now)
+
+    def out_of_the_way(
+        self,
+        robot: Body,
+        theta: float,
+        now: float,
+        dt: float,
+        fleet: Mapping[str, Body],
+        outside: Callable[[float, float], bool],
+        allowed: Callable[[Step], bool],
+    ) -> Step | None:
+        """A step toward the nearest free point where ``outside`` holds (out of a lane another robot
+        needs), or None when there is no way there."""
+        detour = self._detours.get(robot.id)
+        if detour is None:
+            if now - self._last_try.get(robot.id, -math.inf) < self.retry:
+                return None
+            self._last_try[robot.id] = now
+            room = self.site.room_at(robot.x, robot.y)
+            if room is None:
+                return None
+            others = [(o.x, o.y) for o in fleet.values() if o.id != robot.id]
+            keep = 2.0 * self.radius + self.clearance
+            spots = sorted(
+                (round(r, 2), k, (robot.x + r * math.cos(k * math.pi / 8), robot.y + r * math.sin(k * math.pi / 8)))
+                for r in (0.7, 1.0, 1.3, 1.6)
+                for k in range(16)
+            )
+            for _, _, p in spots:
+                if not (outside(*p) and room.contains(*p) and self.free.is_free(*p)):
+                    continue
+                if any(math.dist(p, o) < keep for o in others):
+                    continue
+                points = self._search(room.id, room.rect, (robot.x, robot.y), p, others)
+                if points:
+                    detour = self._detours[robot.id] = Detour(points, now)
+                    break
+            if detour is None:
+                return None
+        return self._follow(robot, theta, detour, now, dt, fleet, allowed)
+
+    def _follow(
+        self,
+        robot: Body,
+        theta: float,
+        detour: Detour,
+        now: float,
+        dt: float,
+        fleet: Mapping[str, Body],
+        allowed: Callable[[Step], bool],
+    ) -> Step | None:
+        while detour.points and math.hypot(detour.points[0][0] - robot.x, detour.points[0][1] - robot.y) < 0.08:
+            detour.points.pop(0)
+        if not detour.points:
+            self.moving_on(robot.id)  # there
+            return None
+        step = self._toward(robot, theta, detour.points[0], dt)
+        moved = (step.x, step.y) != (robot.x, robot.y)
+        if moved and not (
+            self.free.is_free(step.x, step.y) and self.clear(robot, step.x, step.y, fleet, now) and allowed(step)
+        ):
+            self._detours.pop(robot.id, None)  # something moved into the way: plan again later
+            return None
+        return step
+
+    def _toward(self, robot: Body, theta: float, point: tuple[float, float], dt: float) -> Step:
+        cfg = self.controller
+        turn = wrap(math.atan2(point[1] - robot.y, point[0] - robot.x) - theta)
+        omega = max(-cfg.max_turn_rate, min(cfg.max_turn_rate, turn / dt))
+        if abs(turn) > 0.5:  # face the way first: turning on the spot never touches anything
+            return Step(robot.x, robot.y, wrap(theta + omega * dt), 0.0, omega)
+        v = min(cfg.speed, math.hypot(point[0] - robot.x, point[1] - robot.y) / dt)
+        nx, ny, nth = integrate(robot.x, robot.y, theta, v, omega, dt)
+        return Step(nx, ny, nth, v, omega)
+
+    def _plan(self, robot: Body, path: Path, progress: float, fleet: Mapping[str, Body]) -> list[tuple[float, float]]:
+        """A way around the other robots to the first clear point of the trajectory ahead, within
+        the robot's room; [] when there is none."""
+        room = self.site.room_at(robot.x, robot.y)
+        if room is None:
+            return []
+        others = [(o.x, o.y) for o in fleet.values() if o.id != robot.id]
+        keep = 2.0 * self.radius + self.clearance
+        goal = None
+        s = progress + 0.3
+        while s <= min(progress + self.reach, path.length) + 1e-9:
+            p = path.point_at(s)
+            if not room.contains(p[0], p[1]):
+                break
+            if self.free.is_free(*p) and all(math.dist(p, o) >= keep for o in others):
+                goal = p
+                break
+            s += 0.1
+        if goal is None:
+            return []
+        return self._search(room.id, room.rect, (robot.x, robot.y), goal, others)
+
+    def _room_cells(self, room_id: str, rect: tuple[float, float, float, float]):
+        hit = self._rooms.get(room_id)
+        if hit is None:
+            x0, y0, x1, y1 = rect
+            res = self.resolution
+            nx, ny = max(int((x1 - x0) / res), 1), max(int((y1 - y0) / res), 1)
+            cells = np.array(
+                [[self.free.is_free(x0 + (c + 0.5) * res, y0 + (r + 0.5) * res) for c in range(nx)] for r in range(ny)]
+            )
+            hit = self._rooms[room_id] = (cells, (x0, y0))
+        return hit
+
+    def _search(
+        self,
+        room_id: str,
+        rect: tuple[float, float, float, float],
+        start: tuple[float, float],
+        goal: tuple[float, float],
+        others: list[tuple[float, float]],
+    ) -> list[tuple[float, float]]:
+        """A* on the room's cells, robots' discs (grown by ``clearance``) as obstacles."""
+        cells, (x0, y0) = self._room_cells(room_id, rect)
+        res = self.resolution
+        ny, nx = cells.shape
+        keep = 2.0 * self.radius + self.clearance
+        blocked = ~cells
+        ys, xs = np.mgrid[0:ny, 0:nx]
+        cx, cy = x0 + (xs + 0.5) * res, y0 + (ys + 0.5) * res
+        floor = 2.0 * self.radius + self.contact_gap
+        for ox, oy in others:
+            # a robot already nearer than ``keep`` may still move off: its disc is shrunk to that
+            r = max(min(keep, math.dist(start, (ox, oy)) - 0.01), floor)
+            blocked = blocked | ((cx - ox) ** 2 + (cy - oy) ** 2 < r * r)
+
+        def cell(p: tuple[float, float]) -> tuple[int, int]:
+            return (min(max(int((p[1] - y0) / res), 0), ny - 1), min(max(int((p[0] - x0) / res), 0), nx - 1))
+
+        a, b = cell(start), cell(goal)
+        if blocked[b]:
+            return []
+        came: dict[tuple[int, int], tuple[int, int]] = {}
+        cost = {a: 0.0}
+        heap = [(0.0, a)]
+        while heap:
+            _, c = heapq.heappop(heap)
+            if c == b:
+                break
+            for dr, dc in NEIGHBOURS:
+                n = (c[0] + dr, c[1] + dc)
+                if not (0 <= n[0] < ny and 0 <= n[1] < nx) or blocked[n]:
+                    continue
+                g = cost[c] + math.hypot(dr, dc)
+                if g < cost.get(n, math.inf):
+                    cost[n], came[n] = g, c
+                    heapq.heappush(heap, (g + math.hypot(n[0] - b[0], n[1] - b[1]), n))
+        if b not in came:
+            return []
+        route = [b]
+        while route[-1] != a:
+            route.append(came[route[-1]])
+        route.reverse()
+        points = [(x0 + (c[1] + 0.5) * res, y0 + (c[0] + 0.5) * res) for c in route[1:-1:3]]
+        return [*points, goal]

@@ -1,0 +1,129 @@
+"""Doorways are taken one crossing robot at a time.
+
+A robot told to go through an opening (``gothrough``) first asks for it. The opening is granted to
+the asking robot nearest to it (then the one that asked first, then the smallest id) once nobody
+holds it, or - while the holder is not in the lane yet - to an asking robot nearer than the holder
+(it stands in the holder's way); the others stay where they are (the queue spots the planner sent
+them to). The holder keeps the opening while it drives through and until it is out of the
+opening's *lane* - the strip in front of the gap on both sides, ``LANE_DEPTH`` deep, as wide as the
+gap and ``LANE_MARGIN`` more - or is told something else, or stops driving. Meanwhile no other robot
+steps into that lane, and one that is in it gets out of the way (:meth:`Doorways.lane_to_leave`).
+So two robots do not meet in a doorway or in front of one, whatever the timing of their commands.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from protocol.site.model import Opening, Site
+
+# m either side of an opening's line: where a crossing robot comes out (the planner's point beside
+# the opening, 0.6 m) and a robot's width and a margin beyond
+LANE_DEPTH = 1.2
+LANE_MARGIN = 0.15  # m beyond the gap's half-width (a robot waiting beside it is clear of one coming out)
+
+
+def across(opening: Opening, x: float, y: float) -> float:
+    """Signed distance of (x, y) from the opening's line."""
+    return (y - opening.center[1]) if opening.axis == "x" else (x - opening.center[0])
+
+
+def in_lane(opening: Opening, x: float, y: float) -> bool:
+    """Whether (x, y) is in the lane through ``opening``."""
+    along = (x - opening.center[0]) if opening.axis == "x" else (y - opening.center[1])
+    return abs(along) <= opening.width / 2.0 + LANE_MARGIN and abs(across(opening, x, y)) <= LANE_DEPTH
+
+
+class Mover(Protocol):
+    """What the rule reads from a robot (:class:`services.sim.robots.Robot`)."""
+
+    id: str
+    x: float
+    y: float
+    phase: str
+
+
+@dataclass
+class Doorways:
+    site: Site
+    holders: dict[str, str] = field(default_factory=dict)  # opening -> robot holding it
+    _asked: dict[str, tuple[str, float]] = field(default_factory=dict)  # robot -> (opening, since)
+    _entered: set[str] = field(default_factory=set)  # openings whose holder has been in the lane
+    _told: dict[str, str] = field(default_factory=dict)  # robot -> opening its command goes through
+
+    def may_cross(self, robot: Mover, opening_id: str, now: float, fleet: Mapping[str, Mover]) -> bool:
+        """Whether ``robot``, told to go through ``opening_id``, may drive now (it holds the opening,
+        or gets it); otherwise it waits where it is."""
+        self._told[robot.id] = opening_id
+        self._release(fleet)
+        if self.holders.get(opening_id) == robot.id:
+            return True
+        if self._asked.get(robot.id, ("", 0.0))[0] != opening_id:
+            self._asked[robot.id] = (opening_id, now)
+        center = self.site.opening(opening_id).center
+        holder = self.holders.get(opening_id)
+        if holder is not None:
+            if opening_id in self._entered:
+                return False
+            # not in the lane yet: a robot nearer the opening (in the holder's way) goes first
+            mine = math.dist((robot.x, robot.y), center)
+            theirs = fleet[holder]
+            if mine >= math.dist((theirs.x, theirs.y), center):
+                return False
+            self._asked[holder] = (opening_id, now)
+            del self.holders[opening_id]
+        # the one nearest the opening first (the queue's head: the others' ways in pass where it
+        # stands), then the one that asked first
+        first = min(
+            (round(math.dist((fleet[rid].x, fleet[rid].y), center), 3), since, rid)
+            for rid, (o, since) in self._asked.items()
+            if o == opening_id and rid in fleet
+        )
+        if first[2] != robot.id:
+            return False
+        self.holders[opening_id] = robot.id
+        self._entered.discard(opening_id)
+        del self._asked[robot.id]
+        return True
+
+    def forget(self, robot: str) -> None:
+        """The robot is told something else: it asks for nothing (what it holds it keeps until out)."""
+        self._asked.pop(robot, None)
+        self._told.pop(robot, None)
+
+    def lane_taken(self, robot: Mover, x: float, y: float, fleet: Mapping[str, Mover]) -> bool:
+        """Whether stepping to (x, y) takes ``robot`` into the lane of an opening another robot holds."""
+        self._release(fleet)
+        for opening_id, holder in self.holders.items():
+            if holder == robot.id:
+                continue
+            opening = self.site.opening(opening_id)
+            if in_lane(opening, x, y) and not in_lane(opening, robot.x, robot.y):
+                return True
+        return False
+
+    def lane_to_leave(self, robot: Mover, fleet: Mapping[str, Mover]) -> Opening | None:
+        """The opening whose lane ``robot`` stands in while another robot holds it (it should get
+        out of the way), if any."""
+        self._release(fleet)
+        for opening_id, holder in self.holders.items():
+            opening = self.site.opening(opening_id)
+            if holder != robot.id and in_lane(opening, robot.x, robot.y):
+                return opening
+        return None
+
+    def _release(self, fleet: Mapping[str, Mover]) -> None:
+        """Free the openings whose holder is through (it was in the lane and is out), was told
+        something else, or stopped driving."""
+        for opening_id, holder in list(self.holders.items()):
+            other = fleet.get(holder)
+            if other is None or other.phase != "drive" or self._told.get(holder) != opening_id:
+                del self.holders[opening_id]
+                continue
+            if in_lane(self.site.opening(opening_id), other.x, other.y):
+                self._entered.add(opening_id)
+            elif opening_id in self._entered:
+                del self.holders[opening_id]

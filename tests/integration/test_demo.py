@@ -106,7 +106,7 @@ def test_demo_runs_the_mission_serves_the_tablet_page_and_keeps_overlay_frames(s
     frames = sorted((run / "overlays").glob("overlay-*.png"))
     assert 4 <= len(frames) <= 5, frames  # 5 kept of the ~9 held frames that show a robot and its path
     assert f"{len(frames)} overlay frame(s)" in proc.output
-    times = []
+    times, drawn = [], 0
     for frame in frames:
         image = cv2.imread(str(frame))
         assert image is not None and image.shape == (480, 640, 3), frame
@@ -119,10 +119,13 @@ def test_demo_runs_the_mission_serves_the_tablet_page_and_keeps_overlay_frames(s
             and any(layer.startswith("intent:") for layer in layers)
         ), layers
         samples, fraction = drawn_fraction(image, record["primitives"])
-        assert samples >= 20 and fraction >= 0.3, (
+        # (a frame whose robots and paths are all behind walls has only X-ray lines: none counted)
+        assert samples < 20 or fraction >= 0.3, (
             f"{frame.name}: {fraction:.0%} of {samples} points along the drawn lines have their colour"
         )
+        drawn += samples >= 20
         times.append(record["time"])
+    assert drawn >= 3, f"only {drawn} frames with solid lines drawn"
     # Every one a held frame: drawn at its capture instant, a multiple of the hold interval.
     hold = CameraOptions().hold
     assert all(abs(t - hold * round(t / hold)) < 1e-6 for t in times), times

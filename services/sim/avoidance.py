@@ -59,7 +59,9 @@ class Avoidance:
     clearance: float = 0.05  # m kept between discs along a way around
     detour_after: float = 1.0  # s kept back by a robot before driving around it
     retry: float = 1.0  # s between two attempts to plan a way around
-    give_up: float = 20.0  # s kept back after which a robot pushes through (a contact, counted)
+    give_up: float = (
+        12.0  # s kept back after which a robot pushes through (a contact, counted); less than a door's hold
+    )
     progress: float = 0.5  # m a robot kept back must get from where it was to count as getting somewhere
     rejoin_after: float = 0.3  # m off its trajectory from which a robot plans its way back
     resolution: float = 0.1  # m: cells of the grid a way around is planned on

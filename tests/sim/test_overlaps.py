@@ -132,7 +132,7 @@ def test_a_robot_wedged_for_long_pushes_through_and_the_contact_is_counted():
     r1.x, r1.y = 3.0, 6.0  # parked in d_office's doorway, the only way into the office
     r0.x, r0.y, r0.theta = 3.0, 4.6, math.pi / 2
     e.apply_command(command("r0", 1, "gothrough", ["d_office"], [(3.0, 4.6), (3.0, 7.2)]))
-    run_until(e, 15.0)
+    run_until(e, 10.0)
     assert r0.y < 5.5 and overlaps(e) == []  # kept back: nothing gets it past
     run_until(e, 60.0)
     assert r0.phase == "done" and len(overlaps(e)) == 1  # after give_up it pushes through

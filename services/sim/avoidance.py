@@ -46,7 +46,6 @@ class Detour:
     """A way around: points to drive through, in order, ending on the trajectory."""
 
     points: list[tuple[float, float]]
-    planned_at: float
 
 
 @dataclass
@@ -141,27 +140,23 @@ class Avoidance:
     ) -> Step | None:
         """A step on the way around whatever keeps ``robot`` back, or None (it waits).
         ``allowed`` vetoes steps the caller knows are wrong (into a shut doorway)."""
-        since = self._since(robot, now)
+        if robot.id not in self._detours:
+            if now - self._since(robot, now) < self.detour_after:
+                return None
+            self.rejoin(robot, path, progress, now, fleet)
         detour = self._detours.get(robot.id)
-        if detour is None:
-            if now - since < self.detour_after or now - self._last_try.get(robot.id, -math.inf) < self.retry:
-                return None
-            self._last_try[robot.id] = now
-            points = self._plan(robot, path, progress, fleet)
-            if not points:
-                return None
-            detour = self._detours[robot.id] = Detour(points, now)
-        return self._follow(robot, theta, detour, now, dt, fleet, allowed)
+        return None if detour is None else self._follow(robot, theta, detour, now, dt, fleet, allowed)
 
     def rejoin(self, robot: Body, path: Path, progress: float, now: float, fleet: Mapping[str, Body]) -> None:
-        """Plan a way back to the trajectory for a robot ``rejoin_after`` metres off it (after it got
-        out of another robot's way): heading straight back could cut a doorway's jamb."""
+        """Plan a way (at most one try per ``retry``) to the first clear point of the trajectory
+        ahead: around the robots in the way, or back for a robot ``rejoin_after`` metres off it
+        (heading straight back could cut a doorway's jamb)."""
         if robot.id in self._detours or now - self._last_try.get(robot.id, -math.inf) < self.retry:
             return
         self._last_try[robot.id] = now
         points = self._plan(robot, path, progress, fleet)
         if points:
-            self._detours[robot.id] = Detour(points, now)
+            self._detours[robot.id] = Detour(points)
 
     def out_of_the_way(
         self,
@@ -197,7 +192,7 @@ class Avoidance:
                     continue
                 points = self._search(room.id, room.rect, (robot.x, robot.y), p, others)
                 if points:
-                    detour = self._detours[robot.id] = Detour(points, now)
+                    detour = self._detours[robot.id] = Detour(points)
                     break
             if detour is None:
                 return None

@@ -2,8 +2,9 @@
 
 A robot told to go through an opening (``gothrough``) first asks for it. The opening is granted to
 the asking robot nearest to it (then the one that asked first, then the smallest id) once nobody
-holds it, or - while the holder is not in the lane yet - to an asking robot nearer than the holder
-(it stands in the holder's way); the others stay where they are (the queue spots the planner sent
+holds it, or - while the holder has not left the spot where it got it - to an asking robot nearer
+than the holder (it stands in the holder's way; a holder already on its way keeps it, so it is not
+stopped where it would be in the way); the others stay where they are (the queue spots the planner sent
 them to). The holder keeps the opening while it drives through and until it is out of the
 opening's *lane* - the strip in front of the gap on both sides, ``LANE_DEPTH`` deep, as wide as the
 gap and ``LANE_MARGIN`` more - or is told something else, or stops driving. Meanwhile no other robot
@@ -23,6 +24,7 @@ from protocol.site.model import Opening, Site
 # m either side of an opening's line: where a crossing robot comes out (the planner's point beside
 # the opening, 0.6 m) and a robot's width and a margin beyond
 LANE_DEPTH = 1.2
+SETTLED = 0.2  # m a holder may have moved from where it got the doorway and still give it to a nearer robot
 LANE_MARGIN = 0.15  # m beyond the gap's half-width (a robot waiting beside it is clear of one coming out)
 
 
@@ -53,6 +55,7 @@ class Doorways:
     _asked: dict[str, tuple[str, float]] = field(default_factory=dict)  # robot -> (opening, since)
     _entered: set[str] = field(default_factory=set)  # openings whose holder has been in the lane
     _told: dict[str, str] = field(default_factory=dict)  # robot -> opening its command goes through
+    _granted_at: dict[str, tuple[float, float]] = field(default_factory=dict)  # opening -> where its holder got it
 
     def may_cross(self, robot: Mover, opening_id: str, now: float, fleet: Mapping[str, Mover]) -> bool:
         """Whether ``robot``, told to go through ``opening_id``, may drive now (it holds the opening,
@@ -66,12 +69,11 @@ class Doorways:
         center = self.site.opening(opening_id).center
         holder = self.holders.get(opening_id)
         if holder is not None:
-            if opening_id in self._entered:
-                return False
-            # not in the lane yet: a robot nearer the opening (in the holder's way) goes first
-            mine = math.dist((robot.x, robot.y), center)
             theirs = fleet[holder]
-            if mine >= math.dist((theirs.x, theirs.y), center):
+            if opening_id in self._entered or math.dist((theirs.x, theirs.y), self._granted_at[opening_id]) > SETTLED:
+                return False  # in the lane, or on its way: stopping it now could leave it in the way
+            # still where it was granted the doorway: a robot nearer the opening (in its way) goes first
+            if math.dist((robot.x, robot.y), center) >= math.dist((theirs.x, theirs.y), center):
                 return False
             self._asked[holder] = (opening_id, now)
             del self.holders[opening_id]
@@ -85,6 +87,7 @@ class Doorways:
         if first[2] != robot.id:
             return False
         self.holders[opening_id] = robot.id
+        self._granted_at[opening_id] = (robot.x, robot.y)
         self._entered.discard(opening_id)
         del self._asked[robot.id]
         return True

@@ -39,16 +39,20 @@ def test_the_nearest_asking_robot_gets_the_doorway_and_the_other_waits():
     assert ways.holders == {"d_office": "r0"}
 
 
-def test_a_nearer_robot_takes_over_until_the_holder_is_in_the_lane():
+def test_a_nearer_robot_takes_over_only_while_the_holder_has_not_set_off():
     ways, door, fleet = setup()
-    assert ways.may_cross(fleet["r1"], "d_office", 0.0, fleet)
-    fleet["r0"].y = 5.0  # r0 comes nearer before r1 has entered: r0 stands in r1's way
+    fleet["r0"].y = 4.2  # 1.8 m below the door
+    assert ways.may_cross(fleet["r1"], "d_office", 0.0, fleet)  # r1, 1.7 m above it, alone: granted
+    fleet["r0"].y = 4.4  # r0 now nearer while r1 has not moved: r0 stands in its way, it goes first
     assert ways.may_cross(fleet["r0"], "d_office", 1.0, fleet)
     assert not ways.may_cross(fleet["r1"], "d_office", 1.0, fleet)
-    fleet["r0"].y = 5.6  # r0 is in the lane now: it keeps the doorway whoever comes nearer
-    ways.may_cross(fleet["r0"], "d_office", 2.0, fleet)
-    fleet["r1"].y = 6.3
+    fleet["r0"].x = 3.3  # r0 on its way (0.3 m from where it got the doorway), still out of the lane:
+    fleet["r1"].y = 7.3  # it keeps the doorway though r1 is nearer now
     assert not ways.may_cross(fleet["r1"], "d_office", 2.0, fleet)
+    fleet["r0"].y = 5.6  # r0 in the lane: it keeps it whoever comes nearer
+    ways.may_cross(fleet["r0"], "d_office", 3.0, fleet)
+    fleet["r1"].y = 6.3
+    assert not ways.may_cross(fleet["r1"], "d_office", 3.0, fleet)
 
 
 def test_nobody_steps_into_a_held_lane_and_the_holder_lets_go_once_through():

@@ -112,7 +112,7 @@ class RobotExecutor:
         self.config = config
         self.fleet: dict[str, Robot] = {}  # every robot, for the right of way (set by the engine)
         self.right_of_way = RightOfWay(config.radius, config.robot_margin)
-        # where a robot's centre may go when it backs away (doors open: it only backs over its own path)
+        # where a robot's centre may go when it drives around another (doors open: shut ones are checked apart)
         self._free = site.occupancy_grid(resolution=0.05, open_doors=tuple(site.door_leaves), inflate=config.radius)
         self.avoidance = Avoidance(site, self._free, config.radius, config.controller)
         self.doorways = Doorways(site)
@@ -255,7 +255,7 @@ class RobotExecutor:
         if moved and (
             self._into_shut_doorway(robot, step) or not self.avoidance.clear(robot, step.x, step.y, self.fleet, now)
         ):
-            # whatever moved it (backing off, a hold, a corner): its disc never enters a shut doorway
+            # whatever moved it (driving around, a hold, a corner): its disc never enters a shut doorway
             # (passing beside one, a corridor along a row of doors, is allowed) nor touches a robot
             step = Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
         robot.x, robot.y, robot.theta, robot.v, robot.omega = step.x, step.y, step.theta, step.v, step.omega
@@ -293,7 +293,7 @@ class RobotExecutor:
             return False
         if cmd.action == "gothrough":
             opening = self.site.opening(cmd.args[0])
-            if in_lane(opening, robot.x, robot.y) or not crossing_behind(
+            if not crossing_behind(
                 follower.path, follower.path.length / 2, opening.endpoints, follower.s, robot.x, robot.y
             ):
                 return False
@@ -301,13 +301,11 @@ class RobotExecutor:
         return any(other is not robot and math.dist((other.x, other.y), end) < taken for other in self.fleet.values())
 
     def _kept_back(self, robot: Robot, follower: PurePursuit, now: float, dt: float) -> Step:
-        """Another robot is in the way: back away from one that has the right of way and comes on,
-        else step around it after a while (:mod:`.avoidance`), else stop."""
-        step = Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
+        """Another robot is in the way: drive around it after a while (:mod:`.avoidance`), else stop."""
         around = self.avoidance.around(
             robot, robot.theta, follower.path, follower.s, now, dt, self.fleet, self._allows(robot)
         )
-        return around if around is not None else step
+        return around if around is not None else Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
 
     def _allows(self, robot: Robot):
         """What a step off the trajectory must not do: enter a shut doorway or a lane another robot holds."""

@@ -9,14 +9,17 @@ Two rules for robots driving in the simulator, on top of the right of way
   patience with a parked robot) it comes up to the other robot and stops.
 - **Driving around.** A robot kept back by another robot for ``detour_after`` seconds plans a way
   around, as the local planner of a real robot does: the first point of its trajectory ahead that
-  is clear of every other robot (within the room it is in) is the goal, and a shortest path on a
+  is clear of every other robot (within the room it is in, however far ahead: past a queue of
+  robots standing on it) is the goal, and a shortest path on a
   ``resolution`` grid of the room avoids walls and keeps ``clearance`` from every robot's disc. It
   drives that path (turning on the spot first where the path turns sharply); its trajectory's
   follower projects it back onto the trajectory from there. With no such point or path it waits,
   and tries again ``retry`` seconds later.
 
-Only when neither helps for ``give_up`` seconds (robots wedged in a cluster, each waiting on the
-next) does a robot push through: a contact, which :mod:`services.sim.overlaps` counts.
+Where there is no way around, the robot kept back asks the robot in its way to make way
+(:mod:`services.sim.make_way`). Only when nothing helps for ``give_up`` seconds (robots wedged in
+a cluster, each waiting on the next) does a robot push through: a contact, which
+:mod:`services.sim.overlaps` counts.
 
 Both rules read other robots where they are now; robots are stepped one after another within a
 tick, so each sees the others' latest poses and the invariant holds after every robot's step.
@@ -37,6 +40,8 @@ from protocol.site.grid import OccupancyGrid
 from protocol.site.model import Site
 
 from .right_of_way import Body
+
+Rect = tuple[float, float, float, float]  # x0, y0, x1, y1
 
 NEIGHBOURS = [(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr, dc) != (0, 0)]
 
@@ -64,7 +69,9 @@ class Avoidance:
     progress: float = 0.5  # m a robot kept back must get from where it was to count as getting somewhere
     rejoin_after: float = 0.3  # m off its trajectory from which a robot plans its way back
     resolution: float = 0.1  # m: cells of the grid a way around is planned on
-    reach: float = 4.0  # m of trajectory ahead in which the goal of a way around is looked for
+    # areas a robot may not enter (other robots' doorway lanes: :mod:`.doorways`); a way never
+    # enters one, unless it starts in it
+    keep_out: Callable[[Body], list[Rect]] = lambda robot: []
     _blocked_since: dict[str, tuple[float, float, float]] = field(default_factory=dict)  # robot -> (t, x, y)
     _detours: dict[str, Detour] = field(default_factory=dict)
     _last_try: dict[str, float] = field(default_factory=dict)
@@ -108,6 +115,11 @@ class Avoidance:
     def moving_on(self, robot: str) -> None:
         """The robot follows its trajectory again (or waits for a door or a hold, not a robot)."""
         self._blocked_since.pop(robot, None)
+        self._detours.pop(robot, None)
+
+    def stop_driving_around(self, robot: str) -> None:
+        """Drop the robot's way around (it waits for another robot to make way instead); it is
+        still kept back."""
         self._detours.pop(robot, None)
 
     def _since(self, robot: Body, now: float) -> float:
@@ -190,7 +202,7 @@ class Avoidance:
                     continue
                 if any(math.dist(p, o) < keep for o in others):
                     continue
-                points = self._search(room.id, room.rect, (robot.x, robot.y), p, others)
+                points = self._search(robot, room.id, room.rect, p, others)
                 if points:
                     detour = self._detours[robot.id] = Detour(points)
                     break
@@ -218,15 +230,22 @@ class Avoidance:
         if moved and not (
             self.free.is_free(step.x, step.y) and self.clear(robot, step.x, step.y, fleet, now) and allowed(step)
         ):
-            self._detours.pop(robot.id, None)  # something moved into the way: plan again later
+            # the arc swings it where it may not go: face the point squarely first, else something
+            # moved into the way: plan again later
+            square = self._toward(robot, theta, detour.points[0], dt, facing=0.05)
+            if (square.x, square.y) == (robot.x, robot.y) and square.omega != 0.0:
+                return square
+            self._detours.pop(robot.id, None)
             return None
         return step
 
-    def _toward(self, robot: Body, theta: float, point: tuple[float, float], dt: float) -> Step:
+    def _toward(self, robot: Body, theta: float, point: tuple[float, float], dt: float, facing: float = 0.5) -> Step:
+        """A step toward ``point``: on the spot while the robot faces more than ``facing`` rad
+        away from it (turning on the spot never touches anything), else along an arc."""
         cfg = self.controller
         turn = wrap(math.atan2(point[1] - robot.y, point[0] - robot.x) - theta)
         omega = max(-cfg.max_turn_rate, min(cfg.max_turn_rate, turn / dt))
-        if abs(turn) > 0.5:  # face the way first: turning on the spot never touches anything
+        if abs(turn) > facing:
             return Step(robot.x, robot.y, wrap(theta + omega * dt), 0.0, omega)
         v = min(cfg.speed, math.hypot(point[0] - robot.x, point[1] - robot.y) / dt)
         nx, ny, nth = integrate(robot.x, robot.y, theta, v, omega, dt)
@@ -242,7 +261,7 @@ class Avoidance:
         keep = 2.0 * self.radius + self.clearance
         goal = None
         s = progress + 0.3
-        while s <= min(progress + self.reach, path.length) + 1e-9:
+        while s <= path.length + 1e-9:  # as far as the trajectory stays in the room: past a whole queue line
             p = path.point_at(s)
             if not room.contains(p[0], p[1]):
                 break
@@ -252,7 +271,7 @@ class Avoidance:
             s += 0.1
         if goal is None:
             return []
-        return self._search(room.id, room.rect, (robot.x, robot.y), goal, others)
+        return self._search(robot, room.id, room.rect, goal, others)
 
     def _room_cells(self, room_id: str, rect: tuple[float, float, float, float]):
         hit = self._rooms.get(room_id)
@@ -268,13 +287,15 @@ class Avoidance:
 
     def _search(
         self,
+        robot: Body,
         room_id: str,
-        rect: tuple[float, float, float, float],
-        start: tuple[float, float],
+        rect: Rect,
         goal: tuple[float, float],
         others: list[tuple[float, float]],
     ) -> list[tuple[float, float]]:
-        """A* on the room's cells, robots' discs (grown by ``clearance``) as obstacles."""
+        """A* on the room's cells from the robot to ``goal``, robots' discs (grown by ``clearance``)
+        and the areas kept out (but one it stands in) as obstacles."""
+        start = (robot.x, robot.y)
         cells, (x0, y0) = self._room_cells(room_id, rect)
         res = self.resolution
         ny, nx = cells.shape
@@ -287,6 +308,9 @@ class Avoidance:
             # a robot already nearer than ``keep`` may still move off: its disc is shrunk to that
             r = max(min(keep, math.dist(start, (ox, oy)) - 0.01), floor)
             blocked = blocked | ((cx - ox) ** 2 + (cy - oy) ** 2 < r * r)
+        for ax, ay, bx, by in self.keep_out(robot):
+            if not (ax <= start[0] <= bx and ay <= start[1] <= by):
+                blocked = blocked | ((cx >= ax) & (cx <= bx) & (cy >= ay) & (cy <= by))
 
         def cell(p: tuple[float, float]) -> tuple[int, int]:
             return (min(max(int((p[1] - y0) / res), 0), ny - 1), min(max(int((p[0] - x0) / res), 0), nx - 1))
@@ -315,5 +339,30 @@ class Avoidance:
         while route[-1] != a:
             route.append(came[route[-1]])
         route.reverse()
-        points = [(x0 + (c[1] + 0.5) * res, y0 + (c[0] + 0.5) * res) for c in route[1:-1:3]]
+        points = [(x0 + (c[1] + 0.5) * res, y0 + (c[0] + 0.5) * res) for c in _corners(route, blocked)]
         return [*points, goal]
+
+
+def _corners(route: list[tuple[int, int]], blocked: np.ndarray) -> list[tuple[int, int]]:
+    """The cells of ``route`` (after its first, before its last) where it must turn: from each kept
+    cell the next is the farthest one reached in a straight line over free cells only, so the
+    straight legs between them never cut across a blocked cell."""
+    kept, here = [], 0
+    while here < len(route) - 1:
+        nxt = here + 1
+        while nxt + 1 < len(route) and _straight(route[here], route[nxt + 1], blocked):
+            nxt += 1
+        if nxt < len(route) - 1:
+            kept.append(route[nxt])
+        here = nxt
+    return kept
+
+
+def _straight(a: tuple[int, int], b: tuple[int, int], blocked: np.ndarray) -> bool:
+    """Whether the straight line between the centres of cells ``a`` and ``b`` crosses free cells only."""
+    steps = 2 * max(abs(b[0] - a[0]), abs(b[1] - a[1]))
+    for i in range(1, steps):
+        t = i / steps
+        if blocked[round(a[0] + t * (b[0] - a[0])), round(a[1] + t * (b[1] - a[1]))]:
+            return False
+    return True

@@ -39,6 +39,15 @@ def in_lane(opening: Opening, x: float, y: float) -> bool:
     return abs(along) <= opening.width / 2.0 + LANE_MARGIN and abs(across(opening, x, y)) <= LANE_DEPTH
 
 
+def lane_rect(opening: Opening) -> tuple[float, float, float, float]:
+    """The lane through ``opening`` as a rectangle (x0, y0, x1, y1): where :func:`in_lane` holds."""
+    half = opening.width / 2.0 + LANE_MARGIN
+    cx, cy = opening.center
+    if opening.axis == "x":
+        return (cx - half, cy - LANE_DEPTH, cx + half, cy + LANE_DEPTH)
+    return (cx - LANE_DEPTH, cy - half, cx + LANE_DEPTH, cy + half)
+
+
 class Mover(Protocol):
     """What the rule reads from a robot (:class:`services.sim.robots.Robot`)."""
 
@@ -92,6 +101,10 @@ class Doorways:
         del self._asked[robot.id]
         return True
 
+    def holds(self, robot: str) -> bool:
+        """Whether ``robot`` holds an opening (it is crossing it)."""
+        return robot in self.holders.values()
+
     def forget(self, robot: str) -> None:
         """The robot is told something else: it asks for nothing (what it holds it keeps until out)."""
         self._asked.pop(robot, None)
@@ -107,6 +120,11 @@ class Doorways:
             if in_lane(opening, x, y) and not in_lane(opening, robot.x, robot.y):
                 return True
         return False
+
+    def held_lanes(self, robot: Mover, fleet: Mapping[str, Mover]) -> list[tuple[float, float, float, float]]:
+        """The lanes (x0, y0, x1, y1) of the openings other robots hold: ``robot`` may not step in."""
+        self._release(fleet)
+        return [lane_rect(self.site.opening(o)) for o, holder in self.holders.items() if holder != robot.id]
 
     def lane_to_leave(self, robot: Mover, fleet: Mapping[str, Mover]) -> Opening | None:
         """The opening whose lane ``robot`` stands in while another robot holds it (it should get

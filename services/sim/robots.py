@@ -33,6 +33,7 @@ from protocol.site.model import Site
 from .avoidance import Avoidance
 from .doors import Doors
 from .doorways import Doorways, in_lane
+from .make_way import MakeWay
 from .objects import Objects
 from .right_of_way import RightOfWay
 
@@ -116,6 +117,9 @@ class RobotExecutor:
         self._free = site.occupancy_grid(resolution=0.05, open_doors=tuple(site.door_leaves), inflate=config.radius)
         self.avoidance = Avoidance(site, self._free, config.radius, config.controller)
         self.doorways = Doorways(site)
+        self.avoidance.keep_out = lambda robot: self.doorways.held_lanes(robot, self.fleet)
+        self.make_way = MakeWay(config.radius, self.doorways.holds)
+        self._made_way: set[str] = set()  # robots answering a request to make way
 
     # ------------------------------------------------------------------ commands
 
@@ -124,6 +128,7 @@ class RobotExecutor:
         robot.command = cmd
         robot.last_action_id = cmd.action_id
         self.doorways.forget(robot.id)
+        self.avoidance.moving_on(robot.id)  # how long it was kept back on its last drive counts no more
         robot.follower = None
         robot.crossings = []
         robot.v = robot.omega = 0.0
@@ -175,6 +180,8 @@ class RobotExecutor:
 
     def step(self, robot: Robot, now: float, dt: float) -> list[Outcome]:
         """Advance one robot by ``dt``; ``now`` is the time at the start of the step."""
+        if self._making_way(robot, now, dt):
+            return []
         if robot.phase == "drive":
             return self._drive(robot, now, dt)
         self.right_of_way.forget(robot.id)  # waits for no robot
@@ -238,11 +245,16 @@ class RobotExecutor:
         if step.held:
             self.right_of_way.forget(robot.id)  # waits for a door or a hold, not for a robot
             self.avoidance.moving_on(robot.id)
+        elif self.doorways.lane_taken(robot, step.x, step.y, self.fleet):
+            # the way ahead crosses a doorway's lane another robot holds: wait for it, like for a door
+            robot.v = robot.omega = 0.0
+            robot.yield_time += dt
+            self.avoidance.moving_on(robot.id)
+            return []
         elif not self.avoidance.pushing(robot, self.fleet, now) and (
             self.right_of_way.blocker(robot, step.x, step.y, self.fleet, now)
             or not self.avoidance.clear(robot, step.x, step.y, self.fleet, now)
             or self.avoidance.driving_around(robot.id)
-            or self.doorways.lane_taken(robot, step.x, step.y, self.fleet)
         ):
             if self._goal_taken(robot, follower, now):
                 robot.v = robot.omega = 0.0
@@ -301,11 +313,51 @@ class RobotExecutor:
         return any(other is not robot and math.dist((other.x, other.y), end) < taken for other in self.fleet.values())
 
     def _kept_back(self, robot: Robot, follower: PurePursuit, now: float, dt: float) -> Step:
-        """Another robot is in the way: drive around it after a while (:mod:`.avoidance`), else stop."""
+        """Another robot is in the way: drive around it after a while (:mod:`.avoidance`), ask it
+        to make way when that does not get the robot anywhere (:mod:`.make_way`), else stop."""
+        stop = Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
+        if self.avoidance.kept_back(robot.id, now) >= self.make_way.ask_after:
+            way = self.make_way.way_ahead(follower.path, follower.s)
+            other = self.make_way.in_the_way(robot, way, self.fleet)
+            if other is not None and self.make_way.ask(robot, other, way, now):
+                self.avoidance.stop_driving_around(robot.id)  # it waits for the other to make way
+                return stop
         around = self.avoidance.around(
             robot, robot.theta, follower.path, follower.s, now, dt, self.fleet, self._allows(robot)
         )
-        return around if around is not None else Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
+        return around if around is not None else stop
+
+    def _making_way(self, robot: Robot, now: float, dt: float) -> bool:
+        """Whether the robot spends this step making way for another (:mod:`.make_way`): stepping
+        off the other's way, or waiting off it until the other has gone past."""
+        if robot.phase == "dwell":
+            return False
+        request = self.make_way.request_for(robot, now, self.fleet)
+        if request is None:
+            if robot.id in self._made_way:  # the other has gone past: back to its own business
+                self._made_way.discard(robot.id)
+                self.avoidance.moving_on(robot.id)
+            return False
+        if robot.id not in self._made_way:
+            self._made_way.add(robot.id)
+            self.avoidance.moving_on(robot.id)  # its own way around, if any, is not where it goes now
+        robot.yield_time += dt
+        step = None
+        if not self.make_way.off_the_way(request, robot.x, robot.y):
+            step = self.avoidance.out_of_the_way(
+                robot,
+                robot.theta,
+                now,
+                dt,
+                self.fleet,
+                lambda x, y: self.make_way.off_the_way(request, x, y),
+                self._allows(robot),
+            )
+        if step is None or self._into_shut_doorway(robot, step):
+            robot.v = robot.omega = 0.0
+            return True
+        robot.x, robot.y, robot.theta, robot.v, robot.omega = step.x, step.y, step.theta, step.v, step.omega
+        return True
 
     def _allows(self, robot: Robot):
         """What a step off the trajectory must not do: enter a shut doorway or a lane another robot holds."""

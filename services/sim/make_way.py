@@ -1,0 +1,130 @@
+"""A robot that cannot get past another asks it to make way.
+
+Driving around (:mod:`services.sim.avoidance`) needs room; where there is none - a robot standing
+on the only way along a queue line, two robots meeting where neither can step aside, a robot
+parked on another's way out of a room - the robot kept back asks the one in its way to make way,
+as people do in a corridor. Robots are ranked, and only a robot of higher rank may ask:
+
+- a robot holding a doorway (it is crossing: :mod:`services.sim.doorways`) first,
+- then robots driving a trajectory,
+- then robots waiting for a door to open,
+- then parked robots (their action over, or stopped);
+- within a rank, the smaller id first (the right of way's fixed priority).
+
+A robot loading or unloading is never asked (it is done within seconds, then it is parked).
+Because the ranks are a total order, two robots never ask each other, and the highest-ranked robot
+kept back always gets its way cleared when there is room anywhere nearby.
+
+A robot asked steps off the asker's way ahead (``horizon`` metres of its trajectory) to the nearest
+free point at least a robot's width from it, and waits there until the asker has gone past (it is
+no longer kept back and is ``passed`` metres away) or stopped driving; then it goes on with what
+it was doing (a driving robot plans its way back onto its trajectory).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+from protocol.pursuit import Path
+
+from .right_of_way import Body
+
+PHASE_RANK = {"drive": 2, "wait_open": 1, "done": 0, "idle": 0, "failed": 0}  # "dwell": never asked
+HOLDER_RANK = 3
+
+
+@dataclass
+class Request:
+    """``asker`` needs the asked robot off ``way`` (points of its trajectory ahead)."""
+
+    asker: str
+    way: list[tuple[float, float]]
+    since: float
+    renewed: float
+
+
+@dataclass
+class MakeWay:
+    radius: float
+    holds_doorway: Callable[[str], bool]  # whether a robot holds a doorway (it is crossing one)
+    clearance: float = 0.05  # m between discs: what "off the way" keeps
+    ask_after: float = 3.0  # s kept back (not getting around) before asking
+    horizon: float = 3.0  # m of the asker's trajectory ahead that is cleared
+    step: float = 0.1  # m between the points of the way
+    linger: float = 2.0  # s a request outlives the asker's last ask (it drives off first)
+    passed: float = 1.0  # m beyond touching: the asker is this far away, the request ends
+    longest: float = 30.0  # s a request lasts at most (the asker is stuck for another reason)
+    requests: dict[str, Request] = field(default_factory=dict)  # asked robot -> its request
+
+    @property
+    def keep(self) -> float:
+        return 2.0 * self.radius + self.clearance
+
+    def priority(self, robot: Body) -> tuple:
+        """Sorts first the robot that goes first: the rank of what it does, then its id in natural
+        order (r2 before r10)."""
+        level = HOLDER_RANK if self.holds_doorway(robot.id) else PHASE_RANK.get(robot.phase, -1)
+        return (-level, natural(robot.id))
+
+    def way_ahead(self, path: Path, progress: float) -> list[tuple[float, float]]:
+        """The points of ``path`` from ``progress`` to ``horizon`` metres on."""
+        end = min(progress + self.horizon, path.length)
+        count = max(int((end - progress) / self.step), 0)
+        return [path.point_at(progress + i * self.step) for i in range(count + 1)]
+
+    def in_the_way(self, robot: Body, way: list[tuple[float, float]], fleet: Mapping[str, Body]) -> Body | None:
+        """The first robot along ``way`` that stands on it (nearer than ``keep`` to one of its points)."""
+        for point in way:
+            for other in fleet.values():
+                if other.id != robot.id and math.dist(point, (other.x, other.y)) < self.keep:
+                    return other
+        return None
+
+    def ask(self, asker: Body, asked: Body, way: list[tuple[float, float]], now: float) -> bool:
+        """``asker`` asks ``asked`` to get off ``way``; whether it may (it outranks it, and no
+        higher-ranked robot's request is pending)."""
+        if asked.phase not in PHASE_RANK or self.priority(asker) >= self.priority(asked):
+            return False
+        mine = self.requests.get(asked.id)
+        if mine is not None and mine.asker == asker.id:
+            mine.way, mine.renewed = way, now
+            return True
+        if mine is not None and now - mine.renewed <= self.linger and mine.asker != asker.id:
+            return False  # it is making way for another robot first
+        self.requests[asked.id] = Request(asker.id, way, now, now)
+        return True
+
+    def request_for(self, robot: Body, now: float, fleet: Mapping[str, Body]) -> Request | None:
+        """The request ``robot`` is to answer now, if any (ended requests are dropped)."""
+        request = self.requests.get(robot.id)
+        if request is None:
+            return None
+        asker = fleet.get(request.asker)
+        gone = (
+            asker is None
+            or asker.phase != "drive"
+            or now - request.since > self.longest
+            or (
+                now - request.renewed > self.linger
+                and math.dist((asker.x, asker.y), (robot.x, robot.y)) > self.keep + self.passed
+            )
+        )
+        if gone:
+            del self.requests[robot.id]
+            return None
+        return request
+
+    def off_the_way(self, request: Request, x: float, y: float) -> bool:
+        """Whether a robot at (x, y) leaves ``request``'s way free."""
+        return all(math.dist(point, (x, y)) >= self.keep for point in request.way)
+
+    def forget(self, robot: str) -> None:
+        self.requests.pop(robot, None)
+
+
+def natural(name: str) -> tuple:
+    """``name`` as a key that orders its numbers by value: r2 before r10."""
+    return tuple((0, int(part), "") if part.isdigit() else (1, 0, part) for part in re.split(r"(\d+)", name) if part)

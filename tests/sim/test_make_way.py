@@ -1,0 +1,106 @@
+"""A robot that cannot get past another asks it to make way: only a robot of higher rank may ask
+(a doorway's holder, then driving, then waiting for a door, then parked; the smaller id first), a
+robot loading or unloading is never asked, and the request ends once the asker has gone past."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from protocol.pursuit import Path
+from services.sim.make_way import MakeWay, Request
+from tests.sim.helpers import command
+from tests.sim.test_overlaps import engine, overlaps
+
+
+@dataclass
+class Bot:
+    id: str
+    x: float
+    y: float
+    phase: str = "drive"
+
+
+def rules(holders: tuple[str, ...] = ()) -> MakeWay:
+    return MakeWay(0.25, lambda robot: robot in holders)
+
+
+def test_ranks_put_a_doorway_holder_first_then_driving_waiting_and_parked_robots():
+    way = rules(holders=("r5",))
+    holder, driving, waiting, parked = (
+        Bot("r5", 0, 0),
+        Bot("r3", 0, 0),
+        Bot("r0", 0, 0, "wait_open"),
+        Bot("r1", 0, 0, "done"),
+    )
+    assert way.priority(holder) < way.priority(driving) < way.priority(waiting) < way.priority(parked)
+    assert way.priority(Bot("r1", 0, 0)) < way.priority(Bot("r2", 0, 0))  # the same phase: the smaller id first
+    assert way.priority(Bot("r2", 0, 0)) < way.priority(Bot("r10", 0, 0))  # by number, not by letter
+
+
+def test_only_a_robot_of_higher_rank_may_ask_and_a_loading_robot_is_never_asked():
+    way = rules()
+    line = [(0.0, 0.0), (1.0, 0.0)]
+    assert not way.ask(Bot("r1", 0, 0), Bot("r0", 0.5, 0), line, 0.0)  # r0 drives too and comes first
+    assert way.ask(Bot("r0", 0, 0), Bot("r1", 0.5, 0), line, 0.0)
+    assert not way.ask(Bot("r0", 0, 0), Bot("r2", 0.5, 0, "dwell"), line, 0.0)
+    assert set(way.requests) == {"r1"}
+    # r1 is making way for r0: r2 (driving, after r0) waits its turn until r0's request lapses
+    assert not way.ask(Bot("r2", 0, 0), Bot("r1", 0.5, 0, "done"), line, 1.0)
+    assert way.ask(Bot("r2", 0, 0), Bot("r1", 0.5, 0, "done"), line, 1.0 + way.linger + 0.1)
+
+
+def test_the_way_ahead_and_who_stands_on_it():
+    way = rules()
+    path = Path([[0.0, 0.0, 0.0, 0.0], [10.0, 5.0, 0.0, 0.0]])
+    ahead = way.way_ahead(path, 1.0)
+    assert ahead[0] == (1.0, 0.0) and math.isclose(ahead[-1][0], 1.0 + way.horizon)
+    fleet = {"r0": Bot("r0", 1.0, 0.0), "r1": Bot("r1", 3.0, 0.5), "r2": Bot("r2", 2.5, 0.3)}
+    assert way.in_the_way(fleet["r0"], ahead, fleet).id == "r2"  # the first one along the way
+    fleet["r2"].y = 0.6  # 0.6 m off the way: no longer on it (a robot's width is 0.5 m)
+    assert way.in_the_way(fleet["r0"], ahead, fleet).id == "r1"
+    request = Request("r0", ahead, 0.0, 0.0)
+    assert way.off_the_way(request, 2.5, 0.6) and not way.off_the_way(request, 2.5, 0.5)
+
+
+def test_a_request_ends_when_the_asker_has_gone_past_or_stops_driving():
+    way = rules()
+    asker, asked = Bot("r0", 0.0, 0.0), Bot("r1", 0.6, 0.0, "done")
+    fleet = {"r0": asker, "r1": asked}
+    assert way.ask(asker, asked, [(0.0, 0.0), (2.0, 0.0)], 0.0)
+    assert way.request_for(asked, 1.0, fleet) is not None
+    assert way.request_for(asked, 1.0 + way.linger + 0.1, fleet) is not None  # not asked again, but still near
+    asker.x = 2.5  # gone past (1.9 m away)
+    assert way.request_for(asked, 1.0 + way.linger + 0.1, fleet) is None
+    assert way.ask(asker, asked, [(2.0, 0.0), (4.0, 0.0)], 5.0)
+    asker.phase = "done"  # stopped driving (arrived, or told something else)
+    assert way.request_for(asked, 5.1, fleet) is None
+
+
+def test_a_parked_robot_on_the_end_of_a_drive_makes_way_for_it():
+    e = engine()
+    r0, r1 = e.robots["r0"], e.robots["r1"]
+    r1.x, r1.y = 3.0, 5.0  # parked (no command) where r0's drive to d_office ends
+    e.apply_command(command("r0", 1, "opendoor", ["d_office"], [(1.0, 5.0), (3.0, 5.0)]))
+    least = math.inf
+    while e.time < 60.0 and r0.phase == "drive":
+        e.step()
+        least = min(least, math.dist((r0.x, r0.y), (r1.x, r1.y)))
+    assert r0.phase in ("wait_open", "done") and math.dist((r0.x, r0.y), (3.0, 5.0)) < 0.1  # it got there
+    assert least >= 0.5 and overlaps(e) == [] and e.summary()["robot_overlaps"] == 0
+    assert r0.yield_time > 0.0 and r1.yield_time > 0.0  # r0 waited for r1, r1 stepped aside
+
+
+def test_a_new_command_starts_with_no_time_kept_back():
+    e = engine()
+    r0, r1 = e.robots["r0"], e.robots["r1"]
+    r1.x, r1.y = 1.6, 5.0  # right ahead of r0
+    e.apply_command(command("r0", 1, "approach", ["d_office"], [(1.0, 5.0), (1.5, 5.0)]))
+    for _ in range(40):  # kept back 2 s, then queued behind r1 (the end of its approach is taken)
+        e.step()
+    assert r0.phase == "done"
+    for _ in range(400):  # 20 s later (more than give_up) it is told to drive off
+        e.step()
+    e.apply_command(command("r0", 2, "approach", ["d_office"], [(r0.x, r0.y), (r0.x, 4.4)]))
+    assert e.executor.avoidance.kept_back("r0", e.time) == 0.0
+    assert not e.executor.avoidance.pushing(r0, e.robots, e.time)

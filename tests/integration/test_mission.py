@@ -60,18 +60,24 @@ def test_default_mission_completes(spawn, tmp_path: Path, mode: list[str]):
     events = [json.loads(line) for line in (run / "events.jsonl").read_text().splitlines()]
     kinds = Counter(e["kind"] for e in events)
     assert kinds["mission_done"] == 1 and kinds["delivered"] == 9
-    # robot-robot contacts are counted, each once, and filed under a place (the goal, 0, is not met yet:
-    # docs/architecture.md, "Collision-free team motion")
+    # robot-robot contacts are counted, each once, and filed under a place; in lockstep (the same
+    # mission every run) there are none
     overlaps = metrics["robot_overlaps"]
     assert overlaps == kinds["robot_overlap"] == sum(metrics["robot_overlaps_by_place"].values())
+    if "lockstep" in mode:
+        assert overlaps == 0, metrics["robot_overlaps_by_place"]
     failed = [e["data"] for e in events if e["kind"] == "action_failed"]
     if "lockstep" in mode:
         assert failed == []
     else:
         # At 20x on a loaded machine a command planned from a pose some wall tenths of a second old
-        # can start metres from the robot: the sim refuses it (its safety check) and the planner
-        # plans anew. Seen once in about 15 runs; anything else failing is a bug.
-        assert len(failed) <= 3 and all("trajectory starts" in f.get("reason", "") for f in failed), [
+        # can start metres from the robot, or (the robot has gone round a corner or through a
+        # doorway since) its way from the robot to the trajectory's start crosses a wall: the sim
+        # refuses it (its safety check) and the planner plans anew. Robots that make way for one
+        # another move while parked, so this happens a few times a run on a loaded machine;
+        # anything else failing is a bug.
+        stale = ("trajectory starts", "crosses a wall")
+        assert len(failed) <= 8 and all(any(s in f.get("reason", "") for s in stale) for f in failed), [
             (f.get("action"), f.get("args"), f.get("reason")) for f in failed
         ]
     # about 100 actions for 9 loads; thousands mean robots repeat an action without progress

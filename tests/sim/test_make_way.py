@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from itertools import pairwise
 
 from protocol.pursuit import Path
 from services.sim.make_way import MakeWay, Request
@@ -104,3 +105,33 @@ def test_a_new_command_starts_with_no_time_kept_back():
     e.apply_command(command("r0", 2, "approach", ["d_office"], [(r0.x, r0.y), (r0.x, 4.4)]))
     assert e.executor.avoidance.kept_back("r0", e.time) == 0.0
     assert not e.executor.avoidance.pushing(r0, e.robots, e.time)
+
+
+def test_a_way_around_keeps_out_of_a_lane_another_robot_holds_and_cuts_no_corner():
+    e = engine()
+    ex = e.executor
+    r0, r1 = e.robots["r0"], e.robots["r1"]
+    r0.x, r0.y = 1.5, 4.6
+    r1.x, r1.y = 3.0, 6.6  # holds d_office (an automatic door at (3, 6)): its lane is 2.4-3.6 x 4.8-7.2
+    r1.phase = "drive"  # crossing it
+    ex.doorways.holders["d_office"] = "r1"
+    ex.doorways._told["r1"] = "d_office"
+    room = e.site.rooms["corridor"]
+    others = [(r1.x, r1.y)]
+    goal = (4.5, 5.6)  # beyond the lane, near the corridor's upper wall: the straight way crosses the lane
+    points = ex.avoidance._search(r0, room.id, room.rect, goal, others)
+    assert points and points[-1] == goal
+    lane = ex.doorways.held_lanes(r0, e.robots)[0]
+    legs = [(r0.x, r0.y), *points]
+    for (ax, ay), (bx, by) in pairwise(legs):
+        for i in range(21):  # every point of every straight leg stays out of the lane and off the walls
+            x, y = ax + (bx - ax) * i / 20, ay + (by - ay) * i / 20
+            assert not (lane[0] <= x <= lane[2] and lane[1] <= y <= lane[3]), (x, y)
+            assert ex.avoidance.free.is_free(x, y), (x, y)
+    ex.doorways.holders.clear()  # nobody holds it: the way may cross the lane, and is shorter
+    free_way = ex.avoidance._search(r0, room.id, room.rect, goal, others)
+    assert way_length((r0.x, r0.y), free_way) < way_length((r0.x, r0.y), points)
+
+
+def way_length(start: tuple[float, float], points: list[tuple[float, float]]) -> float:
+    return sum(math.dist(a, b) for a, b in pairwise([start, *points]))

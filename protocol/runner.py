@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import logging
 import os
+import signal
 import sys
 from collections.abc import Callable
 
@@ -19,6 +21,12 @@ def setup_logging(level: str | None = None) -> None:
     logging.basicConfig(level=chosen, format=LOG_FORMAT, stream=sys.stderr, force=True)
     # zenoh's Rust logs go through its own env var; keep them quiet unless asked.
     os.environ.setdefault("RUST_LOG", "error")
+    if hasattr(signal, "SIGUSR1"):
+        # `kill -USR1 PID` prints every thread's stack: what a service that stopped answering is doing
+        try:
+            faulthandler.register(signal.SIGUSR1, file=sys.__stderr__, all_threads=True)
+        except (AttributeError, OSError, ValueError):  # no stderr with a file descriptor: no stack dumps
+            pass
 
 
 def add_common_arguments(parser: argparse.ArgumentParser, *, site: bool = True, zenoh: bool = True) -> None:

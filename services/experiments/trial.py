@@ -22,6 +22,7 @@ import json
 import logging
 import re
 import shutil
+import signal
 import tempfile
 import threading
 import time
@@ -40,6 +41,7 @@ from .routers import Router, child_env
 log = logging.getLogger("arroch.experiment")
 
 POLL = 0.05  # wall s between two looks at a running trial
+STACK_DUMP_WAIT = 1.0  # wall s the services of a trial that timed out get to print their stacks
 # The planner's wall-clock limits, set so that they never bind in a trial: a plan cut short by the
 # clock would depend on the machine's load, and the same seed must give the same results. (The
 # service's defaults, 5 s a plan and 2 s a program, suit a live mission, not an experiment.)
@@ -256,7 +258,18 @@ class Trial:
         if not self.router.alive():
             raise _Failed("error", "the Zenoh router stopped")
         if time.monotonic() - started > self.config.timeout:
+            self._dump_stacks()
             raise _Failed("timeout", f"no end of mission within {self.config.timeout:g} s wall ({what})")
+
+    def _dump_stacks(self) -> None:
+        """Have every service still running print its threads' stacks into the trial's log (each
+        registers SIGUSR1 for that: protocol.runner.setup_logging), so a hang says where it hangs."""
+        running = [child for child in self.children.values() if child.running()]
+        for child in running:
+            child.signal(signal.SIGUSR1)
+        time.sleep(STACK_DUMP_WAIT)
+        for child in running:
+            child.flush_output()
 
     def _mission(self, folder: Path, watch: Any, started: float) -> tuple[str, str, dict[str, Any] | None]:
         try:

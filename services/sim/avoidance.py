@@ -19,7 +19,7 @@ Two rules for robots driving in the simulator, on top of the right of way
 Where there is no way around, the robot kept back asks the robot in its way to make way
 (:mod:`services.sim.make_way`). Only when nothing helps for ``give_up`` seconds (robots wedged in
 a cluster, each waiting on the next) does a robot push through: a contact, which
-:mod:`services.sim.overlaps` counts.
+:mod:`services.sim.overlaps` counts. A robot making way for another never pushes through.
 
 Both rules read other robots where they are now; robots are stepped one after another within a
 tick, so each sees the others' latest poses and the invariant holds after every robot's step.
@@ -43,6 +43,7 @@ from .right_of_way import Body
 
 Rect = tuple[float, float, float, float]  # x0, y0, x1, y1
 
+RING = (0.7, 1.0, 1.3, 1.6)  # m: how far from where it stands a robot looks for a free point to step to
 NEIGHBOURS = [(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr, dc) != (0, 0)]
 
 
@@ -117,6 +118,11 @@ class Avoidance:
         self._blocked_since.pop(robot, None)
         self._detours.pop(robot, None)
 
+    def not_kept_back(self, robot: str) -> None:
+        """The robot is not kept back (its way, if any, is kept): it does not push through."""
+        self._blocked_since.pop(robot, None)
+        self._pushing.discard(robot)
+
     def stop_driving_around(self, robot: str) -> None:
         """Drop the robot's way around (it waits for another robot to make way instead); it is
         still kept back."""
@@ -190,25 +196,58 @@ class Avoidance:
             room = self.site.room_at(robot.x, robot.y)
             if room is None:
                 return None
-            others = [(o.x, o.y) for o in fleet.values() if o.id != robot.id]
-            keep = 2.0 * self.radius + self.clearance
-            spots = sorted(
-                (round(r, 2), k, (robot.x + r * math.cos(k * math.pi / 8), robot.y + r * math.sin(k * math.pi / 8)))
-                for r in (0.7, 1.0, 1.3, 1.6)
-                for k in range(16)
-            )
-            for _, _, p in spots:
-                if not (outside(*p) and room.contains(*p) and self.free.is_free(*p)):
-                    continue
-                if any(math.dist(p, o) < keep for o in others):
-                    continue
-                points = self._search(robot, room.id, room.rect, p, others)
-                if points:
-                    detour = self._detours[robot.id] = Detour(points)
-                    break
-            if detour is None:
+            points = self._free_point(robot, room, outside, [(o.x, o.y) for o in fleet.values() if o.id != robot.id])
+            if not points:
                 return None
+            detour = self._detours[robot.id] = Detour(points)
         return self._follow(robot, theta, detour, now, dt, fleet, allowed)
+
+    def boxed_in_by(
+        self,
+        robot: Body,
+        fleet: Mapping[str, Body],
+        outside: Callable[[float, float], bool],
+        movable: Callable[[Body], bool],
+    ) -> tuple[Body, list[tuple[float, float]]] | None:
+        """For a robot that finds no free point where ``outside`` holds: the nearest robot (of the
+        ``movable`` ones) without which it would, and its way there (from where it stands); None
+        when no one robot's moving would do."""
+        room = self.site.room_at(robot.x, robot.y)
+        if room is None:
+            return None
+        reach = RING[-1] + 2.0 * self.radius + self.clearance
+        near = sorted(
+            (math.hypot(o.x - robot.x, o.y - robot.y), o.id, o)
+            for o in fleet.values()
+            if o.id != robot.id and movable(o) and math.hypot(o.x - robot.x, o.y - robot.y) <= reach
+        )
+        for _, _, other in near[:3]:
+            others = [(o.x, o.y) for o in fleet.values() if o.id not in (robot.id, other.id)]
+            points = self._free_point(robot, room, outside, others)
+            if points:
+                return other, [(robot.x, robot.y), *points]
+        return None
+
+    def _free_point(
+        self, robot: Body, room, outside: Callable[[float, float], bool], others: list[tuple[float, float]]
+    ) -> list[tuple[float, float]]:
+        """A way to the nearest free point (on rings ``RING`` around the robot, 16 directions) in the
+        robot's room where ``outside`` holds, clear of ``others``' discs; [] when there is none."""
+        keep = 2.0 * self.radius + self.clearance
+        spots = sorted(
+            (round(r, 2), k, (robot.x + r * math.cos(k * math.pi / 8), robot.y + r * math.sin(k * math.pi / 8)))
+            for r in RING
+            for k in range(16)
+        )
+        for _, _, p in spots:
+            if not (outside(*p) and room.contains(*p) and self.free.is_free(*p)):
+                continue
+            if any(math.dist(p, o) < keep for o in others):
+                continue
+            points = self._search(robot, room.id, room.rect, p, others)
+            if points:
+                return points
+        return []
 
     def _follow(
         self,

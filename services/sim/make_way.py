@@ -19,6 +19,12 @@ A robot asked steps off the asker's way ahead (``horizon`` metres of its traject
 free point at least a robot's width from it, and waits there until the asker has gone past (it is
 no longer kept back and is ``passed`` metres away) or stopped driving; then it goes on with what
 it was doing (a driving robot plans its way back onto its trajectory).
+
+A robot asked that is boxed in (in a crowd at a door every free point is behind another robot)
+passes the request on: it asks the robot standing where it could go to make way in turn - off the
+first asker's way and off its own way out - whatever that robot's rank, as long as it is not
+loading or unloading, holding a doorway, or already in the chain (``chain`` robots at most). The
+robots of a chain answer for the first asker: when its request ends, theirs do.
 """
 
 from __future__ import annotations
@@ -44,6 +50,11 @@ class Request:
     way: list[tuple[float, float]]
     since: float
     renewed: float
+    root: str = ""  # passed on: the robot whose way the chain clears ("": the asker)
+
+    @property
+    def first_asker(self) -> str:
+        return self.root or self.asker
 
 
 @dataclass
@@ -57,6 +68,7 @@ class MakeWay:
     linger: float = 2.0  # s a request outlives the asker's last ask (it drives off first)
     passed: float = 1.0  # m beyond touching: the asker is this far away, the request ends
     longest: float = 30.0  # s a request lasts at most (the asker is stuck for another reason)
+    chain: int = 3  # robots a request may be passed on to, one after another
     requests: dict[str, Request] = field(default_factory=dict)  # asked robot -> its request
 
     @property
@@ -97,15 +109,49 @@ class MakeWay:
         self.requests[asked.id] = Request(asker.id, way, now, now)
         return True
 
+    def pass_on(self, robot: Body, other: Body, escape: list[tuple[float, float]], now: float) -> bool:
+        """``robot``, making way but boxed in, asks ``other`` to make way in turn: off the way
+        ``robot`` makes way for and off ``escape`` (its own way out); whether it may."""
+        mine = self.requests.get(robot.id)
+        if mine is None or other.phase not in PHASE_RANK or self.holds_doorway(other.id):
+            return False
+        chain = self._chain(robot.id)  # [robot, ..., first asker]: len - 2 passes so far
+        if other.id in chain or len(chain) - 2 >= self.chain:
+            return False
+        way = [*mine.way, *escape]
+        theirs = self.requests.get(other.id)
+        if theirs is not None and theirs.asker != robot.id and now - theirs.renewed <= self.linger:
+            if theirs.first_asker != mine.first_asker:
+                return False  # making way for another robot first
+            theirs.way = [*theirs.way, *(p for p in escape if p not in theirs.way)]  # for the same one: both ways
+            return True
+        if theirs is not None and theirs.asker == robot.id:
+            theirs.way, theirs.renewed = way, now
+            return True
+        self.requests[other.id] = Request(robot.id, way, now, now, mine.first_asker)
+        return True
+
+    def _chain(self, robot: str) -> list[str]:
+        """``robot`` and the robots it makes way for, back to the first asker."""
+        chain = [robot]
+        request = self.requests.get(robot)
+        while request is not None and request.asker not in chain:
+            chain.append(request.asker)
+            request = self.requests.get(request.asker)
+        return chain
+
     def request_for(self, robot: Body, now: float, fleet: Mapping[str, Body]) -> Request | None:
         """The request ``robot`` is to answer now, if any (ended requests are dropped)."""
         request = self.requests.get(robot.id)
         if request is None:
             return None
         asker = fleet.get(request.asker)
+        first = fleet.get(request.first_asker)
         gone = (
             asker is None
-            or asker.phase != "drive"
+            or first is None
+            or first.phase != "drive"
+            or (request.root != "" and request.asker not in self.requests)  # the one it helped is done
             or now - request.since > self.longest
             or (
                 now - request.renewed > self.linger
@@ -128,3 +174,12 @@ class MakeWay:
 def natural(name: str) -> tuple:
     """``name`` as a key that orders its numbers by value: r2 before r10."""
     return tuple((0, int(part), "") if part.isdigit() else (1, 0, part) for part in re.split(r"(\d+)", name) if part)
+
+
+def along(points: list[tuple[float, float]], step: float) -> list[tuple[float, float]]:
+    """The polyline through ``points`` as points at most ``step`` apart."""
+    out = points[:1]
+    for a, b in zip(points, points[1:], strict=False):
+        count = max(math.ceil(math.dist(a, b) / step), 1)
+        out.extend((a[0] + (b[0] - a[0]) * i / count, a[1] + (b[1] - a[1]) * i / count) for i in range(1, count + 1))
+    return out

@@ -33,7 +33,7 @@ from protocol.site.model import Site
 from .avoidance import Avoidance
 from .doors import Doors
 from .doorways import Doorways, in_lane
-from .make_way import MakeWay
+from .make_way import MakeWay, Request, along
 from .objects import Objects
 from .right_of_way import RightOfWay
 
@@ -120,6 +120,7 @@ class RobotExecutor:
         self.avoidance.keep_out = lambda robot: self.doorways.held_lanes(robot, self.fleet)
         self.make_way = MakeWay(config.radius, self.doorways.holds)
         self._made_way: set[str] = set()  # robots answering a request to make way
+        self._passed_on: dict[str, float] = {}  # robot -> when it last looked for a robot boxing it in
 
     # ------------------------------------------------------------------ commands
 
@@ -342,6 +343,7 @@ class RobotExecutor:
             self._made_way.add(robot.id)
             self.avoidance.moving_on(robot.id)  # its own way around, if any, is not where it goes now
         robot.yield_time += dt
+        self.avoidance.not_kept_back(robot.id)  # it waits for nobody: it never pushes through
         step = None
         if not self.make_way.off_the_way(request, robot.x, robot.y):
             step = self.avoidance.out_of_the_way(
@@ -353,11 +355,30 @@ class RobotExecutor:
                 lambda x, y: self.make_way.off_the_way(request, x, y),
                 self._allows(robot),
             )
+        if step is None and not self.avoidance.driving_around(robot.id):
+            self._pass_on(robot, request, now)
         if step is None or self._into_shut_doorway(robot, step):
             robot.v = robot.omega = 0.0
             return True
         robot.x, robot.y, robot.theta, robot.v, robot.omega = step.x, step.y, step.theta, step.v, step.omega
         return True
+
+    def _pass_on(self, robot: Robot, request: Request, now: float) -> None:
+        """Boxed in while making way: ask the robot standing where it could go to make way in turn
+        (at most once per ``avoidance.retry``: it is a search of the room)."""
+        if not self.make_way.off_the_way(request, robot.x, robot.y) and (
+            now - self._passed_on.get(robot.id, -math.inf) >= self.avoidance.retry
+        ):
+            self._passed_on[robot.id] = now
+            found = self.avoidance.boxed_in_by(
+                robot,
+                self.fleet,
+                lambda x, y: self.make_way.off_the_way(request, x, y),
+                lambda other: other.phase != "dwell" and other.id != request.first_asker,
+            )
+            if found is not None:
+                other, escape = found
+                self.make_way.pass_on(robot, other, along(escape, self.make_way.step), now)
 
     def _allows(self, robot: Robot):
         """What a step off the trajectory must not do: enter a shut doorway or a lane another robot holds."""

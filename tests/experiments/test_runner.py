@@ -165,6 +165,7 @@ def test_a_trial_is_bounded_recorded_and_leaves_nothing(tmp_path: Path, human: P
         assert code == 1 and row["reason"].startswith("no end of mission within 15 s wall")
         log = (out / "logs" / "arroch-n2-o1-p0.5-w90-c0-t00.log").read_text()
         assert "status: timeout" in log
+        assert "most recent call first" in log  # the services' stacks, printed as the trial timed out
     else:
         assert code == 0 and float(row["team_completion_time"]) >= float(row["human_completion_time"]) > 0
     [session] = json.loads((out / "runs.json").read_text())

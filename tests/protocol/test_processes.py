@@ -249,3 +249,11 @@ def test_a_burst_of_signals_still_stops_the_process(spawn, module_router, namesp
         assert code in (0, -signal.SIGTERM), proc.output
         assert "stopped" in proc.output
         assert not any(word in proc.output for word in ("Traceback", "Error", "Exception")), proc.output
+
+
+def test_sigusr1_prints_every_threads_stack_and_the_service_goes_on(spawn, module_router, namespace):
+    proc = start_serve(spawn, "--connect", module_router, "--namespace", namespace)
+    os.kill(proc.popen.pid, signal.SIGUSR1)  # what a sweep does to the services of a trial that timed out
+    proc.wait_for("most recent call first", timeout=10)
+    proc.wait_for('File "', timeout=10)  # the frames follow the thread's line
+    check_summary(run_send("--connect", module_router, "--namespace", namespace, "--count", "5", "--rate", "0"), 5)

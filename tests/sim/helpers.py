@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 from protocol.messages import RobotCommand
 from protocol.site import loads_site
 from protocol.site.model import Site
@@ -127,3 +129,13 @@ def run_mission(engine: Engine, *, max_time: float = 7200.0) -> list[SimEvent]:
         engine.step()
     log.extend(engine.take_events())
     return log
+
+
+@dataclass
+class Bot:
+    """A robot as the traffic rules see it (services.sim.right_of_way.Body): its id, where it is, its phase."""
+
+    id: str
+    x: float
+    y: float
+    phase: str = "drive"

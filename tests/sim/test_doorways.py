@@ -3,18 +3,8 @@ kept until the holder is through and out of the lane, and nobody else steps into
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 from services.sim.doorways import Doorways, in_lane
-from tests.sim.helpers import small_site
-
-
-@dataclass
-class Bot:
-    id: str
-    x: float
-    y: float
-    phase: str = "drive"
+from tests.sim.helpers import Bot, small_site
 
 
 def setup():

@@ -5,21 +5,14 @@ robot loading or unloading is never asked, and the request ends once the asker h
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from itertools import pairwise
 
 from protocol.pursuit import Path
+from protocol.site import loads_site
+from services.sim.engine import Engine
 from services.sim.make_way import MakeWay, Request
-from tests.sim.helpers import command
+from tests.sim.helpers import SMALL_SITE, Bot, command
 from tests.sim.test_overlaps import engine, overlaps
-
-
-@dataclass
-class Bot:
-    id: str
-    x: float
-    y: float
-    phase: str = "drive"
 
 
 def rules(holders: tuple[str, ...] = ()) -> MakeWay:
@@ -135,3 +128,41 @@ def test_a_way_around_keeps_out_of_a_lane_another_robot_holds_and_cuts_no_corner
 
 def way_length(start: tuple[float, float], points: list[tuple[float, float]]) -> float:
     return sum(math.dist(a, b) for a, b in pairwise([start, *points]))
+
+
+def crowd_engine(parked: dict[str, tuple[float, float]]) -> Engine:
+    """The small site with more robots, parked where given (they have no command)."""
+    extra = "".join(f'\n[[robots]]\nid = "{rid}"\nstart = [{x}, {y}, 0.0]\n' for rid, (x, y) in parked.items())
+    e = Engine(loads_site(SMALL_SITE + extra, "crowd.toml"), method="no-feedback", seed=1)
+    e.start()
+    e.take_events()
+    return e
+
+
+def drive_through_a_boxed_in_robot(chain: int) -> tuple[Engine, float, set[str]]:
+    """r0 drives east along the corridor's middle; r2 stands on its way, boxed in by r3 (south),
+    r4 (north) and r5 (east, on the way too); r1 is parked far off. Returns the engine after the
+    drive, the closest r0 came to any robot, and the robots that pushed through."""
+    e = crowd_engine({"r2": (4.0, 5.0), "r3": (4.0, 4.4), "r4": (4.0, 5.6), "r5": (4.6, 5.0)})
+    e.executor.make_way.chain = chain
+    r0 = e.robots["r0"]
+    e.apply_command(command("r0", 1, "approach", ["d_storage"], [(1.0, 5.0), (8.0, 5.0)]))
+    least, pushed = math.inf, set()
+    while e.time < 90.0 and r0.phase == "drive":
+        e.step()
+        least = min(least, *(math.dist((r0.x, r0.y), (o.x, o.y)) for o in e.robots.values() if o is not r0))
+        pushed |= e.executor.avoidance._pushing  # (asking with pushing() would start parked robots' clocks)
+    return e, least, pushed
+
+
+def test_a_robot_asked_that_is_boxed_in_passes_the_request_on():
+    e, least, pushed = drive_through_a_boxed_in_robot(chain=3)
+    r0 = e.robots["r0"]
+    assert r0.phase == "done" and math.dist((r0.x, r0.y), (8.0, 5.0)) < 0.1  # it got there
+    assert least >= 0.5 and overlaps(e) == [] and e.summary()["robot_overlaps"] == 0 and pushed == set()
+    moved = {rid for rid, start in (("r2", (4.0, 5.0)), ("r5", (4.6, 5.0))) if e.robots[rid].x != start[0]}
+    assert moved == {"r2", "r5"}  # r2 made way once r5 had made way for it
+    # Without passing it on, r2 has nowhere to go and r0 ends up pushing through after give_up; r2,
+    # making way all along, never pushes through (it waits for nobody).
+    e, least, pushed = drive_through_a_boxed_in_robot(chain=0)
+    assert least < 0.5 and e.summary()["robot_overlaps"] >= 1 and pushed == {"r0"}

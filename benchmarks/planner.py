@@ -14,8 +14,8 @@ For each team size (robots x 3 objects, on sites from ``protocol.site.generate_s
 
 - dispatching each of those plans (every robot's front action turned into a trajectory, as after a
   planner restart: the worst case) with collision-free team motion (``services.planner.teammotion``,
-  the service's default) and without (``--no-collision-free``), in the same run: wall time of each,
-  and the replan time plus the collision-free dispatch;
+  the planner's opt-in ``--collision-free``) and without, in the same run: wall time of each, and
+  the replan time plus the collision-free dispatch;
 
 Prints one JSON document: per team size, medians and p95 of the replan times, the first plans'
 figures, and whether the targets hold (FLOORS: 6 robots median replan <= 0.1 s and p95 <= 0.25 s;

@@ -162,7 +162,8 @@ def test_a_robot_asked_that_is_boxed_in_passes_the_request_on():
     assert least >= 0.5 and overlaps(e) == [] and e.summary()["robot_overlaps"] == 0 and pushed == set()
     moved = {rid for rid, start in (("r2", (4.0, 5.0)), ("r5", (4.6, 5.0))) if e.robots[rid].x != start[0]}
     assert moved == {"r2", "r5"}  # r2 made way once r5 had made way for it
-    # Without passing it on, r2 has nowhere to go and r0 ends up pushing through after give_up; r2,
-    # making way all along, never pushes through (it waits for nobody).
+    # Without passing it on, r2 has nowhere to go and r0 ends up pushing through after give_up, the
+    # only robot that does. (That a robot making way never pushes through is not shown here: r0's
+    # clock starts first, so r0 pushes first either way.)
     e, least, pushed = drive_through_a_boxed_in_robot(chain=0)
     assert least < 0.5 and e.summary()["robot_overlaps"] >= 1 and pushed == {"r0"}

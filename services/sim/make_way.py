@@ -33,6 +33,7 @@ import math
 import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from itertools import pairwise
 
 from protocol.pursuit import Path
 
@@ -179,7 +180,7 @@ def natural(name: str) -> tuple:
 def along(points: list[tuple[float, float]], step: float) -> list[tuple[float, float]]:
     """The polyline through ``points`` as points at most ``step`` apart."""
     out = points[:1]
-    for a, b in zip(points, points[1:], strict=False):
+    for a, b in pairwise(points):
         count = max(math.ceil(math.dist(a, b) / step), 1)
         out.extend((a[0] + (b[0] - a[0]) * i / count, a[1] + (b[1] - a[1]) * i / count) for i in range(1, count + 1))
     return out

@@ -9,8 +9,9 @@ Doors on the way: every door whose gap the path crosses is a *crossing* at some 
 the next crossing's door is not passable, the robot may go no further than ``radius +
 stop_margin`` short of the closed leaf's line; held there it is ``waiting_at_door``. A hard guard
 backs this up: a step that would bring the robot's disc within ``guard_margin`` of a shut door's
-gap, closer than it was, is refused. Automatic doors are asked to open while the robot's path
-reaches them within ``auto_open_distance``.
+gap, closer than it was, is refused (the robot still turns where it stands); a drive refused so for
+``shut_door_patience`` in a row, beside a door it does not go through, fails. Automatic doors are
+asked to open while the robot's path reaches them within ``auto_open_distance``.
 
 A command that cannot be executed fails at once with ``action_failed`` and a reason: an unknown
 door, passage or object, an object that is not this robot's or not where it can be reached, a full
@@ -58,6 +59,7 @@ class RobotConfig:
     start_tolerance: float = START_TOLERANCE  # m; a trajectory may start at most this far from the robot
     reach: float = REACH  # m from the robot's centre within which it can pick up an object
     robot_margin: float = 0.05  # m a driving robot keeps between its disc and another robot's
+    shut_door_patience: float = 30.0  # s a drive may be refused by the shut-doorway guard before it fails
 
 
 @dataclass(frozen=True)
@@ -100,6 +102,7 @@ class Robot:
     crossings: list[tuple[float, str]] = field(default_factory=list)  # (arc length, door id), in order
     dwell_left: float = 0.0
     dwell_total: float = 0.0
+    refused_time: float = 0.0  # s the drive's steps have been refused by the shut-doorway guard in a row
     status_changed: bool = True
 
 
@@ -132,6 +135,7 @@ class RobotExecutor:
         self.avoidance.moving_on(robot.id)  # how long it was kept back on its last drive counts no more
         robot.follower = None
         robot.crossings = []
+        robot.refused_time = 0.0
         robot.v = robot.omega = 0.0
         robot.detail = ""
         robot.progress = 0.0
@@ -265,12 +269,15 @@ class RobotExecutor:
         elif step.v > 0.0:
             self.avoidance.moving_on(robot.id)
         moved = (step.x, step.y) != (robot.x, robot.y)
-        if moved and (
-            self._into_shut_doorway(robot, step) or not self.avoidance.clear(robot, step.x, step.y, self.fleet, now)
-        ):
+        shut = moved and self._into_shut_doorway(robot, step)
+        if shut or (moved and not self.avoidance.clear(robot, step.x, step.y, self.fleet, now)):
             # whatever moved it (driving around, a hold, a corner): its disc never enters a shut doorway
-            # (passing beside one, a corridor along a row of doors, is allowed) nor touches a robot
-            step = Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
+            # (passing beside one, a corridor along a row of doors, is allowed) nor touches a robot. It
+            # still turns, where it stands: a robot facing the gap it must not come nearer would
+            # otherwise never face its way out again.
+            step = Step(robot.x, robot.y, step.theta, 0.0, step.omega)
+        if self._held_by_shut_door(robot, shut, dt):
+            return self._fail(robot, f"held beside a shut door's gap for {self.config.shut_door_patience:g} s")
         robot.x, robot.y, robot.theta, robot.v, robot.omega = step.x, step.y, step.theta, step.v, step.omega
         robot.progress = min(follower.s / follower.path.length, 1.0) if follower.path.length > 0 else 1.0
         if step.held and not blocking:
@@ -289,6 +296,13 @@ class RobotExecutor:
         if step.arrived:
             return self._arrived(robot, now + dt)
         return []
+
+    def _held_by_shut_door(self, robot: Robot, refused: bool, dt: float) -> bool:
+        """Whether the robot's drive has been refused by the shut-doorway guard for too long: a door
+        it does not go through (it would report ``waiting_at_door`` for one it does), so nobody opens
+        it; the action fails and the planner plans again from where the robot stands."""
+        robot.refused_time = robot.refused_time + dt if refused else 0.0
+        return robot.refused_time >= self.config.shut_door_patience
 
     def _goal_taken(self, robot: Robot, follower: PurePursuit, now: float) -> bool:
         """Whether a robot kept back near the end of an approach, a gothrough (through the opening)

@@ -7,9 +7,10 @@ from __future__ import annotations
 import math
 from itertools import pairwise
 
-from protocol.pursuit import Path
+from protocol.pursuit import Path, Step
 from protocol.site import loads_site
 from services.sim.engine import Engine
+from services.sim.human import HumanConfig
 from services.sim.make_way import MakeWay, Request
 from tests.sim.helpers import SMALL_SITE, Bot, command
 from tests.sim.test_overlaps import engine, overlaps
@@ -130,10 +131,10 @@ def way_length(start: tuple[float, float], points: list[tuple[float, float]]) ->
     return sum(math.dist(a, b) for a, b in pairwise([start, *points]))
 
 
-def crowd_engine(parked: dict[str, tuple[float, float]]) -> Engine:
+def crowd_engine(parked: dict[str, tuple[float, float]], human: HumanConfig | None = None) -> Engine:
     """The small site with more robots, parked where given (they have no command)."""
     extra = "".join(f'\n[[robots]]\nid = "{rid}"\nstart = [{x}, {y}, 0.0]\n' for rid, (x, y) in parked.items())
-    e = Engine(loads_site(SMALL_SITE + extra, "crowd.toml"), method="no-feedback", seed=1)
+    e = Engine(loads_site(SMALL_SITE + extra, "crowd.toml"), method="no-feedback", seed=1, human=human)
     e.start()
     e.take_events()
     return e
@@ -167,3 +168,41 @@ def test_a_robot_asked_that_is_boxed_in_passes_the_request_on():
     # clock starts first, so r0 pushes first either way.)
     e, least, pushed = drive_through_a_boxed_in_robot(chain=0)
     assert least < 0.5 and e.summary()["robot_overlaps"] >= 1 and pushed == {"r0"}
+
+
+def test_a_robot_making_way_never_pushes_through(monkeypatch):
+    # r0 waits at the shut storage door (driving, held at its stop line) and has asked r2, beside it,
+    # to make way. r2's way out (from its way-around search, stood in for here) leads through r3, who
+    # stands 2 cm beyond touching: every step of it is refused. r2 waits for r0, not for r3: however
+    # long it stands there it must not give up and push through r3 (a robot kept back 12 s would).
+    e = crowd_engine({"r2": (6.0, 5.0), "r3": (6.52, 5.0)}, HumanConfig(door_probability=0.0, focus_count=0))
+    e.executor.make_way.chain = 0  # no passing on: r3 stays where it is
+    r0, r2, r3 = e.robots["r0"], e.robots["r2"], e.robots["r3"]
+    e.apply_command(command("r0", 1, "gothrough", ["d_storage"], [(1.0, 5.0), (6.0, 5.0), (6.0, 3.0)]))
+    while r0.state != "waiting_at_door":
+        assert e.time < 60.0
+        e.step()
+    # (r0 was kept back by r2 on its way; parked robots got out of its way or it drove around them)
+    r2.x, r2.y, r3.x, r3.y = 6.0, 5.0, 6.52, 5.0
+    avoidance = e.executor.avoidance
+    avoidance.not_kept_back("r2")
+    e.take_events()
+    way = [(6.0, 4.4 + 0.1 * i) for i in range(13)]  # r0's way back up the corridor, through r2
+    e.executor.make_way.requests["r2"] = Request("r0", way, e.time, e.time)
+    real = avoidance.out_of_the_way
+
+    def way_through_r3(robot, theta, now, dt, fleet, outside, allowed):
+        if robot.id != "r2":
+            return real(robot, theta, now, dt, fleet, outside, allowed)
+        x, y = robot.x + 0.02, robot.y
+        return Step(x, y, 0.0, 0.4, 0.0) if avoidance.clear(robot, x, y, fleet, now) else None
+
+    monkeypatch.setattr(avoidance, "out_of_the_way", way_through_r3)
+    asked_at, closest = e.time, math.inf
+    while e.time < asked_at + 25.0:
+        e.step()
+        assert e.executor.make_way.requests.get("r2") is not None  # still asked all along
+        closest = min(closest, math.dist((r2.x, r2.y), (r3.x, r3.y)))
+    assert r0.state == "waiting_at_door"
+    assert closest >= 0.505 - 1e-9 and overlaps(e) == []
+    assert "r2" not in avoidance._pushing and avoidance.kept_back("r2", e.time) < 1.0  # its clock never runs

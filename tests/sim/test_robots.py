@@ -321,3 +321,42 @@ def test_a_leaf_never_closes_onto_a_robot_in_its_sweep(engine):
     leaf = engine.site.door_leaves["d_storage"]
     r1 = engine.robots["r1"]
     assert math.dist((r1.x, r1.y), leaf.hinge) > leaf.length + RADIUS
+
+
+def test_a_robot_facing_a_shut_doors_gap_turns_where_it_stands_and_drives_off(engine):
+    # Beside the shut door's gap, facing it; its way leads off along the corridor. Every step
+    # forward would first bring its disc nearer the gap, which the guard refuses: it must turn first.
+    r0 = engine.robots["r0"]
+    r0.x, r0.y, r0.theta = 5.8, 4.25, -0.68
+    start = gap_distance(engine, "d_storage", "r0")
+    engine.apply_command(command("r0", 1, "approach", ["d_storage"], [(5.8, 4.25), (7.35, 4.6)]))
+    closest = []
+    events = run_until(
+        engine,
+        lambda ev: kinds(ev, "action_done") or kinds(ev, "action_failed"),
+        limit=30.0,
+        on_step=lambda: closest.append(gap_distance(engine, "d_storage", "r0")),
+    )
+    assert kinds(events, "action_done") and not kinds(events, "action_failed")
+    assert math.dist((r0.x, r0.y), (7.35, 4.6)) < 0.3
+    assert min(closest) >= start - 1e-9  # never nearer the shut gap than it started
+
+
+def test_a_drive_the_shut_door_guard_holds_for_30_s_fails_so_the_planner_plans_again(engine):
+    # A trajectory that ends in the doorway of a shut door without crossing it: no waiting_at_door
+    # (the door is not on its way), so nobody would open it; the guard stops the robot short.
+    r0 = engine.robots["r0"]
+    r0.x, r0.y, r0.theta = 6.0, 4.8, -math.pi / 2
+    engine.apply_command(command("r0", 1, "approach", ["d_storage"], [(6.0, 4.8), (6.0, 4.02)]))
+    held_from = []
+
+    def note_held():
+        if not held_from and r0.v == 0.0 and gap_distance(engine, "d_storage", "r0") < RADIUS + 0.05:
+            held_from.append(engine.time)
+
+    events = run_until(engine, lambda ev: kinds(ev, "action_failed"), limit=60.0, on_step=note_held)
+    failed = kinds(events, "action_failed")[0]
+    assert failed.robot == "r0" and "shut door" in failed.data["reason"]
+    assert not kinds(events, "waiting_at_door") and not kinds(events, "action_done")
+    assert failed.time - held_from[0] == pytest.approx(30.0, abs=0.5)
+    assert gap_distance(engine, "d_storage", "r0") >= RADIUS - 1e-9  # its disc never entered the gap

@@ -2,9 +2,9 @@
 pose: real headless Chromium, its fake camera playing a 640x480 view of the hall's lone east-wall tag
 from 4.5 m (17 px; AR client synthetic frames, truth known), and a scripted ``devicemotion`` source.
 
-Without motion data the frames go without gravity and the pose is the tag's mirror solution, over a
-metre off; once the page hears ``devicemotion`` (the reaction to gravity a still tablet measures, in
-device axes), every frame carries gravity in the camera frame and the pose is right.
+Without motion data the frames go without gravity and the pose is mostly the tag's mirror solution,
+over a metre off; once the page hears ``devicemotion`` (the reaction to gravity a still tablet
+measures, in device axes), every frame carries gravity in the camera frame and the pose is right.
 """
 
 from __future__ import annotations
@@ -49,7 +49,9 @@ def test_gravity_from_devicemotion_rides_with_the_frames_and_fixes_a_single_tag_
     )
     assert blind["gravity"] is None and blind["overlay"]["gravity"] is None  # no motion data yet: none sent
     assert blind["overlay"]["tags"] == [SINGLE_TAG]
-    assert np.linalg.norm(np.array(blind["overlay"]["position"]) - truth.position) > 1.0  # the mirror solution
+    # Which of the tag's two planar solutions the blind pose is depends on the first frames' noise after
+    # the browser's encoding: mostly the mirror one, over a metre off, but not always (it was right in
+    # one run of many), so it is not asserted here; tests/ar/test_gravity.py shows it on the frames.
 
     # A still tablet's accelerometer: the reaction to gravity, in device axes (x right, y up the
     # screen, z out of the screen); the rear camera's axes are (x, -y, -z) of those.

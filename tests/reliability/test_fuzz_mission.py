@@ -220,6 +220,7 @@ class Watch:
         self.sets: list[ConstraintSet] = []
         self.site_time = 0.0
         self.mission_done_at: float | None = None
+        self.done_by = ""  # what said the mission was over (for a failure's message)
         self._lock = threading.Lock()
         session, remote = client.session, zenoh.Locality.REMOTE
         client._declared += [
@@ -238,12 +239,14 @@ class Watch:
                 # `up` leaves first once the mission is done, before stopping the services: from here
                 # on tokens go away by design (and this may arrive before the mission_done event).
                 self.mission_done_at = time.monotonic()
+                self.done_by = f"{key} left at site time {self.site_time:.1f} s"
             else:
                 self.lost.append(key)
 
     def _event(self, sample: zenoh.Sample) -> None:
         if decode(sample.payload.to_bytes(), Event).kind == "mission_done" and self.mission_done_at is None:
             self.mission_done_at = time.monotonic()
+            self.done_by = f"mission_done event at site time {self.site_time:.1f} s"
 
     def _clock(self, sample: zenoh.Sample) -> None:
         self.site_time = max(self.site_time, decode(sample.payload.to_bytes(), Clock).time)
@@ -340,7 +343,9 @@ def test_a_mission_survives_100k_bad_payloads_and_counts_every_one(spawn, tmp_pa
         started, started_at_site_time = time.monotonic(), watch.site_time
         replies = send(client, plan, watch)
         sent_for = time.monotonic() - started
-        assert watch.mission_done_at is None, f"the mission ended before the fuzz did ({sent_for:.1f} s of sending)"
+        assert watch.mission_done_at is None, (
+            f"the mission ended before the fuzz did ({sent_for:.1f} s of sending; {watch.done_by})"
+        )
         sent_at_site_time = watch.site_time
 
         # Every query gets its refusal: the restrictor names what is wrong rather than leave it waiting.

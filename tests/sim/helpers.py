@@ -8,6 +8,7 @@ from protocol.messages import RobotCommand
 from protocol.site import loads_site
 from protocol.site.model import Site
 from services.sim.engine import Engine, SimEvent
+from services.sim.human import HumanConfig
 from tests.sim.standin import ScriptedPlanner
 
 # A corridor with a storage room behind a human-operated door (the human works inside) and an
@@ -72,6 +73,10 @@ robot = "r1"
 room = "storage"
 position = [7.0, 1.0]
 """
+
+
+# A human who never opens a door and never focuses: the tests open doors themselves.
+PASSIVE = HumanConfig(door_probability=0.0, focus_count=0)
 
 
 def small_site() -> Site:

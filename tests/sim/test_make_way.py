@@ -12,7 +12,7 @@ from protocol.site import loads_site
 from services.sim.engine import Engine
 from services.sim.human import HumanConfig
 from services.sim.make_way import MakeWay, Request
-from tests.sim.helpers import SMALL_SITE, Bot, command
+from tests.sim.helpers import PASSIVE, SMALL_SITE, Bot, command
 from tests.sim.test_overlaps import engine, overlaps
 
 
@@ -175,7 +175,7 @@ def test_a_robot_making_way_never_pushes_through(monkeypatch):
     # to make way. r2's way out (from its way-around search, stood in for here) leads through r3, who
     # stands 2 cm beyond touching: every step of it is refused. r2 waits for r0, not for r3: however
     # long it stands there it must not give up and push through r3 (a robot kept back 12 s would).
-    e = crowd_engine({"r2": (6.0, 5.0), "r3": (6.52, 5.0)}, HumanConfig(door_probability=0.0, focus_count=0))
+    e = crowd_engine({"r2": (6.0, 5.0), "r3": (6.52, 5.0)}, PASSIVE)
     e.executor.make_way.chain = 0  # no passing on: r3 stays where it is
     r0, r2, r3 = e.robots["r0"], e.robots["r2"], e.robots["r3"]
     e.apply_command(command("r0", 1, "gothrough", ["d_storage"], [(1.0, 5.0), (6.0, 5.0), (6.0, 3.0)]))

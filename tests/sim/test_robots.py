@@ -8,11 +8,8 @@ import pytest
 
 from protocol.plane import segment_distance
 from services.sim.engine import Engine
-from services.sim.human import HumanConfig
-from tests.sim.helpers import command, small_site
+from tests.sim.helpers import PASSIVE, command, small_site
 
-# A human who never opens a door and never focuses: the tests open doors themselves.
-PASSIVE = HumanConfig(door_probability=0.0, focus_count=0)
 RADIUS = 0.25
 
 

@@ -243,7 +243,7 @@ class Pipeline:
         loc = self.localize(gray, intrinsics, timestamp, gravity)
 
         t_proj = time.perf_counter()
-        world = self.world.snapshot(timestamp if now is None else now)
+        world = self.world.snapshot(timestamp if now is None else now, at=timestamp)
         self.last_world = world
         prims = []
         drawn = self._drawn_pose(loc, timestamp, gravity)

@@ -1,4 +1,8 @@
-"""The AR client's picture of the world: the latest robot poses, statuses, intents and door states.
+"""The AR client's picture of the world: robot poses, statuses, intents and door states.
+
+Poses keep a short history per robot, so a camera frame is drawn with the poses of its capture
+time (the newest stamped at or before it), not with whatever came in while it was processed: the
+robots drawn then match the image, and a recorded run replayed into a fresh client draws the same.
 
 A :class:`WorldView` is fed from Zenoh messages by the service (or from a ``STATE.json`` file by
 ``arroch ar render``) and read by the pipeline through :meth:`WorldView.snapshot`, an immutable copy
@@ -17,8 +21,10 @@ taken under a lock, so a drawing thread never sees a half-applied update.
 
 from __future__ import annotations
 
+import bisect
 import math
 import threading
+from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -26,6 +32,8 @@ from typing import Any
 import numpy as np
 
 from protocol.messages import ROBOT_STATES, DoorState, Intent, RobotPose, RobotStatus
+
+POSE_HISTORY = 100  # poses kept per robot (chosen: 5 s at the sim's default 20 Hz, past any frame's latency)
 
 
 @dataclass(frozen=True)
@@ -54,7 +62,7 @@ class WorldView:
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
-        self._poses: dict[str, RobotPose] = {}
+        self._poses: dict[str, deque[RobotPose]] = {}  # rid -> poses, oldest first, stamps never decreasing
         self._status: dict[str, str] = {}
         self._intents: dict[str, np.ndarray] = {}
         self._doors: dict[str, DoorState] = {}
@@ -63,9 +71,9 @@ class WorldView:
 
     def on_pose(self, msg: RobotPose, key: str = "") -> None:
         with self._lock:
-            old = self._poses.get(msg.robot)
-            if old is None or msg.stamp >= old.stamp:  # an older sample overtaken on the wire is ignored
-                self._poses[msg.robot] = msg
+            kept = self._poses.setdefault(msg.robot, deque(maxlen=POSE_HISTORY))
+            if not kept or msg.stamp >= kept[-1].stamp:  # an older sample overtaken on the wire is ignored
+                kept.append(msg)
 
     def on_status(self, msg: RobotStatus, key: str = "") -> None:
         with self._lock:
@@ -86,16 +94,20 @@ class WorldView:
         """Subscribe ``service`` (a protocol Service) to everything this view shows: poses (latest
         only), statuses, intents and door states of its namespace."""
         keys = service.keys
-        service.subscribe(keys.robot_pose("*"), RobotPose, self.on_pose, latest=True)
+        # inline, not latest: every pose goes into the history (a frame is drawn at its own time)
+        service.subscribe(keys.robot_pose("*"), RobotPose, self.on_pose, inline=True)
         service.subscribe(keys.robot_status("*"), RobotStatus, self.on_status)
         service.subscribe(keys.intent("*"), Intent, self.on_intent)
         service.subscribe(keys.door_state("*"), DoorState, self.on_door)
 
-    def snapshot(self, now: float) -> WorldSnapshot:
+    def snapshot(self, now: float, at: float | None = None) -> WorldSnapshot:
+        """The world to draw at ``now``, with each robot's newest pose stamped at or before ``at``
+        (a frame's capture time; its oldest kept pose when all are later; None: the newest)."""
         with self._lock:
-            robots = {
-                rid: RobotState(p.x, p.y, p.theta, self._status.get(rid, ""), p.stamp) for rid, p in self._poses.items()
-            }
+            robots = {}
+            for rid, kept in self._poses.items():
+                p = kept[-1] if at is None else kept[max(bisect.bisect_right(kept, at, key=_stamp) - 1, 0)]
+                robots[rid] = RobotState(p.x, p.y, p.theta, self._status.get(rid, ""), p.stamp)
             return WorldSnapshot(now=now, robots=robots, intents=dict(self._intents), doors=dict(self._doors))
 
     def open_doors(self) -> set[str]:
@@ -147,3 +159,7 @@ def _number(value: Any, name: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise ValueError(f"state: {name} must hold finite numbers")
     return float(value)
+
+
+def _stamp(pose: RobotPose) -> float:
+    return pose.stamp

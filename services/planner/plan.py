@@ -98,6 +98,7 @@ class TeamResult:
     optimal: bool = False
     converged: bool = False  # IIDP stopped because no robot could improve the team
     solves: int = 0  # clingo programs solved
+    out_of_time: bool = False  # "failed" only because a solve found no model within its limits
 
     # ------------------------------------------------------------------ figures
 

@@ -29,6 +29,8 @@ from .world import World
 log = logging.getLogger("arroch.planner")
 
 METHODS = ("iidp", "joint")
+OUT_OF_TIME_RETRIES = 2  # plans made again when a solve found no model in time (chosen: 4x, then 16x)
+LIMIT_GROWTH = 4.0  # each retry's time limits over the last one's
 
 
 @dataclass
@@ -75,9 +77,35 @@ class TaskPlanner:
         time_limit: float | None = None,
         warm: TeamResult | None = None,
     ) -> TeamResult:
-        """Plan for every robot of ``world``. ``warm``: the plan being executed, to start IIDP from."""
+        """Plan for every robot of ``world``. ``warm``: the plan being executed, to start IIDP from.
+
+        A plan that fails only because a solve found no model within its limits (a loaded machine,
+        not an impossible problem) is made again with the limits ``LIMIT_GROWTH`` times longer, up to
+        ``OUT_OF_TIME_RETRIES`` times: a slow plan beats none, and nothing else would ask again."""
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r} (use {' or '.join(METHODS)})")
+        t0 = time.perf_counter()
+        scale = 1.0
+        result = self._plan(world, constraints, method, time_limit, warm, scale)
+        for _ in range(OUT_OF_TIME_RETRIES):
+            if not result.out_of_time:
+                break
+            scale *= LIMIT_GROWTH
+            log.warning("%s; planning again with %g times the time limits", result.diagnostic, scale)
+            result = self._plan(world, constraints, method, time_limit, warm, scale)
+        result.solve_time = time.perf_counter() - t0
+        return result
+
+    def _plan(
+        self,
+        world: World,
+        constraints: ConstraintProgram | None,
+        method: str,
+        time_limit: float | None,
+        warm: TeamResult | None,
+        scale: float,
+    ) -> TeamResult:
+        """One attempt at :meth:`plan`, with every time limit multiplied by ``scale``."""
         t0 = time.perf_counter()
         base = int(math.floor(world.now))
         result = TeamResult(method=method, base=base, hold=self.hold, plans={})
@@ -92,8 +120,9 @@ class TaskPlanner:
         if constraints is not None:
             common += time_point_facts(self.site, base, constraints.numbers())
             common += "".join(f"watched({room}).\n" for room in sorted(constraints.watched_rooms(self.site.rooms)))
-        single = SingleRobotSolver(common, self.hold, constraints, self.settings.solve_limit, existing, base=base)
-        limit = self.settings.time_limit if time_limit is None else time_limit
+        solve_limit = self.settings.solve_limit * scale
+        single = SingleRobotSolver(common, self.hold, constraints, solve_limit, existing, base=base)
+        limit = (self.settings.time_limit if time_limit is None else time_limit) * scale
         warm_plans = self._warm(warm, base)
         try:
             plans, stats = iidp(
@@ -119,7 +148,7 @@ class TaskPlanner:
                 existing=existing,
                 horizon=result.makespan,
                 hints=plans,
-                time_limit=self.settings.joint_time_limit,
+                time_limit=self.settings.joint_time_limit * scale,
             )
             if jplans is not None:
                 result.plans = jplans
@@ -193,5 +222,6 @@ class TaskPlanner:
         else:
             result.status = "failed"
             result.diagnostic = f"no plan for robot {exc.robot} within the time limit ({out.status})"
+            result.out_of_time = True
         result.solve_time = time.perf_counter() - t0
         return result

@@ -37,7 +37,7 @@ import numpy as np
 from protocol.plane import wrap
 from protocol.pursuit import ControllerConfig, Path, Step, integrate
 from protocol.site.grid import OccupancyGrid
-from protocol.site.model import Site
+from protocol.site.model import Room, Site
 
 from .right_of_way import Body
 
@@ -73,6 +73,9 @@ class Avoidance:
     # areas a robot may not enter (other robots' doorway lanes: :mod:`.doorways`); a way never
     # enters one, unless it starts in it
     keep_out: Callable[[Body], list[Rect]] = lambda robot: []
+    # whether a door or passage may be driven through now (a shut door may not); a way back onto a
+    # trajectory that goes on in the next room is planned into it only through openings that may
+    passable: Callable[[str], bool] = lambda opening_id: True
     _blocked_since: dict[str, tuple[float, float, float]] = field(default_factory=dict)  # robot -> (t, x, y)
     _detours: dict[str, Detour] = field(default_factory=dict)
     _last_try: dict[str, float] = field(default_factory=dict)
@@ -165,14 +168,24 @@ class Avoidance:
         detour = self._detours.get(robot.id)
         return None if detour is None else self._follow(robot, theta, detour, now, dt, fleet, allowed)
 
-    def rejoin(self, robot: Body, path: Path, progress: float, now: float, fleet: Mapping[str, Body]) -> None:
+    def rejoin(
+        self,
+        robot: Body,
+        path: Path,
+        progress: float,
+        now: float,
+        fleet: Mapping[str, Body],
+        *,
+        off_track: bool = False,
+    ) -> None:
         """Plan a way (at most one try per ``retry``) to the first clear point of the trajectory
         ahead: around the robots in the way, or back for a robot ``rejoin_after`` metres off it
-        (heading straight back could cut a doorway's jamb)."""
+        (``off_track``: heading straight back could cut a doorway's jamb, or the wall beside a
+        doorway when the trajectory goes on in the next room)."""
         if robot.id in self._detours or now - self._last_try.get(robot.id, -math.inf) < self.retry:
             return
         self._last_try[robot.id] = now
-        points = self._plan(robot, path, progress, fleet)
+        points = self._plan(robot, path, progress, fleet, next_room=off_track)
         if points:
             self._detours[robot.id] = Detour(points)
 
@@ -244,7 +257,7 @@ class Avoidance:
                 continue
             if any(math.dist(p, o) < keep for o in others):
                 continue
-            points = self._search(robot, room.id, room.rect, p, others)
+            points = self._search(robot, (room,), p, others)
             if points:
                 return points
         return []
@@ -266,9 +279,10 @@ class Avoidance:
             return None
         step = self._toward(robot, theta, detour.points[0], dt)
         moved = (step.x, step.y) != (robot.x, robot.y)
-        if moved and not (
-            self.free.is_free(step.x, step.y) and self.clear(robot, step.x, step.y, fleet, now) and allowed(step)
-        ):
+        # a robot whose centre is nearer a wall than its radius (beside a jamb) may step on toward the
+        # way's next point: the way leads out of there, and ``allowed`` keeps it from going deeper
+        free = self.free.is_free(step.x, step.y) or not self.free.is_free(robot.x, robot.y)
+        if moved and not (free and self.clear(robot, step.x, step.y, fleet, now) and allowed(step)):
             # the arc swings it where it may not go: face the point squarely first, else something
             # moved into the way: plan again later
             square = self._toward(robot, theta, detour.points[0], dt, facing=0.05)
@@ -290,52 +304,70 @@ class Avoidance:
         nx, ny, nth = integrate(robot.x, robot.y, theta, v, omega, dt)
         return Step(nx, ny, nth, v, omega)
 
-    def _plan(self, robot: Body, path: Path, progress: float, fleet: Mapping[str, Body]) -> list[tuple[float, float]]:
+    def _plan(
+        self, robot: Body, path: Path, progress: float, fleet: Mapping[str, Body], *, next_room: bool = False
+    ) -> list[tuple[float, float]]:
         """A way around the other robots to the first clear point of the trajectory ahead, within
-        the robot's room; [] when there is none."""
+        the robot's room (``next_room``: or the room the trajectory goes on in, when every opening
+        between the two may be driven through); [] when there is none."""
         room = self.site.room_at(robot.x, robot.y)
         if room is None:
             return []
+        rooms = [room]
         others = [(o.x, o.y) for o in fleet.values() if o.id != robot.id]
         keep = 2.0 * self.radius + self.clearance
         goal = None
         s = progress + 0.3
         while s <= path.length + 1e-9:  # as far as the trajectory stays in the room: past a whole queue line
             p = path.point_at(s)
-            if not room.contains(p[0], p[1]):
-                break
+            if not any(r.contains(p[0], p[1]) for r in rooms):
+                beyond = self.site.room_at(p[0], p[1])
+                if not next_room or len(rooms) > 1 or beyond is None or not self._open_between(room.id, beyond.id):
+                    break
+                rooms.append(beyond)
             if self.free.is_free(*p) and all(math.dist(p, o) >= keep for o in others):
                 goal = p
                 break
             s += 0.1
         if goal is None:
             return []
-        return self._search(robot, room.id, room.rect, goal, others)
+        return self._search(robot, tuple(rooms), goal, others)
 
-    def _room_cells(self, room_id: str, rect: tuple[float, float, float, float]):
-        hit = self._rooms.get(room_id)
+    def _open_between(self, room_id: str, other_id: str) -> bool:
+        """Whether the rooms have an opening between them, each of which may be driven through."""
+        between = [o for o, other in self.site.neighbours(room_id) if other == other_id]
+        return bool(between) and all(self.passable(o) for o in between)
+
+    def _room_cells(self, rooms: tuple[Room, ...]) -> tuple[np.ndarray, tuple[float, float]]:
+        """The free cells of the rooms' bounding rectangle that lie in one of the rooms, and its origin."""
+        key = "+".join(r.id for r in rooms)
+        hit = self._rooms.get(key)
         if hit is None:
-            x0, y0, x1, y1 = rect
+            x0, y0 = min(r.rect[0] for r in rooms), min(r.rect[1] for r in rooms)
+            x1, y1 = max(r.rect[2] for r in rooms), max(r.rect[3] for r in rooms)
             res = self.resolution
             nx, ny = max(int((x1 - x0) / res), 1), max(int((y1 - y0) / res), 1)
+
+            def usable(x: float, y: float) -> bool:
+                return self.free.is_free(x, y) and any(r.contains(x, y) for r in rooms)
+
             cells = np.array(
-                [[self.free.is_free(x0 + (c + 0.5) * res, y0 + (r + 0.5) * res) for c in range(nx)] for r in range(ny)]
+                [[usable(x0 + (c + 0.5) * res, y0 + (r + 0.5) * res) for c in range(nx)] for r in range(ny)]
             )
-            hit = self._rooms[room_id] = (cells, (x0, y0))
+            hit = self._rooms[key] = (cells, (x0, y0))
         return hit
 
     def _search(
         self,
         robot: Body,
-        room_id: str,
-        rect: Rect,
+        rooms: tuple[Room, ...],
         goal: tuple[float, float],
         others: list[tuple[float, float]],
     ) -> list[tuple[float, float]]:
-        """A* on the room's cells from the robot to ``goal``, robots' discs (grown by ``clearance``)
-        and the areas kept out (but one it stands in) as obstacles."""
+        """A* on the cells of ``rooms`` from the robot to ``goal``, robots' discs (grown by
+        ``clearance``) and the areas kept out (but one it stands in) as obstacles."""
         start = (robot.x, robot.y)
-        cells, (x0, y0) = self._room_cells(room_id, rect)
+        cells, (x0, y0) = self._room_cells(rooms)
         res = self.resolution
         ny, nx = cells.shape
         keep = 2.0 * self.radius + self.clearance

@@ -9,9 +9,12 @@ Doors on the way: every door whose gap the path crosses is a *crossing* at some 
 the next crossing's door is not passable, the robot may go no further than ``radius +
 stop_margin`` short of the closed leaf's line; held there it is ``waiting_at_door``. A hard guard
 backs this up: a step that would bring the robot's disc within ``guard_margin`` of a shut door's
-gap, closer than it was, is refused (the robot still turns where it stands); a drive refused so for
-``shut_door_patience`` in a row, beside a door it does not go through, fails. Automatic doors are
-asked to open while the robot's path reaches them within ``auto_open_distance``.
+gap, closer than it was, is refused (the robot still turns where it stands). Walls likewise: a
+step that takes a disc more than ``wall_tolerance`` into a wall, deeper than it was, is refused
+(the pursuit's corner cut beside a doorway, heading back onto a trajectory from off it), and the
+robot plans its way back on the grid (:meth:`Avoidance.rejoin`). A drive refused so for
+``shut_door_patience`` in a row (a door it does not go through, a wall it has no way round) fails.
+Automatic doors are asked to open while the robot's path reaches them within ``auto_open_distance``.
 
 A command that cannot be executed fails at once with ``action_failed`` and a reason: an unknown
 door, passage or object, an object that is not this robot's or not where it can be reached, a full
@@ -37,6 +40,7 @@ from .doorways import Doorways, in_lane
 from .make_way import MakeWay, Request, along
 from .objects import Objects
 from .right_of_way import RightOfWay
+from .walls import WallDepth
 
 QUEUE_DISTANCE = 1.5  # m from the end of its approach within which a robot kept back queues there
 
@@ -59,7 +63,8 @@ class RobotConfig:
     start_tolerance: float = START_TOLERANCE  # m; a trajectory may start at most this far from the robot
     reach: float = REACH  # m from the robot's centre within which it can pick up an object
     robot_margin: float = 0.05  # m a driving robot keeps between its disc and another robot's
-    shut_door_patience: float = 30.0  # s a drive may be refused by the shut-doorway guard before it fails
+    shut_door_patience: float = 30.0  # s a drive may be refused by the shut-doorway or wall guard before it fails
+    wall_tolerance: float = 0.05  # m a disc may reach into a wall (the pursuit's corner cut at a jamb)
 
 
 @dataclass(frozen=True)
@@ -102,7 +107,7 @@ class Robot:
     crossings: list[tuple[float, str]] = field(default_factory=list)  # (arc length, door id), in order
     dwell_left: float = 0.0
     dwell_total: float = 0.0
-    refused_time: float = 0.0  # s the drive's steps have been refused by the shut-doorway guard in a row
+    refused_time: float = 0.0  # s the drive's steps have been refused by the shut-doorway or wall guard in a row
     status_changed: bool = True
 
 
@@ -118,9 +123,11 @@ class RobotExecutor:
         self.right_of_way = RightOfWay(config.radius, config.robot_margin)
         # where a robot's centre may go when it drives around another (doors open: shut ones are checked apart)
         self._free = site.occupancy_grid(resolution=0.05, open_doors=tuple(site.door_leaves), inflate=config.radius)
+        self._walls = WallDepth(site, config.radius)
         self.avoidance = Avoidance(site, self._free, config.radius, config.controller)
         self.doorways = Doorways(site)
         self.avoidance.keep_out = lambda robot: self.doorways.held_lanes(robot, self.fleet)
+        self.avoidance.passable = lambda opening_id: opening_id not in doors.doors or doors.passable(opening_id)
         self.make_way = MakeWay(config.radius, self.doorways.holds)
         self._made_way: set[str] = set()  # robots answering a request to make way
         self._passed_on: dict[str, float] = {}  # robot -> when it last looked for a robot boxing it in
@@ -246,7 +253,7 @@ class RobotExecutor:
         if blocking and not step.held and self._breaks_guard(robot, step, blocking):
             step = Step(robot.x, robot.y, robot.theta, 0.0, 0.0, held=True)
         if not step.held and follower.cross_track > self.avoidance.rejoin_after:
-            self.avoidance.rejoin(robot, follower.path, follower.s, now, self.fleet)
+            self.avoidance.rejoin(robot, follower.path, follower.s, now, self.fleet, off_track=True)
         if step.held:
             self.right_of_way.forget(robot.id)  # waits for a door or a hold, not for a robot
             self.avoidance.moving_on(robot.id)
@@ -269,15 +276,19 @@ class RobotExecutor:
         elif step.v > 0.0:
             self.avoidance.moving_on(robot.id)
         moved = (step.x, step.y) != (robot.x, robot.y)
-        shut = moved and self._into_shut_doorway(robot, step)
-        if shut or (moved and not self.avoidance.clear(robot, step.x, step.y, self.fleet, now)):
+        refused_by = "a shut door's gap" if moved and self._into_shut_doorway(robot, step) else ""
+        if moved and not refused_by and self._into_wall(robot, step):
+            refused_by = "a wall"
+            # the way on lies past a wall's end (the pursuit cuts the corner): plan it on the grid
+            self.avoidance.rejoin(robot, follower.path, follower.s, now, self.fleet, off_track=True)
+        if refused_by or (moved and not self.avoidance.clear(robot, step.x, step.y, self.fleet, now)):
             # whatever moved it (driving around, a hold, a corner): its disc never enters a shut doorway
-            # (passing beside one, a corridor along a row of doors, is allowed) nor touches a robot. It
-            # still turns, where it stands: a robot facing the gap it must not come nearer would
-            # otherwise never face its way out again.
+            # (passing beside one, a corridor along a row of doors, is allowed) nor a wall, nor
+            # touches a robot. It still turns, where it stands: a robot facing the gap it must not
+            # come nearer would otherwise never face its way out again.
             step = Step(robot.x, robot.y, step.theta, 0.0, step.omega)
-        if self._held_by_shut_door(robot, shut, dt):
-            return self._fail(robot, f"held beside a shut door's gap for {self.config.shut_door_patience:g} s")
+        if self._held_back(robot, bool(refused_by), dt):
+            return self._fail(robot, f"held beside {refused_by} for {self.config.shut_door_patience:g} s")
         robot.x, robot.y, robot.theta, robot.v, robot.omega = step.x, step.y, step.theta, step.v, step.omega
         robot.progress = min(follower.s / follower.path.length, 1.0) if follower.path.length > 0 else 1.0
         if step.held and not blocking:
@@ -297,10 +308,11 @@ class RobotExecutor:
             return self._arrived(robot, now + dt)
         return []
 
-    def _held_by_shut_door(self, robot: Robot, refused: bool, dt: float) -> bool:
-        """Whether the robot's drive has been refused by the shut-doorway guard for too long: a door
-        it does not go through (it would report ``waiting_at_door`` for one it does), so nobody opens
-        it; the action fails and the planner plans again from where the robot stands."""
+    def _held_back(self, robot: Robot, refused: bool, dt: float) -> bool:
+        """Whether the robot's drive has been refused by the shut-doorway or wall guard for too long:
+        a door it does not go through (it would report ``waiting_at_door`` for one it does), so
+        nobody opens it, or a wall it finds no way round; the action fails and the planner plans
+        again from where the robot stands."""
         robot.refused_time = robot.refused_time + dt if refused else 0.0
         return robot.refused_time >= self.config.shut_door_patience
 
@@ -395,11 +407,13 @@ class RobotExecutor:
                 self.make_way.pass_on(robot, other, along(escape, self.make_way.step), now)
 
     def _allows(self, robot: Robot):
-        """What a step off the trajectory must not do: enter a shut doorway or a lane another robot holds."""
+        """What a step off the trajectory must not do: enter a shut doorway, a wall or a lane another robot holds."""
 
         def allowed(candidate: Step) -> bool:
-            return not self._into_shut_doorway(robot, candidate) and not self.doorways.lane_taken(
-                robot, candidate.x, candidate.y, self.fleet
+            return (
+                not self._into_shut_doorway(robot, candidate)
+                and not self._into_wall(robot, candidate)
+                and not self.doorways.lane_taken(robot, candidate.x, candidate.y, self.fleet)
             )
 
         return allowed
@@ -417,6 +431,12 @@ class RobotExecutor:
                 if not self.doors.doorway_clear(door, [(step.x, step.y)]):
                     return True
         return False
+
+    def _into_wall(self, robot: Robot, step: Step) -> bool:
+        """Whether ``step`` takes the robot's disc more than ``wall_tolerance`` into a wall, deeper
+        than it was (sliding along a wall, or getting out of one, is allowed)."""
+        after = self._walls.depth(step.x, step.y)
+        return after > self.config.wall_tolerance and after > self._walls.depth(robot.x, robot.y) + 1e-9
 
     def _breaks_guard(self, robot: Robot, step: Step, door_id: str, margin: float | None = None) -> bool:
         a, b = self.doors[door_id].opening.endpoints

@@ -170,3 +170,27 @@ def test_the_pipeline_overlay_travels_on_the_wire_and_bad_frames_raise():
         pipeline.process(b"\xff\xd8 definitely not a jpeg", HD, 2.0)
     with pytest.raises(BadFrame):
         pipeline.process(frame.image[:100], HD, 2.0)  # not the size the intrinsics say
+
+
+def test_a_frame_is_drawn_with_the_poses_of_its_capture_time_not_later_ones():
+    """Poses that came in while a frame waited are newer than its image: the robots drawn are where
+    they were when it was captured (the newest pose stamped at or before), so live and replayed
+    runs draw the same."""
+    w = WorldView()
+    for stamp, x in ((0.5, 2.0), (1.0, 2.2), (1.5, 3.0)):
+        w.on_pose(RobotPose(robot="r0", x=x, y=5.0, theta=0.0, stamp=stamp))
+    assert [w.snapshot(9.0, at=t).robots["r0"].x for t in (0.7, 1.0, 1.2, 0.1)] == [2.0, 2.2, 2.2, 2.0]
+    assert w.snapshot(9.0).robots["r0"].x == 3.0  # no capture time: the newest
+    w.on_pose(RobotPose(robot="r0", x=9.0, y=5.0, theta=0.0, stamp=0.9))  # overtaken on the wire: ignored
+    assert w.snapshot(9.0, at=1.2).robots["r0"].x == 2.2
+
+    hall = site("hall")
+    truth = look_at([3.5, 5.5, 1.3], [0.05, 5.0, 1.0])
+    image = render(hall, truth, HD).image
+    then = WorldView()
+    then.on_pose(RobotPose(robot="r0", x=2.2, y=5.0, theta=0.0, stamp=1.0))
+    drawn = {}
+    for name, view in (("history", w), ("as captured", then)):
+        overlay, _ = Pipeline(hall, view, camera_id="tab").process(image, HD, 1.2, frame_seq=1)
+        drawn[name] = [p for p in overlay.primitives if p.layer == "robot:r0"]
+    assert drawn["history"] and drawn["history"] == drawn["as captured"]

@@ -5,10 +5,11 @@ from __future__ import annotations
 import pytest
 
 from services.planner.facts import Context, site_facts
-from services.planner.iidp import iidp
+from services.planner.iidp import NoPlan, iidp
 from services.planner.plan import RobotPlan, Step, TeamResult, share_windows
 from services.planner.planner import PlannerSettings, TaskPlanner
 from services.planner.single import SingleRobotSolver
+from services.planner.solver import Outcome
 from services.planner.validator import validate_result
 from services.planner.world import initial_world
 from tests.planner.conftest import planner_for, site_named
@@ -126,3 +127,42 @@ def test_a_plan_moved_past_its_end_finishes_now_not_before():
     assert moved["r0"].finish == 0 and moved["r1"].finish == 5
     assert TeamResult("iidp", 0, 20, moved).makespan == 5
     assert TeamResult("iidp", 0, 20, {"r0": moved["r0"]}).makespan == 0
+
+
+def _iidp_out_of_time_first(times: int, limits: list[tuple[float, float]]):
+    """IIDP that finds no model in time on its first ``times`` calls (as on a loaded machine),
+    then plans for real; ``limits`` collects each call's (solve limit, time limit)."""
+
+    def fake(single, problems, *, time_limit, **kwargs):  # noqa: ANN001, ANN202
+        limits.append((single.solve_limit, time_limit))
+        if len(limits) <= times:
+            raise NoPlan(sorted(problems)[0], Outcome(status="unknown"))
+        return iidp(single, problems, time_limit=time_limit, **kwargs)
+
+    return fake
+
+
+def test_a_plan_out_of_time_without_a_model_is_made_again_with_longer_limits(monkeypatch):
+    """Under load a solve can find no model within its limits: the plan is made again with 4x the
+    limits, and is the plan an unloaded machine makes, not a failure left for nobody to retry."""
+    name = "office"
+    site = site_named(name)
+    tp = TaskPlanner(site, PlannerSettings(time_limit=10.0, solve_limit=2.0))
+    limits: list[tuple[float, float]] = []
+    monkeypatch.setattr("services.planner.planner.iidp", _iidp_out_of_time_first(1, limits))
+    result = tp.plan(initial_world(site))
+    assert result.status == "ok" and not result.out_of_time, result.diagnostic
+    assert limits[:2] == [(2.0, 10.0), (8.0, 40.0)]
+    strip = lambda r: {k: v for k, v in r.as_json().items() if k != "solve_time"}  # noqa: E731
+    assert strip(result) == strip(plan(name))
+
+
+def test_a_plan_still_out_of_time_after_the_retries_fails_and_says_why(monkeypatch):
+    site = site_named("office")
+    tp = TaskPlanner(site, PlannerSettings(time_limit=10.0, solve_limit=2.0))
+    limits: list[tuple[float, float]] = []
+    monkeypatch.setattr("services.planner.planner.iidp", _iidp_out_of_time_first(99, limits))
+    result = tp.plan(initial_world(site))
+    assert result.status == "failed" and result.out_of_time
+    assert "within the time limit" in result.diagnostic
+    assert [s for s, _ in limits] == [2.0, 8.0, 32.0]  # tried, then retried twice

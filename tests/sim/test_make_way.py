@@ -113,7 +113,7 @@ def test_a_way_around_keeps_out_of_a_lane_another_robot_holds_and_cuts_no_corner
     room = e.site.rooms["corridor"]
     others = [(r1.x, r1.y)]
     goal = (4.5, 5.6)  # beyond the lane, near the corridor's upper wall: the straight way crosses the lane
-    points = ex.avoidance._search(r0, room.id, room.rect, goal, others)
+    points = ex.avoidance._search(r0, (room,), goal, others)
     assert points and points[-1] == goal
     lane = ex.doorways.held_lanes(r0, e.robots)[0]
     legs = [(r0.x, r0.y), *points]
@@ -123,7 +123,7 @@ def test_a_way_around_keeps_out_of_a_lane_another_robot_holds_and_cuts_no_corner
             assert not (lane[0] <= x <= lane[2] and lane[1] <= y <= lane[3]), (x, y)
             assert ex.avoidance.free.is_free(x, y), (x, y)
     ex.doorways.holders.clear()  # nobody holds it: the way may cross the lane, and is shorter
-    free_way = ex.avoidance._search(r0, room.id, room.rect, goal, others)
+    free_way = ex.avoidance._search(r0, (room,), goal, others)
     assert way_length((r0.x, r0.y), free_way) < way_length((r0.x, r0.y), points)
 
 

@@ -64,9 +64,11 @@ def page_url(host: str, port: int, token: str, mode: str | None = None) -> str:
 
 def announce(urls: list[str], out: TextIO = sys.stdout, qr: bool = True) -> None:
     """Print the URLs and, for the first one, a QR code a tablet's camera app can open."""
-    print("Tablet page (the token in it is this run's access key; share it only with the tablet):", file=out)
+    # One write per line: unbuffered, print() writes the text and its newline apart, and a log
+    # line from another thread on the same pipe can land between them, inside the URL's line.
+    out.write("Tablet page (the token in it is this run's access key; share it only with the tablet):\n")
     for url in urls:
-        print(f"  {url}", file=out)
+        out.write(f"  {url}\n")
     if qr and urls:
         try:
             import segno

@@ -40,6 +40,8 @@ TRIAL_FIELDS = KEY_FIELDS + (
     "human_time_away",  # s she spent walking to doors and opening them
     "actions_failed",
     "robot_overlaps",  # times two robots' discs started to intersect (services/sim/overlaps.py; 0 is safe)
+    "wall_contacts",  # times a robot's disc started to reach into a wall (services/sim/walls.py)
+    "wall_depth_max",  # m, the deepest any robot's disc reached into a wall
     "sim_time",  # s of simulated time when the mission ended
 )
 
@@ -131,6 +133,8 @@ def trial_row(spec: SweepSpec, outcome: TrialOutcome) -> dict[str, str]:
         human_time_away=_t(human.get("time_away")),
         actions_failed=_n((m.get("actions") or {}).get("failed")),
         robot_overlaps=_n(m.get("robot_overlaps")),
+        wall_contacts=_n(m.get("wall_contacts")),
+        wall_depth_max=_t(m.get("wall_depth_max")),
         sim_time=_t(m.get("time")),
     )
     return row

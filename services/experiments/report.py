@@ -486,30 +486,37 @@ def _section_drivers(results: Results) -> list[str]:
 
 
 def _section_contacts(results: Results) -> list[str]:
-    """How often robots met: the contacts the simulator counted (services/sim/overlaps.py)."""
+    """How often robots met each other and the walls, as the simulator counted it
+    (services/sim/overlaps.py, services/sim/walls.py)."""
     rows = []
     for level, method, _trials in results.conditions():
         counts = results.values(method, level, "robot_overlaps")
         if counts:
-            zero = sum(c == 0 for c in counts)
+            walls = results.values(method, level, "wall_contacts")
+            deepest = results.values(method, level, "wall_depth_max")
             rows.append(
                 [
                     *results.level_cells(level),
                     method,
-                    f"{zero} / {len(counts)}",
+                    f"{sum(c == 0 for c in counts)} / {len(counts)}",
                     _g(statistics.median(counts)),
                     _g(max(counts)),
+                    _g(statistics.median(walls)) if walls else "",
+                    _g(round(1000.0 * max(deepest))) if deepest else "",
                 ]
             )
     if not rows:
         return []
+    columns = ["method", "trials with none", "median", "max", "wall contacts (median)", "deepest into a wall (mm)"]
     return [
         "## Robot–robot contacts",
         "",
         "Times two robots' discs began to intersect (by more than 1 mm) in a completed trial, as the simulator "
-        "counted them (`robot_overlaps` in `trials.csv`); 0 is a mission without a collision.",
+        "counted them (`robot_overlaps` in `trials.csv`); 0 is a mission without a collision. Beside them, times "
+        "a robot's disc began to reach into a wall (`wall_contacts`; a robot grazing a doorway's jamb counts) and "
+        "the deepest any reached (`wall_depth_max`; the simulator's wall guard refuses steps past 50 mm).",
         "",
-        *_table([*results.level_columns, "method", "trials with none", "median", "max"], rows),
+        *_table([*results.level_columns, *columns], rows),
         "",
     ]
 

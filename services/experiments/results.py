@@ -41,10 +41,13 @@ METRICS = (
     "world_versions",
     "robot_wait_time",
     "robot_overlaps",
+    "wall_contacts",
+    "wall_depth_max",
 )
 COUNTS = frozenset(
     {
         "robot_overlaps",
+        "wall_contacts",
         "door_openings",
         "human_door_trips",
         "human_interruptions",
@@ -54,7 +57,7 @@ COUNTS = frozenset(
         "replans",
         "world_versions",
     }
-)  # the others are times (s)
+)  # the others are times (s), but wall_depth_max (m)
 
 Level = int | float | tuple[float, float]  # robots; door-opening probability; (task mean, interruption cost)
 

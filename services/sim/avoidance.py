@@ -17,9 +17,10 @@ Two rules for robots driving in the simulator, on top of the right of way
   and tries again ``retry`` seconds later.
 
 Where there is no way around, the robot kept back asks the robot in its way to make way
-(:mod:`services.sim.make_way`). Only when nothing helps for ``give_up`` seconds (robots wedged in
-a cluster, each waiting on the next) does a robot push through: a contact, which
-:mod:`services.sim.overlaps` counts. A robot making way for another never pushes through.
+(:mod:`services.sim.make_way`). When nothing helps for ``give_up`` seconds (robots wedged in a
+cluster, each waiting on the next, or behind one that waits for a door) the robot's action fails
+and the planner plans again from where the robots stand (:mod:`services.sim.robots`). A robot
+never pushes through another: solid bodies hold for every step.
 
 Both rules read other robots where they are now; robots are stepped one after another within a
 tick, so each sees the others' latest poses and the invariant holds after every robot's step.
@@ -64,9 +65,7 @@ class Avoidance:
     clearance: float = 0.05  # m kept between discs along a way around
     detour_after: float = 1.0  # s kept back by a robot before driving around it
     retry: float = 1.0  # s between two attempts to plan a way around
-    give_up: float = (
-        12.0  # s kept back after which a robot pushes through (a contact, counted); less than a door's hold
-    )
+    give_up: float = 12.0  # s kept back after which a robot's action fails (the planner plans again)
     progress: float = 0.5  # m a robot kept back must get from where it was to count as getting somewhere
     rejoin_after: float = 0.3  # m off its trajectory from which a robot plans its way back
     resolution: float = 0.1  # m: cells of the grid a way around is planned on
@@ -79,16 +78,12 @@ class Avoidance:
     _blocked_since: dict[str, tuple[float, float, float]] = field(default_factory=dict)  # robot -> (t, x, y)
     _detours: dict[str, Detour] = field(default_factory=dict)
     _last_try: dict[str, float] = field(default_factory=dict)
-    _pushing: set[str] = field(default_factory=set)  # robots that gave up and push through
     _rooms: dict[str, tuple[np.ndarray, tuple[float, float]]] = field(default_factory=dict)
 
     # ------------------------------------------------------------------ solid bodies
 
-    def clear(self, robot: Body, x: float, y: float, fleet: Mapping[str, Body], now: float) -> bool:
-        """Whether stepping to (x, y) keeps ``robot`` from touching any other robot (always True for
-        a robot that gave up: it has been kept back ``give_up`` seconds and pushes through)."""
-        if self._gave_up(robot, fleet, now):
-            return True
+    def clear(self, robot: Body, x: float, y: float, fleet: Mapping[str, Body]) -> bool:
+        """Whether stepping to (x, y) keeps ``robot`` from touching any other robot."""
         limit = 2.0 * self.radius + self.contact_gap
         for other in fleet.values():
             if other.id == robot.id:
@@ -98,23 +93,12 @@ class Avoidance:
                 return False
         return True
 
-    def _gave_up(self, robot: Body, fleet: Mapping[str, Body], now: float) -> bool:
-        if robot.id in self._pushing:
-            near = 2.0 * self.radius + self.clearance
-            if all(math.hypot(robot.x - o.x, robot.y - o.y) >= near for o in fleet.values() if o.id != robot.id):
-                self._pushing.discard(robot.id)  # through: solid again
-                self.moving_on(robot.id)
-            return robot.id in self._pushing
-        if now - self._since(robot, now) >= self.give_up:
-            self._pushing.add(robot.id)
-            return True
-        return False
-
     # ------------------------------------------------------------------ driving around
 
-    def pushing(self, robot: Body, fleet: Mapping[str, Body], now: float) -> bool:
-        """Whether the robot gave up waiting and pushes through (nothing keeps it back)."""
-        return self._gave_up(robot, fleet, now)
+    def gave_up(self, robot: Body, now: float) -> bool:
+        """Whether the robot, not getting on, has been kept back ``give_up`` seconds without getting
+        anywhere (asking starts its clock; :meth:`moving_on` stops it)."""
+        return now - self._since(robot, now) >= self.give_up
 
     def moving_on(self, robot: str) -> None:
         """The robot follows its trajectory again (or waits for a door or a hold, not a robot)."""
@@ -122,9 +106,8 @@ class Avoidance:
         self._detours.pop(robot, None)
 
     def not_kept_back(self, robot: str) -> None:
-        """The robot is not kept back (its way, if any, is kept): it does not push through."""
+        """The robot is not kept back (its way, if any, is kept): it does not give up."""
         self._blocked_since.pop(robot, None)
-        self._pushing.discard(robot)
 
     def stop_driving_around(self, robot: str) -> None:
         """Drop the robot's way around (it waits for another robot to make way instead); it is
@@ -282,7 +265,7 @@ class Avoidance:
         # a robot whose centre is nearer a wall than its radius (beside a jamb) may step on toward the
         # way's next point: the way leads out of there, and ``allowed`` keeps it from going deeper
         free = self.free.is_free(step.x, step.y) or not self.free.is_free(robot.x, robot.y)
-        if moved and not (free and self.clear(robot, step.x, step.y, fleet, now) and allowed(step)):
+        if moved and not (free and self.clear(robot, step.x, step.y, fleet) and allowed(step)):
             # the arc swings it where it may not go: face the point squarely first, else something
             # moved into the way: plan again later
             square = self._toward(robot, theta, detour.points[0], dt, facing=0.05)
@@ -317,7 +300,7 @@ class Avoidance:
         others = [(o.x, o.y) for o in fleet.values() if o.id != robot.id]
         keep = 2.0 * self.radius + self.clearance
         goal = None
-        s = progress + 0.3
+        s = min(progress + 0.3, path.length)  # near its end, the end itself is the goal
         while s <= path.length + 1e-9:  # as far as the trajectory stays in the room: past a whole queue line
             p = path.point_at(s)
             if not any(r.contains(p[0], p[1]) for r in rooms):

@@ -33,6 +33,7 @@ from .objects import Objects
 from .overlaps import OverlapWatch
 from .robots import Outcome, Robot, RobotConfig, RobotExecutor
 from .streams import Streams
+from .walls import WallWatch
 
 HUMAN_DOOR_STANDOFF = 0.5  # m in front of a door where the human stands to open it
 
@@ -140,6 +141,7 @@ class Engine:
         self.external: dict[str, Any] = {}
         self.closed_doors = ClosedDoorWatch(self.doors, p.robot_radius)  # safety invariant, checked every tick
         self.overlaps = OverlapWatch(site, p.robot_radius)  # robot-robot contact, checked every tick
+        self.wall_contacts = WallWatch(site, p.robot_radius)  # robot-wall contact, checked every tick
         her_room = site.human.room
         self.human_doors = sorted(d.id for d in site.doors.values() if d.human_operated and her_room in d.rooms)
         self.human = HumanModel(
@@ -220,6 +222,18 @@ class Engine:
                     "poses": [list(p) for p in overlap.poses],
                     # what each was doing: says whether the plan or the execution let them meet
                     "actions": [self._doing(rid) for rid in overlap.robots],
+                },
+            )
+        for contact in self.wall_contacts.check(self.robots.values()):
+            self.metrics.wall_contact(contact.place)
+            self._emit(
+                "wall_contact",
+                robot=contact.robot,
+                data={
+                    "place": contact.place,
+                    "depth": contact.depth,
+                    "pose": list(contact.pose),
+                    "action": self._doing(contact.robot),
                 },
             )
         self._track_waiting(t1)
@@ -408,7 +422,12 @@ class Engine:
             "focus_started": h.counters.focus_started,
         }
         return self.metrics.summary(
-            time=self.time, completed=self.completed, robots=robots, human=human, world_versions=self.world_version
+            time=self.time,
+            completed=self.completed,
+            robots=robots,
+            human=human,
+            world_versions=self.world_version,
+            wall_depth_max=self.wall_contacts.deepest,
         )
 
 

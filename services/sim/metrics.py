@@ -7,7 +7,8 @@
 - feedback sent, accepted, refused and unanswered (a2 declarations, ARROCH only);
 - safety: robots that entered the doorway of a closed door (:mod:`services.sim.crossings`; 0 in
   every correct run); robot-robot overlaps (two discs intersecting, :mod:`services.sim.overlaps`),
-  in total, per pair and per place (room or opening);
+  in total, per pair and per place (room or opening); robot-wall contacts (a disc reaching into a
+  wall, :mod:`services.sim.walls`), per place, and the deepest any disc reached;
 plus what explains them (robots' waiting time at doors, the human's time away and focus intervals,
 world versions) and every parameter of the run, so a metrics file is self-describing.
 """
@@ -33,9 +34,13 @@ class MetricsRecorder:
     actions_failed: int = 0
     closed_door_crossings: int = 0
     overlaps: Counter = field(default_factory=Counter)  # ((robot, robot), place) -> overlaps
+    wall_contacts: Counter = field(default_factory=Counter)  # place -> robot-wall contacts
 
     def overlap(self, pair: tuple[str, str], place: str) -> None:
         self.overlaps[(pair, place)] += 1
+
+    def wall_contact(self, place: str) -> None:
+        self.wall_contacts[place] += 1
 
     def opened(self, door: str, by: str) -> None:
         self.door_openings[(door, "human" if by == "human" else "robot")] += 1
@@ -56,6 +61,7 @@ class MetricsRecorder:
         robots: dict[str, dict[str, Any]],
         human: dict[str, Any],
         world_versions: int,
+        wall_depth_max: float = 0.0,
     ) -> dict[str, Any]:
         """The metrics as a JSON-ready map (the data of Event ``mission_done``)."""
         agents = {rid: self.robot_done.get(rid) for rid in sorted(robots)}
@@ -87,6 +93,9 @@ class MetricsRecorder:
             "robot_overlaps": sum(self.overlaps.values()),
             "robot_overlaps_by_pair": dict(sorted(per_pair.items())),
             "robot_overlaps_by_place": dict(sorted(per_place.items())),
+            "wall_contacts": sum(self.wall_contacts.values()),
+            "wall_contacts_by_place": dict(sorted(self.wall_contacts.items())),
+            "wall_depth_max": round(wall_depth_max, 6),
             "world_versions": world_versions,
             "robots": robots,
             "human": human,

@@ -15,14 +15,26 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from protocol.plane import segment_distance
 from protocol.site.model import Site
 
-from .robots import Robot
+if TYPE_CHECKING:  # for type hints only: .walls, which the executor (.robots) imports, imports this
+    from .robots import Robot
 
 # Overlap below this (m) is touching, not colliding (float rounding of two robots at the limit).
 TOLERANCE = 1e-3
+
+
+def place(site: Site, radius: float, x: float, y: float) -> str:
+    """The opening whose gap is within ``radius`` of (x, y), else the room there, else "outside"."""
+    for opening in site.openings.values():
+        a, b = opening.endpoints
+        if segment_distance((x, y), a, b) < radius:
+            return opening.id
+    room = site.room_at(x, y)
+    return room.id if room is not None else "outside"
 
 
 @dataclass(frozen=True)
@@ -40,15 +52,6 @@ class OverlapWatch:
         self.site = site
         self.radius = radius
         self._touching: set[tuple[str, str]] = set()
-
-    def place(self, x: float, y: float) -> str:
-        """The opening whose gap is within a radius of (x, y), else the room there."""
-        for opening in self.site.openings.values():
-            a, b = opening.endpoints
-            if segment_distance((x, y), a, b) < self.radius:
-                return opening.id
-        room = self.site.room_at(x, y)
-        return room.id if room is not None else "outside"
 
     def check(self, robots: Iterable[Robot]) -> list[Overlap]:
         """The pairs that started to overlap since the last check (call once per tick)."""
@@ -68,7 +71,7 @@ class OverlapWatch:
                     started.append(
                         Overlap(
                             pair,
-                            self.place(mx, my),
+                            place(self.site, self.radius, mx, my),
                             round(2.0 * self.radius - d, 6),
                             ((round(a.x, 6), round(a.y, 6)), (round(b.x, 6), round(b.y, 6))),
                         )

@@ -13,7 +13,9 @@ gap, closer than it was, is refused (the robot still turns where it stands). Wal
 step that takes a disc more than ``wall_tolerance`` into a wall, deeper than it was, is refused
 (the pursuit's corner cut beside a doorway, heading back onto a trajectory from off it), and the
 robot plans its way back on the grid (:meth:`Avoidance.rejoin`). A drive refused so for
-``shut_door_patience`` in a row (a door it does not go through, a wall it has no way round) fails.
+``guard_patience`` in a row (a door it does not go through, a wall it has no way round) fails.
+Robots never touch (:mod:`.avoidance`): a robot kept back by others that drives around nothing and
+gets nobody to make way fails after ``Avoidance.give_up``, and the planner plans again.
 Automatic doors are asked to open while the robot's path reaches them within ``auto_open_distance``.
 
 A command that cannot be executed fails at once with ``action_failed`` and a reason: an unknown
@@ -63,7 +65,7 @@ class RobotConfig:
     start_tolerance: float = START_TOLERANCE  # m; a trajectory may start at most this far from the robot
     reach: float = REACH  # m from the robot's centre within which it can pick up an object
     robot_margin: float = 0.05  # m a driving robot keeps between its disc and another robot's
-    shut_door_patience: float = 30.0  # s a drive may be refused by the shut-doorway or wall guard before it fails
+    guard_patience: float = 30.0  # s a drive may be refused by the shut-doorway or wall guard before it fails
     wall_tolerance: float = 0.05  # m a disc may reach into a wall (the pursuit's corner cut at a jamb)
 
 
@@ -263,14 +265,20 @@ class RobotExecutor:
             robot.yield_time += dt
             self.avoidance.moving_on(robot.id)
             return []
-        elif not self.avoidance.pushing(robot, self.fleet, now) and (
+        elif (
             self.right_of_way.blocker(robot, step.x, step.y, self.fleet, now)
-            or not self.avoidance.clear(robot, step.x, step.y, self.fleet, now)
+            or not self.avoidance.clear(robot, step.x, step.y, self.fleet)
             or self.avoidance.driving_around(robot.id)
         ):
             if self._goal_taken(robot, follower, now):
                 robot.v = robot.omega = 0.0
                 return self._arrived(robot, now + dt)
+            if self.avoidance.gave_up(robot, now):
+                # wedged among robots (or behind one that waits for a door) with no way around and
+                # nobody making way: it never pushes through; the planner plans again from here
+                robot.v = robot.omega = 0.0
+                self.avoidance.moving_on(robot.id)
+                return self._fail(robot, f"kept back by robots for {self.avoidance.give_up:g} s")
             step = self._kept_back(robot, follower, now, dt)
             robot.yield_time += dt
         elif step.v > 0.0:
@@ -281,14 +289,14 @@ class RobotExecutor:
             refused_by = "a wall"
             # the way on lies past a wall's end (the pursuit cuts the corner): plan it on the grid
             self.avoidance.rejoin(robot, follower.path, follower.s, now, self.fleet, off_track=True)
-        if refused_by or (moved and not self.avoidance.clear(robot, step.x, step.y, self.fleet, now)):
+        if refused_by or (moved and not self.avoidance.clear(robot, step.x, step.y, self.fleet)):
             # whatever moved it (driving around, a hold, a corner): its disc never enters a shut doorway
             # (passing beside one, a corridor along a row of doors, is allowed) nor a wall, nor
             # touches a robot. It still turns, where it stands: a robot facing the gap it must not
             # come nearer would otherwise never face its way out again.
             step = Step(robot.x, robot.y, step.theta, 0.0, step.omega)
         if self._held_back(robot, bool(refused_by), dt):
-            return self._fail(robot, f"held beside {refused_by} for {self.config.shut_door_patience:g} s")
+            return self._fail(robot, f"held beside {refused_by} for {self.config.guard_patience:g} s")
         robot.x, robot.y, robot.theta, robot.v, robot.omega = step.x, step.y, step.theta, step.v, step.omega
         robot.progress = min(follower.s / follower.path.length, 1.0) if follower.path.length > 0 else 1.0
         if step.held and not blocking:
@@ -314,7 +322,7 @@ class RobotExecutor:
         nobody opens it, or a wall it finds no way round; the action fails and the planner plans
         again from where the robot stands."""
         robot.refused_time = robot.refused_time + dt if refused else 0.0
-        return robot.refused_time >= self.config.shut_door_patience
+        return robot.refused_time >= self.config.guard_patience
 
     def _goal_taken(self, robot: Robot, follower: PurePursuit, now: float) -> bool:
         """Whether a robot kept back near the end of an approach, a gothrough (through the opening)
@@ -369,7 +377,7 @@ class RobotExecutor:
             self._made_way.add(robot.id)
             self.avoidance.moving_on(robot.id)  # its own way around, if any, is not where it goes now
         robot.yield_time += dt
-        self.avoidance.not_kept_back(robot.id)  # it waits for nobody: it never pushes through
+        self.avoidance.not_kept_back(robot.id)  # it waits for nobody: it never gives up
         step = None
         if not self.make_way.off_the_way(request, robot.x, robot.y):
             step = self.avoidance.out_of_the_way(

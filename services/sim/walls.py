@@ -1,4 +1,5 @@
-"""How deep a robot's disc reaches into the site's walls (the executor's wall guard, :mod:`.robots`).
+"""How deep a robot's disc reaches into the site's walls: the executor's wall guard (:mod:`.robots`)
+and the count of robot-wall contacts (:class:`WallWatch`).
 
 Walls are axis-aligned boxes (``WallSegment.box``: the centre line grown by half the thickness), so
 the distance from a disc's centre to each is exact and one numpy expression for all of them.
@@ -6,9 +7,18 @@ the distance from a disc's centre to each is exact and one numpy expression for 
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from protocol.site.model import Site
+
+from .overlaps import place
+
+if TYPE_CHECKING:  # for type hints only: the executor (.robots) imports this module
+    from .robots import Robot
 
 
 class WallDepth:
@@ -24,3 +34,45 @@ class WallDepth:
         dx = np.maximum(np.maximum(self._x0 - x, x - self._x1), 0.0)
         dy = np.maximum(np.maximum(self._y0 - y, y - self._y1), 0.0)
         return float(self.radius - np.sqrt(dx * dx + dy * dy).min())
+
+
+# A disc reaching less than this (m) into a wall touches it, no more (float rounding at the limit).
+TOLERANCE = 1e-3
+
+
+@dataclass(frozen=True)
+class WallContact:
+    robot: str
+    place: str  # the opening whose gap is within a radius of the robot's centre, else its room
+    depth: float  # m the disc reaches into the wall when the contact starts
+    pose: tuple[float, float]
+
+
+class WallWatch:
+    """A safety figure checked every tick, like :mod:`.overlaps`: robots whose disc starts to reach
+    into a wall (edge-triggered: one contact however many ticks it lasts), and the deepest any disc
+    reached. The wall guard (:mod:`.robots`) bounds the depth at ``RobotConfig.wall_tolerance``;
+    this counts how often it is used, independently of how the executor keeps to it."""
+
+    def __init__(self, site: Site, radius: float) -> None:
+        self.site = site
+        self.radius = radius
+        self.walls = WallDepth(site, radius)
+        self.deepest = 0.0  # m, over the whole run
+        self._touching: set[str] = set()
+
+    def check(self, robots: Iterable[Robot]) -> list[WallContact]:
+        """The robots whose disc started to reach into a wall since the last check (once per tick)."""
+        touching: set[str] = set()
+        started: list[WallContact] = []
+        for robot in sorted(robots, key=lambda r: r.id):
+            depth = self.walls.depth(robot.x, robot.y)
+            if depth <= TOLERANCE:
+                continue
+            self.deepest = max(self.deepest, depth)
+            touching.add(robot.id)
+            if robot.id not in self._touching:
+                where = place(self.site, self.radius, robot.x, robot.y)
+                started.append(WallContact(robot.id, where, round(depth, 6), (round(robot.x, 6), round(robot.y, 6))))
+        self._touching = touching
+        return started

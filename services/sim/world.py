@@ -496,11 +496,13 @@ class World:
         hit = self.pb.rayTest(list(start), list(end))[0]
         return None if hit[0] < 0 else self._names[hit[0]]
 
-    def robot_blocked(self, rid: str) -> str | None:
+    def robot_blocked(self, rid: str, wall_tolerance: float = 0.0) -> str | None:
         """A wall (``wall:<i>``) or door leaf (door id) the robot's body overlaps, or None when clear.
 
         Exact convex-shape distances (``getClosestPoints``) between the robot's cylinder and each
-        wall or leaf near it; touching (penetration under :data:`BLOCK_TOLERANCE`) does not count.
+        wall or leaf near it; touching (penetration under :data:`BLOCK_TOLERANCE`) does not count,
+        nor reaching into a wall by up to ``wall_tolerance`` (the executor's wall guard allows a
+        jamb's corner to be grazed: ``RobotConfig.wall_tolerance``).
         """
         robot = self._robot(rid)
         x, y, _ = robot.pose
@@ -511,8 +513,9 @@ class World:
             (lx, ly, _), (hx, hy, _) = self.pb.getAABB(body)
             if x < lx - reach or x > hx + reach or y < ly - reach or y > hy + reach:
                 continue  # too far for any contact: skip the exact query
+            allowed = max(BLOCK_TOLERANCE, wall_tolerance if name in self.wall_names else 0.0)
             for point in self.pb.getClosestPoints(robot.body, body, distance=0.0):
-                if point[8] < -BLOCK_TOLERANCE:  # contactDistance < 0: penetration
+                if point[8] < -allowed:  # contactDistance < 0: penetration
                     return name
         return None
 

@@ -98,7 +98,7 @@ def test_a_new_command_starts_with_no_time_kept_back():
         e.step()
     e.apply_command(command("r0", 2, "approach", ["d_office"], [(r0.x, r0.y), (r0.x, 4.4)]))
     assert e.executor.avoidance.kept_back("r0", e.time) == 0.0
-    assert not e.executor.avoidance.pushing(r0, e.robots, e.time)
+    assert not e.executor.avoidance.gave_up(r0, e.time)
 
 
 def test_a_way_around_keeps_out_of_a_lane_another_robot_holds_and_cuts_no_corner():
@@ -143,38 +143,38 @@ def crowd_engine(parked: dict[str, tuple[float, float]], human: HumanConfig | No
 def drive_through_a_boxed_in_robot(chain: int) -> tuple[Engine, float, set[str]]:
     """r0 drives east along the corridor's middle; r2 stands on its way, boxed in by r3 (south),
     r4 (north) and r5 (east, on the way too); r1 is parked far off. Returns the engine after the
-    drive, the closest r0 came to any robot, and the robots that pushed through."""
+    drive, the closest r0 came to any robot, and its failed actions."""
     e = crowd_engine({"r2": (4.0, 5.0), "r3": (4.0, 4.4), "r4": (4.0, 5.6), "r5": (4.6, 5.0)})
     e.executor.make_way.chain = chain
     r0 = e.robots["r0"]
     e.apply_command(command("r0", 1, "approach", ["d_storage"], [(1.0, 5.0), (8.0, 5.0)]))
-    least, pushed = math.inf, set()
+    least, failed = math.inf, []
     while e.time < 90.0 and r0.phase == "drive":
         e.step()
         least = min(least, *(math.dist((r0.x, r0.y), (o.x, o.y)) for o in e.robots.values() if o is not r0))
-        pushed |= e.executor.avoidance._pushing  # (asking with pushing() would start parked robots' clocks)
-    return e, least, pushed
+        failed += [ev for ev in e.take_events() if ev.kind == "action_failed"]
+    return e, least, failed
 
 
 def test_a_robot_asked_that_is_boxed_in_passes_the_request_on():
-    e, least, pushed = drive_through_a_boxed_in_robot(chain=3)
+    e, least, failed = drive_through_a_boxed_in_robot(chain=3)
     r0 = e.robots["r0"]
     assert r0.phase == "done" and math.dist((r0.x, r0.y), (8.0, 5.0)) < 0.1  # it got there
-    assert least >= 0.5 and overlaps(e) == [] and e.summary()["robot_overlaps"] == 0 and pushed == set()
+    assert least >= 0.5 and e.summary()["robot_overlaps"] == 0 and failed == []
     moved = {rid for rid, start in (("r2", (4.0, 5.0)), ("r5", (4.6, 5.0))) if e.robots[rid].x != start[0]}
     assert moved == {"r2", "r5"}  # r2 made way once r5 had made way for it
-    # Without passing it on, r2 has nowhere to go and r0 ends up pushing through after give_up, the
-    # only robot that does. (That a robot making way never pushes through is not shown here: r0's
-    # clock starts first, so r0 pushes first either way.)
-    e, least, pushed = drive_through_a_boxed_in_robot(chain=0)
-    assert least < 0.5 and e.summary()["robot_overlaps"] >= 1 and pushed == {"r0"}
+    # Without passing it on, r2 has nowhere to go and r0 gives up after give_up: its action fails
+    # (for a new plan), where it stands, touching nobody.
+    e, least, failed = drive_through_a_boxed_in_robot(chain=0)
+    assert [(ev.robot, ev.data["reason"]) for ev in failed] == [("r0", "kept back by robots for 12 s")]
+    assert least >= 0.5 and e.summary()["robot_overlaps"] == 0 and e.robots["r0"].phase == "failed"
 
 
-def test_a_robot_making_way_never_pushes_through(monkeypatch):
+def test_a_robot_making_way_never_gives_up(monkeypatch):
     # r0 waits at the shut storage door (driving, held at its stop line) and has asked r2, beside it,
     # to make way. r2's way out (from its way-around search, stood in for here) leads through r3, who
     # stands 2 cm beyond touching: every step of it is refused. r2 waits for r0, not for r3: however
-    # long it stands there it must not give up and push through r3 (a robot kept back 12 s would).
+    # long it stands there it must not give up (a robot kept back 12 s would: its action fails).
     e = crowd_engine({"r2": (6.0, 5.0), "r3": (6.52, 5.0)}, PASSIVE)
     e.executor.make_way.chain = 0  # no passing on: r3 stays where it is
     r0, r2, r3 = e.robots["r0"], e.robots["r2"], e.robots["r3"]
@@ -195,14 +195,15 @@ def test_a_robot_making_way_never_pushes_through(monkeypatch):
         if robot.id != "r2":
             return real(robot, theta, now, dt, fleet, outside, allowed)
         x, y = robot.x + 0.02, robot.y
-        return Step(x, y, 0.0, 0.4, 0.0) if avoidance.clear(robot, x, y, fleet, now) else None
+        return Step(x, y, 0.0, 0.4, 0.0) if avoidance.clear(robot, x, y, fleet) else None
 
     monkeypatch.setattr(avoidance, "out_of_the_way", way_through_r3)
-    asked_at, closest = e.time, math.inf
+    asked_at, closest, events = e.time, math.inf, []
     while e.time < asked_at + 25.0:
         e.step()
+        events += e.take_events()
         assert e.executor.make_way.requests.get("r2") is not None  # still asked all along
         closest = min(closest, math.dist((r2.x, r2.y), (r3.x, r3.y)))
     assert r0.state == "waiting_at_door"
-    assert closest >= 0.505 - 1e-9 and overlaps(e) == []
-    assert "r2" not in avoidance._pushing and avoidance.kept_back("r2", e.time) < 1.0  # its clock never runs
+    assert closest >= 0.505 - 1e-9 and not [ev for ev in events if ev.kind in ("robot_overlap", "action_failed")]
+    assert avoidance.kept_back("r2", e.time) < 1.0  # its clock never runs

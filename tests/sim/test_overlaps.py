@@ -1,7 +1,8 @@
 """Robot-robot contact: the simulator counts two discs that intersect (once per contact, by pair
 and place), and its robots do not touch - they stop for a robot ahead, drive around one that keeps
 them back, cross a doorway one at a time, queue behind a robot standing where they are going, and
-only push through (counted) when wedged for long; a trajectory's hold is kept."""
+never push through (wedged for long, the action fails and the planner plans again); a trajectory's
+hold is kept. Robot-wall contacts are counted the same way."""
 
 from __future__ import annotations
 
@@ -126,16 +127,22 @@ def test_robots_approaching_a_taken_spot_queue_behind_it():
     assert least >= 0.5 and overlaps(e) == []
 
 
-def test_a_robot_wedged_for_long_pushes_through_and_the_contact_is_counted():
+def test_a_robot_wedged_for_long_never_pushes_through_its_action_fails_for_a_new_plan():
     e = engine()
     r0, r1 = e.robots["r0"], e.robots["r1"]
     r1.x, r1.y = 3.0, 6.0  # parked in d_office's doorway, the only way into the office
     r0.x, r0.y, r0.theta = 3.0, 4.6, math.pi / 2
     e.apply_command(command("r0", 1, "gothrough", ["d_office"], [(3.0, 4.6), (3.0, 7.2)]))
-    run_until(e, 10.0)
-    assert r0.y < 5.5 and overlaps(e) == []  # kept back: nothing gets it past
-    run_until(e, 60.0)
-    assert r0.phase == "done" and len(overlaps(e)) == 1  # after give_up it pushes through
+    events = []
+    while e.time < 60.0:
+        e.step()
+        events += e.take_events()
+        assert math.dist((r0.x, r0.y), (r1.x, r1.y)) >= 0.5  # never touches r1
+    assert not [ev for ev in events if ev.kind == "robot_overlap"] and e.summary()["robot_overlaps"] == 0
+    (failed,) = [ev for ev in events if ev.kind == "action_failed"]
+    assert failed.robot == "r0" and failed.data["reason"] == "kept back by robots for 12 s"
+    assert 12.0 <= failed.time <= 30.0  # given up 12 s after it last got 0.5 m anywhere
+    assert r0.phase == "failed" and r0.y < 5.5  # where it was kept back, waiting for a new plan
 
 
 def test_a_hold_keeps_the_robot_in_place_until_its_time():
@@ -149,3 +156,27 @@ def test_a_hold_keeps_the_robot_in_place_until_its_time():
     assert (r0.x, r0.y) == (1.0, 5.0) and r0.state == "moving"
     run_until(e, 12.0)
     assert r0.x > 2.5
+
+
+def test_a_disc_reaching_into_a_wall_is_one_wall_contact_each_time_and_the_deepest_is_kept():
+    e = engine()
+    r0 = e.robots["r0"]
+    (wall,) = [w.box for w in e.site.walls if w.box[0] <= 8.0 <= w.box[2] and 5.5 < w.box[1] < 6.5]
+    r0.x, r0.y = 8.0, wall[1] - 0.25 + 0.04  # 4 cm into the corridor's north wall
+    for _ in range(5):
+        e.step()  # however long it stays so, one contact
+    r0.y -= 0.5  # away ...
+    e.step()
+    r0.y = wall[1] - 0.25 + 0.02  # ... and back, 2 cm in
+    e.step()
+    contacts = [ev for ev in e.take_events() if ev.kind == "wall_contact"]
+    assert [(c.robot, c.data["place"]) for c in contacts] == [("r0", "corridor"), ("r0", "corridor")]
+    assert abs(contacts[0].data["depth"] - 0.04) < 1e-6 and abs(contacts[1].data["depth"] - 0.02) < 1e-6
+    summary = e.summary()
+    assert summary["wall_contacts"] == 2 and summary["wall_contacts_by_place"] == {"corridor": 2}
+    assert abs(summary["wall_depth_max"] - 0.04) < 1e-6
+    r0.y -= 0.5
+    e.step()
+    r0.y = wall[1] - 0.25 + 0.0005  # half a millimetre: touching, not a contact
+    e.step()
+    assert not [ev for ev in e.take_events() if ev.kind == "wall_contact"]

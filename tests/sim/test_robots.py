@@ -397,6 +397,13 @@ def test_a_robot_off_its_trajectory_in_the_next_room_goes_back_through_the_doorw
     assert deepest < 0.01, f"its disc went {deepest:.3f} m into a wall"
 
 
+def test_a_robot_off_its_trajectory_near_its_end_goes_back_through_the_doorway(engine):
+    # As above, but its drive ends 0.2 m past where it stands (projected): its way back has the
+    # trajectory's end as its goal, not a point further on that does not exist.
+    deepest = _approach_beside_the_open_storage_door(engine, (6.75, 4.35, -math.pi / 2), [(6.0, 3.5), (6.9, 3.45)])
+    assert deepest < 0.01, f"its disc went {deepest:.3f} m into a wall"
+
+
 def test_a_robot_cutting_the_corner_at_a_doorways_jamb_stops_short_of_the_wall(engine):
     # Just inside the storage room, beside the open doorway's east jamb, facing the wall; its
     # trajectory runs east along the wall 0.25 m off (near enough that it does not plan a way

@@ -494,6 +494,7 @@ def _section_contacts(results: Results) -> list[str]:
         if counts:
             walls = results.values(method, level, "wall_contacts")
             deepest = results.values(method, level, "wall_depth_max")
+            failed = results.values(method, level, "actions_failed")
             rows.append(
                 [
                     *results.level_cells(level),
@@ -503,18 +504,29 @@ def _section_contacts(results: Results) -> list[str]:
                     _g(max(counts)),
                     _g(statistics.median(walls)) if walls else "",
                     _g(round(1000.0 * max(deepest))) if deepest else "",
+                    f"{_g(statistics.median(failed))} / {_g(max(failed))}" if failed else "",
                 ]
             )
     if not rows:
         return []
-    columns = ["method", "trials with none", "median", "max", "wall contacts (median)", "deepest into a wall (mm)"]
+    columns = [
+        "method",
+        "trials with none",
+        "median",
+        "max",
+        "wall contacts (median)",
+        "deepest into a wall (mm)",
+        "failed actions (median / max)",
+    ]
     return [
-        "## Robot–robot contacts",
+        "## Contacts and failed actions",
         "",
         "Times two robots' discs began to intersect (by more than 1 mm) in a completed trial, as the simulator "
         "counted them (`robot_overlaps` in `trials.csv`); 0 is a mission without a collision. Beside them, times "
         "a robot's disc began to reach into a wall (`wall_contacts`; a robot grazing a doorway's jamb counts) and "
-        "the deepest any reached (`wall_depth_max`; the simulator's wall guard refuses steps past 50 mm).",
+        "the deepest any reached (`wall_depth_max`; the simulator's wall guard refuses steps past 50 mm). Robots "
+        "never push through one another: a robot kept back 12 s with no way around fails its action and the "
+        "planner plans again, so those waits show as failed actions (`actions_failed`).",
         "",
         *_table([*results.level_columns, *columns], rows),
         "",

@@ -43,11 +43,13 @@ METRICS = (
     "robot_overlaps",
     "wall_contacts",
     "wall_depth_max",
+    "actions_failed",
 )
 COUNTS = frozenset(
     {
         "robot_overlaps",
         "wall_contacts",
+        "actions_failed",
         "door_openings",
         "human_door_trips",
         "human_interruptions",

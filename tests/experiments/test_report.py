@@ -144,3 +144,20 @@ def test_report_refuses_a_folder_without_results(tmp_path: Path) -> None:
 
 def test_methods_follow_the_paper_order(fixed: Path) -> None:
     assert load_results(fixed).methods == [m for m in METHODS if m in ("arroch", "no-comm")]
+
+
+def test_the_contacts_section_reports_walls_and_failed_actions_beside_robot_contacts(tmp_path: Path) -> None:
+    figures = [  # (robot contacts, wall contacts, deepest into a wall (m), failed actions) per trial
+        ("0", "4", "0.012", "0"),
+        ("2", "6", "0.050", "3"),
+        ("0", "9", "0.031", "12"),
+    ]
+    rows = [
+        row("arroch", 6, i, team=700.0, doors=3, robot_overlaps=o, wall_contacts=w, wall_depth_max=d, actions_failed=f)
+        for i, (o, w, d, f) in enumerate(figures)
+    ]
+    write_trials(tmp_path, rows)
+    build_report(tmp_path)
+    report = (tmp_path / "REPORT.md").read_text(encoding="utf-8")
+    section = report[report.index("## Contacts and failed actions") :]
+    assert "| 6 | arroch | 2 / 3 | 0 | 2 | 6 | 50 | 3 / 12 |" in section, section

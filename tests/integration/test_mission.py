@@ -74,9 +74,11 @@ def test_default_mission_completes(spawn, tmp_path: Path, mode: list[str]):
         # can start metres from the robot, or (the robot has gone round a corner or through a
         # doorway since) its way from the robot to the trajectory's start crosses a wall: the sim
         # refuses it (its safety check) and the planner plans anew. Robots that make way for one
-        # another move while parked, so this happens a few times a run on a loaded machine;
-        # anything else failing is a bug (a drive held 30 s by the wall guard among them).
-        stale = ("trajectory starts", "crosses a wall")
+        # another move while parked, so this happens a few times a run on a loaded machine. In real
+        # time robots also meet where lockstep keeps them apart, and a robot kept back 12 s by
+        # others fails its action by design (it never pushes through; the planner plans again).
+        # Anything else failing is a bug (a drive held 30 s by the wall guard among them).
+        stale = ("trajectory starts", "crosses a wall", "kept back by robots")
         assert len(failed) <= 8 and all(any(s in f.get("reason", "") for s in stale) for f in failed), [
             (f.get("action"), f.get("args"), f.get("reason")) for f in failed
         ]

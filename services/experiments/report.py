@@ -302,7 +302,7 @@ def _section_params(results: Results) -> list[str]:
         "",
     ]
     lines += _table(["option", "value"], [[k, _value(v)] for k, v in sorted(human.items())])
-    for name in ("site_params", "engine"):
+    for name in ("site_params", "engine", "robot_motion"):
         if params.get(name):
             lines += ["", f"{name}: " + ", ".join(f"{k} = {_value(v)}" for k, v in sorted(params[name].items()))]
     if params.get("mode") is not None:
@@ -518,15 +518,18 @@ def _section_contacts(results: Results) -> list[str]:
         "deepest into a wall (mm)",
         "failed actions (median / max)",
     ]
+    motion = (results.params or {}).get("robot_motion", {})
+    tolerance = f"{_g(round(1000.0 * motion['wall_tolerance']))} mm" if "wall_tolerance" in motion else "its tolerance"
+    give_up = f"{_g(motion['give_up'])} s" if "give_up" in motion else "for long"
     return [
         "## Contacts and failed actions",
         "",
         "Times two robots' discs began to intersect (by more than 1 mm) in a completed trial, as the simulator "
         "counted them (`robot_overlaps` in `trials.csv`); 0 is a mission without a collision. Beside them, times "
         "a robot's disc began to reach into a wall (`wall_contacts`; a robot grazing a doorway's jamb counts) and "
-        "the deepest any reached (`wall_depth_max`; the simulator's wall guard refuses steps past 50 mm). Robots "
-        "never push through one another: a robot kept back 12 s with no way around fails its action and the "
-        "planner plans again, so those waits show as failed actions (`actions_failed`).",
+        f"the deepest any reached (`wall_depth_max`; the simulator's wall guard refuses steps past {tolerance}). "
+        f"Robots never push through one another: a robot kept back {give_up} with no way around fails its action "
+        "and the planner plans again, so those waits show as failed actions (`actions_failed`).",
         "",
         *_table([*results.level_columns, *columns], rows),
         "",

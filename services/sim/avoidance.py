@@ -44,6 +44,8 @@ from .right_of_way import Body
 
 Rect = tuple[float, float, float, float]  # x0, y0, x1, y1
 
+REACHED = 0.08  # m: a way's point this near the robot is reached
+BACK_OFF = 0.1  # m: the shortest back-off from a robot before a way (longer than REACHED: it is driven)
 RING = (0.7, 1.0, 1.3, 1.6)  # m: how far from where it stands a robot looks for a free point to step to
 NEIGHBOURS = [(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr, dc) != (0, 0)]
 
@@ -95,10 +97,11 @@ class Avoidance:
 
     # ------------------------------------------------------------------ driving around
 
-    def gave_up(self, robot: Body, now: float) -> bool:
-        """Whether the robot, not getting on, has been kept back ``give_up`` seconds without getting
-        anywhere (asking starts its clock; :meth:`moving_on` stops it)."""
-        return now - self._since(robot, now) >= self.give_up
+    def still_kept_back(self, robot: Body, now: float) -> float:
+        """The robot is kept back at this step: seconds it has been kept back without getting
+        anywhere (its clock starts at the first such step; :meth:`moving_on` stops it). At
+        ``give_up`` its action fails."""
+        return now - self._since(robot, now)
 
     def moving_on(self, robot: str) -> None:
         """The robot follows its trajectory again (or waits for a door or a hold, not a robot)."""
@@ -255,7 +258,7 @@ class Avoidance:
         fleet: Mapping[str, Body],
         allowed: Callable[[Step], bool],
     ) -> Step | None:
-        while detour.points and math.hypot(detour.points[0][0] - robot.x, detour.points[0][1] - robot.y) < 0.08:
+        while detour.points and math.hypot(detour.points[0][0] - robot.x, detour.points[0][1] - robot.y) < REACHED:
             detour.points.pop(0)
         if not detour.points:
             self.moving_on(robot.id)  # there
@@ -349,7 +352,8 @@ class Avoidance:
     ) -> list[tuple[float, float]]:
         """A* on the cells of ``rooms`` from the robot to ``goal``, robots' discs (grown by
         ``clearance``) and the areas kept out (but one it stands in) as obstacles."""
-        start = (robot.x, robot.y)
+        backed = self._backed_off(robot, others)
+        start = backed or (robot.x, robot.y)
         cells, (x0, y0) = self._room_cells(rooms)
         res = self.resolution
         ny, nx = cells.shape
@@ -363,7 +367,7 @@ class Avoidance:
             r = max(min(keep, math.dist(start, (ox, oy)) - 0.01), floor)
             blocked = blocked | ((cx - ox) ** 2 + (cy - oy) ** 2 < r * r)
         for ax, ay, bx, by in self.keep_out(robot):
-            if not (ax <= start[0] <= bx and ay <= start[1] <= by):
+            if not (ax <= robot.x <= bx and ay <= robot.y <= by):
                 blocked = blocked | ((cx >= ax) & (cx <= bx) & (cy >= ay) & (cy <= by))
 
         def cell(p: tuple[float, float]) -> tuple[int, int]:
@@ -394,7 +398,34 @@ class Avoidance:
             route.append(came[route[-1]])
         route.reverse()
         points = [(x0 + (c[1] + 0.5) * res, y0 + (c[0] + 0.5) * res) for c in _corners(route, blocked)]
-        return [*points, goal]
+        return [*([backed] if backed else []), *points, goal]
+
+    def _backed_off(self, robot: Body, others: list[tuple[float, float]]) -> tuple[float, float] | None:
+        """Where a robot nearer than ``keep`` to other robots first backs off to before it drives a
+        way: straight away from them, until ``keep`` from the nearest (at least ``BACK_OFF``). A way's
+        first leg from beside a robot it all but touches runs almost along that robot's disc, and any
+        step along it closes in (solid bodies refuse it), so the robot would never set off. None when
+        no robot is that near, or the point is not free or would bring it nearer another robot."""
+        keep = 2.0 * self.radius + self.clearance
+        near = [(o, math.dist((robot.x, robot.y), o)) for o in others]
+        near = [(o, d) for o, d in near if 1e-6 < d < keep]
+        if not near:
+            return None
+        ax = sum((robot.x - o[0]) / d for o, d in near)
+        ay = sum((robot.y - o[1]) / d for o, d in near)
+        norm = math.hypot(ax, ay)
+        if norm < 1e-6:
+            return None  # between two: no way straight away from both
+        length = max(keep - min(d for _, d in near) + 0.01, BACK_OFF)
+        point = (robot.x + ax / norm * length, robot.y + ay / norm * length)
+        if not self.free.is_free(*point) or self.site.room_at(*point) is None:
+            return None
+        limit = 2.0 * self.radius + self.contact_gap
+        for o in others:
+            after = math.dist(point, o)
+            if after < limit and after < math.dist((robot.x, robot.y), o):
+                return None
+        return point
 
 
 def _corners(route: list[tuple[int, int]], blocked: np.ndarray) -> list[tuple[int, int]]:

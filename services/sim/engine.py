@@ -168,6 +168,7 @@ class Engine:
                 "seed": seed,
                 "human": self.human_config.as_dict(),
                 "engine": self.config.as_dict(),
+                "robot_motion": self.executor.motion_params(),
                 "site_params": {k: getattr(p, k) for k in p.__dataclass_fields__},
                 "robots": len(self.robots),
                 "objects": len(self.objects.items),

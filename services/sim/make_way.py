@@ -16,9 +16,11 @@ Because the ranks are a total order, two robots never ask each other, and the hi
 kept back always gets its way cleared when there is room anywhere nearby.
 
 A robot asked steps off the asker's way ahead (``horizon`` metres of its trajectory) to the nearest
-free point at least a robot's width from it, and waits there until the asker has gone past (it is
-no longer kept back and is ``passed`` metres away) or stopped driving; then it goes on with what
-it was doing (a driving robot plans its way back onto its trajectory).
+free point at least a robot's width from it (a robot off the way's points that the asker still
+stops for - its drive cuts a corner nearer than them - steps further: :mod:`.robots`), and waits
+there until the asker has gone past (it is no longer kept back and is ``passed`` metres away) or
+stopped driving; then it goes on with what it was doing (a driving robot plans its way back onto
+its trajectory).
 
 A robot asked that is boxed in (in a crowd at a door every free point is behind another robot)
 passes the request on: it asks the robot standing where it could go to make way in turn - off the

@@ -273,7 +273,7 @@ class RobotExecutor:
             if self._goal_taken(robot, follower, now):
                 robot.v = robot.omega = 0.0
                 return self._arrived(robot, now + dt)
-            if self.avoidance.gave_up(robot, now):
+            if self.avoidance.still_kept_back(robot, now) >= self.avoidance.give_up:
                 # wedged among robots (or behind one that waits for a door) with no way around and
                 # nobody making way: it never pushes through; the planner plans again from here
                 robot.v = robot.omega = 0.0
@@ -315,6 +315,17 @@ class RobotExecutor:
         if step.arrived:
             return self._arrived(robot, now + dt)
         return []
+
+    def motion_params(self) -> dict[str, float]:
+        """How robots keep clear of walls and of one another (the metrics' params: a report quotes them)."""
+        return {
+            "wall_tolerance": self.config.wall_tolerance,
+            "guard_patience": self.config.guard_patience,
+            "robot_margin": self.config.robot_margin,
+            "detour_after": self.avoidance.detour_after,
+            "ask_after": self.make_way.ask_after,
+            "give_up": self.avoidance.give_up,
+        }
 
     def _held_back(self, robot: Robot, refused: bool, dt: float) -> bool:
         """Whether the robot's drive has been refused by the shut-doorway or wall guard for too long:
@@ -379,7 +390,7 @@ class RobotExecutor:
         robot.yield_time += dt
         self.avoidance.not_kept_back(robot.id)  # it waits for nobody: it never gives up
         step = None
-        if not self.make_way.off_the_way(request, robot.x, robot.y):
+        if self._in_the_way(robot, request):
             step = self.avoidance.out_of_the_way(
                 robot,
                 robot.theta,
@@ -396,6 +407,14 @@ class RobotExecutor:
             return True
         robot.x, robot.y, robot.theta, robot.v, robot.omega = step.x, step.y, step.theta, step.v, step.omega
         return True
+
+    def _in_the_way(self, robot: Robot, request: Request) -> bool:
+        """Whether the robot asked still stands in the asker's way: on the way's points, or off
+        them but still what the asker stops for (its drive cuts a corner nearer than the points)."""
+        return (
+            not self.make_way.off_the_way(request, robot.x, robot.y)
+            or self.right_of_way.blocked_by.get(request.asker) == robot.id
+        )
 
     def _pass_on(self, robot: Robot, request: Request, now: float) -> None:
         """Boxed in while making way: ask the robot standing where it could go to make way in turn

@@ -161,3 +161,11 @@ def test_the_contacts_section_reports_walls_and_failed_actions_beside_robot_cont
     report = (tmp_path / "REPORT.md").read_text(encoding="utf-8")
     section = report[report.index("## Contacts and failed actions") :]
     assert "| 6 | arroch | 2 / 3 | 0 | 2 | 6 | 50 | 3 / 12 |" in section, section
+    assert "refuses steps past its tolerance" in section  # no params.json: no figure made up
+    # the guard's tolerance and the give-up time are quoted from the simulator's params
+    motion = {"wall_tolerance": 0.04, "give_up": 9.0, "ask_after": 3.0}
+    (tmp_path / "params.json").write_text(json.dumps({"robot_motion": motion}), encoding="utf-8")
+    build_report(tmp_path)
+    report = (tmp_path / "REPORT.md").read_text(encoding="utf-8")
+    assert "refuses steps past 40 mm" in report and "a robot kept back 9 s with no way around" in report
+    assert "robot_motion: ask_after = 3, give_up = 9, wall_tolerance = 0.04" in report

@@ -83,6 +83,43 @@ def test_a_robot_kept_back_by_a_parked_robot_drives_around_it():
     assert least >= 0.5 and overlaps(e) == [] and e.summary()["robot_overlaps"] == 0
 
 
+def test_a_robot_all_but_touching_a_parked_robot_backs_off_and_drives_around_it():
+    # Where two robots stood in a generated storage room (shifted into this one's): r0, told to
+    # approach the door, is 0.5055 m from r1 (its disc 5.5 mm from r1's), r1 right on its way. The
+    # way around starts almost along r1's disc: every step of it would close in, and solid bodies
+    # refused each one, so r0 never set off and its approach failed every 12 s. It backs off first.
+    # (r1 is not asked to make way here: r0 must get round it on its own.)
+    e = engine()
+    e.executor.make_way.ask = lambda asker, asked, way, now: False
+    r0, r1 = e.robots["r0"], e.robots["r1"]
+    r1.x, r1.y = 5.6125, 2.611
+    r0.x, r0.y, r0.theta = 5.9827, 2.2668, 1.2657
+    e.apply_command(command("r0", 1, "approach", ["d_storage"], [(r0.x, r0.y), (5.1, 3.4)]))
+    least, events = math.inf, []
+    while e.time < 60.0 and r0.phase == "drive":
+        e.step()
+        events += e.take_events()
+        least = min(least, math.dist((r0.x, r0.y), (r1.x, r1.y)))
+    assert [ev for ev in events if ev.kind == "action_failed"] == []
+    assert r0.phase == "done" and math.dist((r0.x, r0.y), (5.1, 3.4)) < 0.1
+    assert least >= 0.505 - 1e-9 and not [ev for ev in events if ev.kind == "robot_overlap"]
+
+
+def test_a_way_planned_beside_a_robot_it_all_but_touches_starts_straight_away_from_it():
+    e = engine()
+    avoidance, r0 = e.executor.avoidance, e.robots["r0"]
+    r0.x, r0.y = 5.9827, 2.2668
+    other = (5.6125, 2.611)
+    points = avoidance._search(r0, (e.site.rooms["storage"],), (5.1, 3.4), [other])
+    away = math.atan2(r0.y - other[1], r0.x - other[0])
+    first = points[0]
+    assert math.isclose(math.atan2(first[1] - r0.y, first[0] - r0.x), away, abs_tol=1e-6)
+    assert math.dist(first, other) >= 2 * avoidance.radius + avoidance.clearance
+    assert math.dist(first, (r0.x, r0.y)) > 0.08  # farther than a reached point: it is driven
+    r0.x, r0.y = 6.5, 1.5  # with room around it, a robot plans from where it stands
+    assert avoidance._backed_off(r0, [other]) is None
+
+
 def test_two_robots_head_on_in_a_corridor_pass_each_other_without_touching():
     e = engine()
     r0, r1 = e.robots["r0"], e.robots["r1"]

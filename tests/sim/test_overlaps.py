@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 
+from services.sim.avoidance import REACHED
 from services.sim.doorways import in_lane
 from services.sim.engine import Engine
 from tests.sim.helpers import command, small_site
@@ -115,7 +116,7 @@ def test_a_way_planned_beside_a_robot_it_all_but_touches_starts_straight_away_fr
     first = points[0]
     assert math.isclose(math.atan2(first[1] - r0.y, first[0] - r0.x), away, abs_tol=1e-6)
     assert math.dist(first, other) >= 2 * avoidance.radius + avoidance.clearance
-    assert math.dist(first, (r0.x, r0.y)) > 0.08  # farther than a reached point: it is driven
+    assert math.dist(first, (r0.x, r0.y)) > REACHED  # farther than a reached point: it is driven
     r0.x, r0.y = 6.5, 1.5  # with room around it, a robot plans from where it stands
     assert avoidance._backed_off(r0, [other]) is None
 

@@ -97,10 +97,10 @@ class Avoidance:
 
     # ------------------------------------------------------------------ driving around
 
-    def still_kept_back(self, robot: Body, now: float) -> float:
-        """The robot is kept back at this step: seconds it has been kept back without getting
-        anywhere (its clock starts at the first such step; :meth:`moving_on` stops it). At
-        ``give_up`` its action fails."""
+    def mark_kept_back(self, robot: Body, now: float) -> float:
+        """Mark the robot kept back at this step (its clock starts at the first such step;
+        :meth:`moving_on` stops it) and return the seconds it has been kept back without getting
+        anywhere. At ``give_up`` its action fails."""
         return now - self._since(robot, now)
 
     def moving_on(self, robot: str) -> None:

@@ -273,7 +273,7 @@ class RobotExecutor:
             if self._goal_taken(robot, follower, now):
                 robot.v = robot.omega = 0.0
                 return self._arrived(robot, now + dt)
-            if self.avoidance.still_kept_back(robot, now) >= self.avoidance.give_up:
+            if self.avoidance.mark_kept_back(robot, now) >= self.avoidance.give_up:
                 # wedged among robots (or behind one that waits for a door) with no way around and
                 # nobody making way: it never pushes through; the planner plans again from here
                 robot.v = robot.omega = 0.0
@@ -419,7 +419,7 @@ class RobotExecutor:
     def _pass_on(self, robot: Robot, request: Request, now: float) -> None:
         """Boxed in while making way: ask the robot standing where it could go to make way in turn
         (at most once per ``avoidance.retry``: it is a search of the room)."""
-        if not self.make_way.off_the_way(request, robot.x, robot.y) and (
+        if self._in_the_way(robot, request) and (
             now - self._passed_on.get(robot.id, -math.inf) >= self.avoidance.retry
         ):
             self._passed_on[robot.id] = now

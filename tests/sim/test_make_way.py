@@ -98,7 +98,7 @@ def test_a_new_command_starts_with_no_time_kept_back():
         e.step()
     e.apply_command(command("r0", 2, "approach", ["d_office"], [(r0.x, r0.y), (r0.x, 4.4)]))
     assert e.executor.avoidance.kept_back("r0", e.time) == 0.0
-    assert e.executor.avoidance.still_kept_back(r0, e.time) == 0.0  # its clock starts now
+    assert e.executor.avoidance.mark_kept_back(r0, e.time) == 0.0  # its clock starts now
 
 
 def test_a_way_around_keeps_out_of_a_lane_another_robot_holds_and_cuts_no_corner():
@@ -223,3 +223,19 @@ def test_a_robot_off_the_ways_points_that_the_asker_still_stops_for_is_still_in_
     assert ex._in_the_way(r2, request)
     ex.right_of_way.blocked_by["r0"] = "r1"
     assert not ex._in_the_way(r2, request)
+
+
+def test_a_boxed_in_robot_the_asker_still_stops_for_passes_the_request_on(monkeypatch):
+    # The same robot just off the way's points, with nowhere to step: it passes the request on
+    # exactly when it is still in the asker's way (the same predicate as stepping off it).
+    e = crowd_engine({"r2": (4.0, 5.56)})
+    ex = e.executor
+    request = Request("r0", [(3.0 + 0.1 * i, 5.0) for i in range(21)], 0.0, 0.0)
+    searched: list[str] = []
+    monkeypatch.setattr(ex.avoidance, "boxed_in_by", lambda robot, *_: searched.append(robot.id))
+    ex.right_of_way.blocked_by["r0"] = "r1"
+    ex._pass_on(e.robots["r2"], request, e.time)
+    assert searched == []  # off the way and not what r0 stops for: nothing to pass on
+    ex.right_of_way.blocked_by["r0"] = "r2"
+    ex._pass_on(e.robots["r2"], request, e.time)
+    assert searched == ["r2"]  # r0 stops for it: it looks for who boxes it in

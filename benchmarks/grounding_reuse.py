@@ -20,7 +20,11 @@ context per solve. This measures how much that could save, on a first plan and i
   whole program once per solve would save. That is an upper
   bound, reached only if the context can enter a grounded program without being grounded into it
   (the encoding lets the context settle the grounding: the horizon bounds the time chain,
-  ``blocked``/``near``/``closed`` prune times; see ``docs/architecture.md``, "The context").
+  ``blocked``/``near``/``closed`` prune times; see ``docs/architecture.md``, "The context");
+- then the kept programs themselves (:func:`with_externals`), made, grounded and optimised against
+  the planner's own fresh programs with the same time limit: the whole context held as
+  ``#external`` atoms (one grounding per problem), and only its bounds (horizon, the others' end,
+  the wait limits; one grounding per problem and distinct rest of the context). Optima must agree.
 
     .venv/bin/python benchmarks/grounding_reuse.py --robots 6 --seeds 1 --replans 2
 """
@@ -35,6 +39,8 @@ import time
 from collections import Counter
 from pathlib import Path
 
+import clingo
+
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from protocol.site import generate_site, loads_site  # noqa: E402
@@ -42,11 +48,13 @@ from services.planner import single  # noqa: E402
 from services.planner.facts import Context, closed_facts, context_facts, door_facts, throughs  # noqa: E402
 from services.planner.planner import PlannerSettings, TaskPlanner  # noqa: E402
 from services.planner.replay import world_at  # noqa: E402
-from services.planner.solver import _grounded  # noqa: E402
+from services.planner.solver import _grounded, _guards, _optimise, _options, solve  # noqa: E402
 from services.planner.world import initial_world  # noqa: E402
 
 # problem key, site facts, problem part, context part, neutral context, encoding parts, constraints
 Recorded = tuple[tuple, str, str, str, str, list[str], object]
+SOLVE_LIMIT = PlannerSettings().solve_limit  # s per optimisation, the planner's own
+PROGRESS_EVERY = 30.0  # s between progress lines
 REPEATS = 3  # each program is made and grounded this many times, the fastest kept (the machine is shared)
 
 
@@ -92,6 +100,13 @@ def ground(facts: str, parts: list[str], constraints) -> tuple[float, int]:
     return best, len(ctl.symbolic_atoms)
 
 
+def problem_of(program: Recorded) -> tuple:
+    """What a kept program would be kept for: the same robot, legs, problem facts (its start, the
+    base second), encoding parts and constraints."""
+    key, site_facts, mine, _context, _neutral, parts, constraints = program
+    return (key, site_facts, mine, tuple(parts), id(constraints))
+
+
 def measure(robots: int, seed: int, replans: int) -> dict:
     programs = record_programs(robots, seed, replans)
     full_s, full_atoms, alone_s, alone_atoms = [], [], [], []
@@ -103,10 +118,10 @@ def measure(robots: int, seed: int, replans: int) -> dict:
         s, a = ground(site_facts + mine + neutral + active, parts, constraints)
         alone_s.append(s)
         alone_atoms.append(a)
-    per_problem = Counter(p[0] for p in programs)
+    per_problem = Counter(problem_of(p) for p in programs)
     alone_by_problem: dict[tuple, list[float]] = {}
     for program, seconds in zip(programs, alone_s, strict=True):
-        alone_by_problem.setdefault(program[0], []).append(seconds)
+        alone_by_problem.setdefault(problem_of(program), []).append(seconds)
     # kept programs: each problem's part made and grounded once, plus each program's context on top
     once = sum(statistics.mean(v) for v in alone_by_problem.values())
     contexts = sum(max(f - a, 0.0) for f, a in zip(full_s, alone_s, strict=True))
@@ -129,7 +144,103 @@ def measure(robots: int, seed: int, replans: int) -> dict:
         else None,
         "ground_atoms_as_planned_median": statistics.median(full_atoms) if programs else 0,
         "ground_atoms_problem_alone_median": statistics.median(alone_atoms) if programs else 0,
+        "kept_whole_context_external": with_externals(programs, SOLVE_LIMIT),
+        "kept_bounds_external": with_externals(programs, SOLVE_LIMIT, BOUNDS),
     }
+
+
+def context_atoms(text: str) -> frozenset[clingo.Symbol]:
+    """The atoms a context's facts state (spans such as ``blocked(r0,x,88..99,3)`` expanded)."""
+    ctl = clingo.Control(["--warn=none"])
+    ctl.add("base", [], text)
+    ctl.ground([("base", [])])
+    return frozenset(a.symbol for a in ctl.symbolic_atoms)
+
+
+# The context atoms that change a program's numbers but not which doorways and seconds are ruled out:
+# held as externals alone, the rest stays facts and a problem is grounded again only when that changes.
+BOUNDS = frozenset({"horizon", "others_end", "syncwait", "clearwait"})
+
+
+def with_externals(programs: list[Recorded], limit: float, held: frozenset[str] | None = None) -> dict:
+    """Kept programs measured: each problem's program grounded once per distinct context (apart from
+    the predicates ``held``; ``None``: all of it) with the ``held`` atoms of every context it met as
+    ``#external``, then optimised once per recorded context (those atoms assigned true, the others
+    false), against each program made, grounded and optimised as the planner does.
+
+    The externals' domain is the union of the contexts the problem actually met, known in advance
+    here: a kept program in the planner would not know its future contexts and would need a wider
+    domain (every second a context could name), so this is the most such a program could save. Both
+    are solved to the same time limit; the costs must agree where both are proved optimal."""
+
+    def is_held(atom: clingo.Symbol) -> bool:
+        return held is None or atom.name in held
+
+    groups: dict[tuple, list[tuple[Recorded, frozenset[clingo.Symbol]]]] = {}
+    for program in programs:
+        atoms = context_atoms(program[3])
+        fixed = frozenset(a for a in atoms if not is_held(a))
+        groups.setdefault((*problem_of(program), fixed), []).append((program, atoms))
+    fresh_s = kept_s = kept_ground_s = 0.0
+    fresh_atoms: list[int] = []
+    kept_atoms: list[int] = []
+    disagree = compared = 0
+    shown = time.monotonic()
+    for n, ((key, site_facts, mine, parts, _, fixed), members) in enumerate(groups.items(), 1):
+        if time.monotonic() - shown > PROGRESS_EVERY:  # a periodic line: at 20 robots this takes minutes
+            shown = time.monotonic()
+            what = "the whole context" if held is None else "its bounds"
+            print(f"  kept programs, {what} external: {n}/{len(groups)}", file=sys.stderr)
+        constraints = members[0][0][6]
+        active = f"active({key[0]}).\n"
+        domain = sorted(frozenset().union(*(atoms for _, atoms in members)) - fixed)
+        fresh_costs = []
+        for program, _atoms in members:
+            facts = site_facts + mine + program[3] + active
+            t0 = time.perf_counter()
+            out = solve(facts, list(parts), constraints, time_limit=limit, diagnose=False)
+            fresh_s += time.perf_counter() - t0
+            fresh_costs.append(levels(out.cost) if out.status == "optimal" else None)
+            fresh_atoms.append(ground_atoms(facts, parts, constraints))
+        t0 = time.perf_counter()
+        kept_facts = "".join(f"{a}.\n" for a in sorted(fixed)) + "".join(f"#external {a}.\n" for a in domain)
+        ctl = _grounded(site_facts + mine + active + kept_facts, list(parts), constraints, _options())
+        kept_ground_s += time.perf_counter() - t0
+        kept_atoms.append(len(ctl.symbolic_atoms))
+        for (_program, atoms), fresh_cost in zip(members, fresh_costs, strict=True):
+            t1 = time.perf_counter()
+            for a in domain:
+                ctl.assign_external(a, a in atoms)
+            out = _optimise(ctl, _guards(constraints), limit, t1, 0.0)
+            kept_s += time.perf_counter() - t1
+            if fresh_cost is not None and out.status == "optimal":
+                compared += 1
+                disagree += levels(out.cost) != fresh_cost
+    kept_total = kept_ground_s + kept_s
+    return {
+        "held": "all" if held is None else sorted(held),
+        "programs": len(programs),
+        "groundings_kept": len(groups),
+        "seconds_fresh": round(fresh_s, 3),  # make + ground + optimise, every program
+        "seconds_kept": round(kept_total, 3),  # make + ground once per group, optimise every program
+        "seconds_kept_grounding": round(kept_ground_s, 3),
+        "kept_to_fresh": round(kept_total / fresh_s, 3) if fresh_s else None,
+        "ground_atoms_fresh_median": statistics.median(fresh_atoms) if fresh_atoms else 0,
+        "ground_atoms_kept_median": statistics.median(kept_atoms) if kept_atoms else 0,
+        "optima_compared": compared,
+        "optima_that_differ": disagree,
+    }
+
+
+def levels(cost) -> tuple[int, ...]:
+    """A cost vector without its zero levels: a program lists a priority level only when some
+    minimize element at it is grounded, so the same optimum can read (0, 249) and (0, 0, 249)."""
+    return tuple(c for c in cost if c)
+
+
+def ground_atoms(facts: str, parts, constraints) -> int:
+    ctl = _grounded(facts, list(parts), constraints, ["--warn=none"])  # kept alive while its atoms are counted
+    return len(ctl.symbolic_atoms)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -22,8 +22,10 @@ SETTLE = 0.4  # seconds for a new subscription to reach the router
 
 
 @pytest.fixture
-def start_restrictor(spawn, router, namespace, tmp_path):
-    """``start_restrictor(clock="wall", state_dir=None)`` runs ``arroch restrictor`` and waits until it is up."""
+def start_restrictor(spawn, router, namespace, tmp_path, client):
+    """``start_restrictor(clock="wall", state_dir=None)`` runs ``arroch restrictor`` and waits until it
+    is up and the router routes queries to it: its log line comes before the router has its queryables
+    (a query then gets no reply at all; seen on a loaded machine)."""
 
     def _start(*, clock: str = "wall", state_dir=None, name: str = "restrictor"):
         proc = spawn(
@@ -43,9 +45,19 @@ def start_restrictor(spawn, router, namespace, tmp_path):
             name=name,
         )
         proc.wait_for("up on namespace", timeout=30)
+        wait_until_served(client)
         return proc
 
     return _start
+
+
+def wait_until_served(client: TestClient, timeout: float = 10.0) -> None:
+    """Until the restrictor answers on ``constraints``, its last queryable (the feedback one is
+    declared before it on the same session, so the router has both)."""
+    deadline = time.monotonic() + timeout
+    while not client.query(client.keys.constraints(), ConstraintSet, timeout=1.0):
+        assert time.monotonic() < deadline, f"the restrictor answered no query within {timeout:g} s"
+        time.sleep(0.05)
 
 
 def query_set(client: TestClient) -> ConstraintSet:

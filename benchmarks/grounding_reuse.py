@@ -36,7 +36,6 @@ import json
 import statistics
 import sys
 import time
-from collections import Counter
 from pathlib import Path
 
 import clingo
@@ -118,10 +117,10 @@ def measure(robots: int, seed: int, replans: int) -> dict:
         s, a = ground(site_facts + mine + neutral + active, parts, constraints)
         alone_s.append(s)
         alone_atoms.append(a)
-    per_problem = Counter(problem_of(p) for p in programs)
     alone_by_problem: dict[tuple, list[float]] = {}
     for program, seconds in zip(programs, alone_s, strict=True):
         alone_by_problem.setdefault(problem_of(program), []).append(seconds)
+    per_problem = {problem: len(seconds) for problem, seconds in alone_by_problem.items()}
     # kept programs: each problem's part made and grounded once, plus each program's context on top
     once = sum(statistics.mean(v) for v in alone_by_problem.values())
     contexts = sum(max(f - a, 0.0) for f, a in zip(full_s, alone_s, strict=True))

@@ -45,6 +45,24 @@ class Keys:
     def door_state(self, door: str = "*") -> str:
         return self._k("door", door if door == "*" else _chunk(door, "door id"), "state")
 
+    def door_sensor(self, door: str = "*") -> str:
+        """A real door's sensor (a door controller, or a ROS 2 ``std_msgs/Bool`` through the bridge):
+        DoorState that a simulator in sensor mode follows."""
+        return self._k("door", door if door == "*" else _chunk(door, "door id"), "sensor")
+
+    # the human and the study
+    def human_state(self) -> str:
+        return self._k("human", "state")
+
+    def participant_action(self) -> str:
+        return self._k("participant", "action")
+
+    def questionnaire(self) -> str:
+        return self._k("participant", "answers")
+
+    def study_control(self) -> str:
+        return self._k("study", "control")
+
     # planner → all
     def plan(self) -> str:
         return self._k("plan")

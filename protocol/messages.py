@@ -29,6 +29,21 @@ ROBOT_STATES = ("idle", "moving", "waiting_at_door", "loading", "unloading", "do
 PRIMITIVE_KINDS = ("line", "polyline", "polygon", "circle", "text", "arrow")
 LINE_STYLES = ("solid", "xray", "dashed")
 AWAITING = ("", "plan", "feedback", "command", "camera")  # what a paused lockstep simulator waits for (Clock)
+# What a study participant does (ParticipantAction.act); see that class.
+PARTICIPANT_ACTS = (
+    "go_to_door",
+    "open_door",
+    "back_to_desk",
+    "task_done",
+    "view",
+    "puzzle_move",
+    "feedback",
+    "consent",
+    "mark",
+)
+PAGE_VIEWS = ("", "puzzle", "ar", "map")
+HUMAN_PLACES = ("desk", "to_door", "at_door", "back")  # HumanState.place
+QUESTIONNAIRES = ("arroch-q", "nasa-tlx")
 
 
 class Message(Struct, kw_only=True, tag_field="type", tag=True):
@@ -250,6 +265,74 @@ class Event(Message):
     data: Json = None
 
 
+class ParticipantAction(Message):
+    """What a study participant did on her tablet page, or what the experimenter marked on the
+    console. Everything she does crosses the wire as one of these, so the run's recording holds it.
+
+    ``act``:
+
+    - ``go_to_door`` (``door``): she leaves her desk for that door (virtual world: her avatar walks);
+    - ``open_door`` (``door``): she opens it (virtual world: the press-and-hold at the door completed);
+    - ``back_to_desk``: she turns back without opening (the walk back after opening is automatic);
+    - ``task_done``: her own task (the puzzle) is complete;
+    - ``view`` (``view``): the page now shows ``puzzle``, ``ar`` or ``map``; time away from her task
+      is measured from these;
+    - ``puzzle_move`` (``piece``, ``correct``, ``placed`` of ``total``): one move of the puzzle;
+    - ``feedback`` (``door``, ``minutes``, ``note`` = the library entry's kind): she sent feedback;
+    - ``consent`` (``note`` = ``given`` or ``refused``): her answer on the consent screen;
+    - ``mark`` (``note``): the experimenter marked an event.
+    """
+
+    participant: Ident  # pseudonymous id (e.g. P03): never a name
+    act: Choice(*PARTICIPANT_ACTS)
+    trial: Str(64) = ""  # the study plan's trial id
+    door: Str(64) = ""
+    view: Choice(*PAGE_VIEWS) = ""
+    piece: Int(-1, 100_000) = -1
+    correct: bool = False
+    placed: Int(0, 100_000) = 0
+    total: Int(0, 100_000) = 0
+    minutes: Int(0, 1440) = 0
+    note: Str(512) = ""
+    wall: Float(0.0, TIME) = 0.0  # the page's wall clock (Unix seconds) when she did it
+
+
+class QuestionnaireAnswers(Message):
+    """A participant's answers after a trial: ``arroch-q`` (the paper's Q1-Q5, 1-5) or ``nasa-tlx``
+    (raw TLX, six scales 0-100)."""
+
+    participant: Ident
+    instrument: Choice(*QUESTIONNAIRES)
+    trial: Str(64) = ""
+    answers: Map(Int(0, 100), 64) = {}
+    wall: Float(0.0, TIME) = 0.0
+
+
+class HumanState(Message):
+    """Where the human is as the simulator has her: at her ``desk``, walking ``to_door``,
+    ``at_door`` (it can be opened now), or walking ``back``. In participant mode the page shows the
+    door controls from it."""
+
+    mode: Choice("simulated", "participant", "sensor") = "simulated"
+    place: Choice(*HUMAN_PLACES) = "desk"
+    door: Str(64) = ""  # the door she walks to, stands at or comes back from
+    doors: List(Ident, 64) = []  # the doors she operates
+    x: Float(-COORD, COORD) = 0.0
+    y: Float(-COORD, COORD) = 0.0
+    theta: Float(-ANGLE, ANGLE) = 0.0
+    task_done: bool = False
+    paused: bool = False  # the experimenter paused the trial: site time stands still
+    open_time: Float(0.0, 1e4) = 0.0  # site seconds the press-and-hold at a door lasts
+
+
+class StudyControl(Message):
+    """The experimenter's console to the world: ``pause`` or ``resume`` site time, ``abort`` the trial."""
+
+    command: Choice("pause", "resume", "abort")
+    trial: Str(64) = ""
+    reason: Str(512) = ""
+
+
 ALL_MESSAGES: tuple[type[Message], ...] = (
     Clock,
     RobotPose,
@@ -265,6 +348,10 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     CameraTruth,
     Overlay,
     Event,
+    ParticipantAction,
+    QuestionnaireAnswers,
+    HumanState,
+    StudyControl,
 )
 
 BY_TYPE: dict[str, type[Message]] = {cls.TYPE: cls for cls in ALL_MESSAGES}

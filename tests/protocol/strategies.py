@@ -87,7 +87,8 @@ def describe(hint: Any) -> tuple[Any, dict[str, Any]]:
             return list[list[number]], meta | {"row_len": item_meta["lengths"][0]} | _item_limits(number_meta)
         return list[item], meta | _item_limits(item_meta)
     if origin is dict:
-        return dict[str, describe(args[1])[0]], meta
+        value, value_meta = describe(args[1])
+        return dict[str, value], meta | _item_limits(value_meta)
     if origin in (types.UnionType, typing.Union):
         return functools.reduce(operator.or_, (describe(a)[0] for a in args)), meta
     return hint, meta
@@ -177,8 +178,9 @@ def value_strategy(hint: Any, meta: typing.Mapping[str, Any]) -> st.SearchStrate
             return st.sampled_from(meta["lengths"]).flatmap(lambda n: st.lists(item, min_size=n, max_size=n))
         return st.lists(item, max_size=min(max_len or MAX_LIST, DRAW_LIST))
     if origin is dict:
+        value_meta = {k: meta.get(k) for k in ("lo", "hi", "choices", "ident")}
         return st.dictionaries(
-            st.text(max_size=8), value_strategy(args[1], {}), max_size=min(max_len or MAX_MAP, DRAW_MAP)
+            st.text(max_size=8), value_strategy(args[1], value_meta), max_size=min(max_len or MAX_MAP, DRAW_MAP)
         )
     raise TypeError(f"no strategy for {hint!r}")
 
@@ -220,7 +222,7 @@ def sample_value(hint: Any, meta: typing.Mapping[str, Any]) -> Any:
             return [[sample_value(float, item_meta)] * meta["row_len"]]
         return [sample_value(args[0], item_meta)] * max(meta.get("lengths") or (1,))
     if origin is dict:
-        return {"k": sample_value(args[1], {})}
+        return {"k": sample_value(args[1], {k: meta.get(k) for k in ("lo", "hi", "choices", "ident")})}
     raise TypeError(f"no sample for {hint!r}")
 
 
@@ -282,7 +284,7 @@ def oversized_value(hint: Any, meta: typing.Mapping[str, Any]) -> Any | None:
         return [item] * (limit + 1)
     if origin is dict:
         limit = meta.get("max_len") or MAX_MAP
-        value = sample_value(args[1], {})
+        value = sample_value(args[1], {k: meta.get(k) for k in ("lo", "hi", "choices", "ident")})
         return {f"k{i}": value for i in range(limit + 1)}
     return None
 

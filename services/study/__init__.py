@@ -1,0 +1,1 @@
+"""``arroch study``: user studies with real participants (plan, run, report, calibrate)."""

@@ -15,4 +15,12 @@ sees the robots, their plans and the doors over the live camera image, and taps 
 - :mod:`.announce` the URLs to open, printed and as a QR code in the terminal;
 - :mod:`.fakecam` and :mod:`.headless` a camera video file for Chromium's fake capture device and a
   small Chrome DevTools Protocol driver, for the end-to-end tests and the latency benchmark.
+
+Study mode (``arroch tablet --study-trial FILE``, the page a study participant uses during a trial):
+
+- :mod:`.study_trial` the trial file (participant, condition, puzzle, questionnaires, consent);
+- :mod:`.study` the trial on the server: what she may do now, and the record of what she did;
+- :mod:`.study_wire` the study page's requests; :mod:`.study_store` its progress across restarts;
+- :mod:`.puzzle` the Jigsaw puzzle's arrangement and moves; :mod:`.puzzle_picture` its picture;
+- :mod:`.questionnaire` the paper's Q1-Q5 and raw NASA-TLX, and the check of the answers.
 """

@@ -8,14 +8,20 @@ A :class:`TabletBridge` is a :class:`protocol.service.Service` named ``tablet``.
 - the live ``constraints`` (and a query for them at start), for the "cancel" choices of the pages;
 - the constraint library the running restrictor serves (``constraints/library``, asked every
   second until one answers), which the pages build their feedback buttons from;
-- with a sim camera (``--camera-source sim:CID``), the newest ``camera/<CID>/frame`` for viewer pages.
+- with a sim camera (``--camera-source sim:CID``), the newest ``camera/<CID>/frame`` for viewer pages;
+- in study mode (``--study-trial``): the newest ``human/state`` (where the simulator has the
+  participant), the newest ``clock`` (its rate and pause, for the page's press-and-hold) and
+  ``event`` (``mission_done`` opens the questionnaire).
 
-The last three are handed to the web server's event loop through the ``on_constraints`` /
-``on_library`` / ``on_sim_frame`` callbacks (called on the worker; the server makes them thread-safe).
+These are handed to the web server's event loop through the ``on_constraints`` / ``on_library`` /
+``on_sim_frame`` / ``on_human_state`` / ``on_clock`` / ``on_mission_done`` callbacks (called on the
+worker; the server makes them thread-safe).
 
 Outwards: each page's Overlays on ``ar/<cid>/overlay`` (for recorders) and feedback to the
 restrictor with :func:`protocol.feedback_client.send_feedback` (query with ack, retried until
-answered), which blocks and so runs on the server's feedback threads, never on the worker.
+answered), which blocks and so runs on the server's feedback threads, never on the worker. In study
+mode, what the participant does on ``participant/action`` and her answers on ``participant/answers``
+(the tablet publishes as the ``ar`` role of the deployment's access table).
 """
 
 from __future__ import annotations
@@ -26,7 +32,17 @@ from typing import Any
 
 from protocol.clock import SimClock, WallClock
 from protocol.feedback_client import newest_constraints, send_feedback, wait_for_library
-from protocol.messages import CameraFrame, ConstraintSet, FeedbackAck, Overlay
+from protocol.messages import (
+    CameraFrame,
+    ConstraintSet,
+    Event,
+    FeedbackAck,
+    HumanState,
+    Overlay,
+    ParticipantAction,
+    QuestionnaireAnswers,
+)
+from protocol.messages import Clock as ClockMessage
 from protocol.service import Service
 from protocol.transport import ZenohOptions
 
@@ -45,8 +61,10 @@ class TabletBridge(Service):
         sim_camera: str | None = None,
         clock: WallClock | SimClock | None = None,
         instance: str | None = None,
+        study: bool = False,
     ) -> None:
         super().__init__("tablet", namespace, zenoh_options, clock=clock, instance=instance)
+        self.study = study
         if sim_camera is not None:
             self.keys.camera_frame(sim_camera)  # an id unusable in a key fails here, before any session
         self.sim_camera = sim_camera
@@ -56,6 +74,9 @@ class TabletBridge(Service):
         self.on_constraints: Callable[[ConstraintSet], None] = lambda msg: None
         self.on_library: Callable[[list[dict[str, Any]]], None] = lambda entries: None
         self.on_sim_frame: Callable[[CameraFrame], None] = lambda msg: None
+        self.on_human_state: Callable[[HumanState], None] = lambda msg: None
+        self.on_clock: Callable[[ClockMessage], None] = lambda msg: None
+        self.on_mission_done: Callable[[Event], None] = lambda msg: None
         self._constraints_lock = threading.Lock()
 
     def setup(self) -> None:
@@ -67,6 +88,13 @@ class TabletBridge(Service):
                 k.camera_frame(self.sim_camera), CameraFrame, lambda msg, key: self.on_sim_frame(msg), latest=True
             )
             self.log.info("viewer stream from %s", k.camera_frame(self.sim_camera))
+        if self.study:
+            self.subscribe(k.human_state(), HumanState, lambda msg, key: self.on_human_state(msg), latest=True)
+            # Its own subscription: a wall-clock tablet (no SimClock) still needs the sim's rate and pause.
+            self.subscribe(k.clock(), ClockMessage, lambda msg, key: self.on_clock(msg), latest=True)
+            self.subscribe(k.event(), Event, self._event)
+            self.advertise(k.participant_action())
+            self.advertise(k.questionnaire())
         # A late joiner asks for the live set, and every page needs the library; off the worker,
         # since queries block.
         threading.Thread(target=self._fetch_constraints, name="tablet-constraints", daemon=True).start()
@@ -78,6 +106,10 @@ class TabletBridge(Service):
                 return  # an older set overtaken on the wire (or the query's answer after a newer publication)
             self.constraints = msg
         self.on_constraints(msg)
+
+    def _event(self, msg: Event, _key: str) -> None:
+        if msg.kind == "mission_done":
+            self.on_mission_done(msg)
 
     def _fetch_constraints(self) -> None:
         newest = newest_constraints(self)
@@ -98,6 +130,12 @@ class TabletBridge(Service):
 
     def publish_overlay(self, overlay: Overlay, reason: str = "") -> None:
         self.publish(self.keys.overlay(overlay.camera), overlay, extra={"reason": reason} if reason else None)
+
+    def publish_action(self, msg: ParticipantAction) -> None:
+        self.publish(self.keys.participant_action(), msg)
+
+    def publish_answers(self, msg: QuestionnaireAnswers) -> None:
+        self.publish(self.keys.questionnaire(), msg)
 
     def send_feedback(self, kind: str, params: dict[str, Any]) -> FeedbackAck | None:
         """Blocks until the restrictor answers or :data:`FEEDBACK_TIMEOUT` passes (None)."""

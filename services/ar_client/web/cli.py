@@ -1,7 +1,8 @@
 """Command line of the tablet client: ``arroch tablet`` and ``arroch ar calibrate``.
 
 Exit codes: 0 done; 1 the server could not start (Zenoh, port); 2 bad usage or configuration
-(site, intrinsics file, certificate; for ``calibrate``: pattern, images, too few views).
+(site, intrinsics file, study trial file, certificate; for ``calibrate``: pattern, images, too few
+views).
 """
 
 from __future__ import annotations
@@ -53,8 +54,11 @@ def _run_tablet(args: argparse.Namespace) -> int:
     from .intrinsics import DEFAULT_HFOV_DEG, CameraModel, load_intrinsics
     from .process import ListenOptions, run_tablet
     from .server import ServerOptions
+    from .study_store import progress_path
+    from .study_trial import load_trial
 
     try:
+        trial = load_trial(args.study_trial) if args.study_trial else None
         sim_camera = _camera_source(args.camera_source)
         site = load_site(args.site)
         calibration = load_intrinsics(args.intrinsics) if args.intrinsics else None
@@ -72,6 +76,7 @@ def _run_tablet(args: argparse.Namespace) -> int:
             zenoh_options=options_from(args),
             sim_camera=sim_camera,
             clock=make_clock(args.clock),
+            study=trial is not None,
         )
     except (ValueError, FileNotFoundError) as exc:
         log.error("%s", exc)
@@ -83,7 +88,23 @@ def _run_tablet(args: argparse.Namespace) -> int:
         detector=args.detector,
         allow_origins=list(args.allow_origin or []),
         default_mode="viewer" if sim_camera else "ar",
+        study=trial,
+        study_progress=progress_path(args.study_trial) if trial is not None else None,
     )
+    if trial is not None:
+        log.info(
+            "study page for %s, trial %s: condition %s, doors %s, puzzle %dx%d (seed %d), questionnaires %s",
+            trial.participant,
+            trial.trial,
+            trial.condition,
+            trial.door_control,
+            trial.puzzle.rows,
+            trial.puzzle.cols,
+            trial.puzzle.seed,
+            ", ".join(trial.questionnaires),
+        )
+        if trial.robots_view == "ar" and sim_camera is None:
+            log.warning("condition %s shows the sim's camera: give --camera-source sim:CID", trial.condition)
     listen = ListenOptions(
         host=args.host, port=args.port, public_host=args.public_host, state_dir=args.state_dir, qr=not args.no_qr
     )
@@ -187,6 +208,12 @@ def register(sub: argparse._SubParsersAction) -> None:
         help="another origin allowed to open the WebSocket (repeatable)",
     )
     tablet.add_argument("--no-qr", action="store_true", help="print the URLs without the QR code")
+    tablet.add_argument(
+        "--study-trial",
+        metavar="FILE",
+        help="serve the study page of this trial (JSON written by the study runner: participant, condition, "
+        "puzzle, questionnaires, consent); its progress is kept beside it in <stem>.tablet-progress.json",
+    )
     tablet.set_defaults(func=_run_tablet)
 
     ar_sub = _ar_subparsers(sub)

@@ -113,7 +113,8 @@ def run_tablet(
     worker.start()
     code = 0
     try:
-        mode_in_url = "viewer" if options.default_mode == "viewer" else None
+        # A study page's mode is the trial's, not the URL's.
+        mode_in_url = "viewer" if options.default_mode == "viewer" and options.study is None else None
         code = asyncio.run(_serve(server, ssl_context, listen, token, mode_in_url))
     finally:
         server.close_pools()

@@ -7,6 +7,11 @@ Routes (every one needs the run's access token, see :mod:`.security`):
 - ``GET /static/<file>`` the page's scripts and style (only the files shipped in ``static/``).
 - ``GET /ca.pem`` the authority that signed the server's certificate, to install on a tablet.
 - ``GET /ws`` the WebSocket (:mod:`.session`); also checks the Origin and the number of clients.
+- ``GET /puzzle.png`` in study mode (``--study-trial``): the puzzle's picture, drawn from the trial's seed.
+
+Study mode (:mod:`.study`): the trial file decides what the page is (the study page of its
+condition); the server keeps the trial's state, judges the page's requests and records them on
+Zenoh; a page's ``?questionnaire=1`` lets the experimenter open the questionnaire early.
 
 Threads: the event loop (HTTP, WebSockets, periodic world updates) on the main thread; the bridge's
 Zenoh worker; ``--workers`` frame threads running the AR pipelines (OpenCV releases the GIL); two
@@ -30,7 +35,16 @@ from typing import Any
 import numpy as np
 from aiohttp import web
 
-from protocol.messages import CameraFrame, ConstraintSet, Overlay
+from protocol.messages import (
+    CameraFrame,
+    Clock,
+    ConstraintSet,
+    Event,
+    HumanState,
+    Overlay,
+    ParticipantAction,
+    QuestionnaireAnswers,
+)
 
 from ..detect import TagDetector
 from ..overlay import OverlayBuilder
@@ -39,8 +53,13 @@ from ..project import Intrinsics
 from . import wire
 from .bridge import TabletBridge
 from .intrinsics import CameraModel
+from .puzzle_picture import picture_png
 from .security import COOKIE, origin_allowed, token_matches
 from .session import ClientSession
+from .study import StudyController
+from .study_store import ProgressStore
+from .study_trial import StudyTrial
+from .study_wire import StudyMessage
 
 log = logging.getLogger("arroch.tablet")
 
@@ -60,6 +79,7 @@ SECURITY_HEADERS = {
     "Cross-Origin-Opener-Policy": "same-origin",
 }
 CONTENT_TYPES = {".html": "text/html", ".js": "text/javascript", ".css": "text/css", ".svg": "image/svg+xml"}
+REFUSAL_LOG_PER_MINUTE = 20
 
 
 @dataclass
@@ -70,6 +90,8 @@ class ServerOptions:
     detector: str = "opencv"
     allow_origins: list[str] = field(default_factory=list)
     default_mode: str = "ar"  # the page's mode when its URL does not say
+    study: StudyTrial | None = None  # --study-trial: the page is this trial's study page
+    study_progress: Path | None = None  # where the trial's progress is saved (None: memory only)
 
 
 class TabletServer:
@@ -99,6 +121,7 @@ class TabletServer:
             "refused_origin": 0,
             "refused_full": 0,
             "violations": 0,
+            "study_refused": 0,
         }
         self._numbers = 0
         self._violation_log: list[float] = []
@@ -109,6 +132,18 @@ class TabletServer:
         self._viewer_busy = False
         self._viewer_pipeline: Pipeline | None = None
         self._static = {p.name: p for p in STATIC.iterdir() if p.suffix in CONTENT_TYPES}
+        self._refusal_log: list[float] = []
+        self.study: StudyController | None = None
+        self._puzzle_png = b""
+        trial = self.options.study
+        if trial is not None:
+            self.study = StudyController(
+                trial,
+                publish_action=self._publish_record,
+                publish_answers=self._publish_record,
+                store=ProgressStore(self.options.study_progress),
+            )
+            self._puzzle_png = picture_png(trial.puzzle.seed, trial.puzzle.rows, trial.puzzle.cols)
         self.app = self._make_app()
 
     # ------------------------------------------------------------------ app
@@ -119,6 +154,7 @@ class TabletServer:
         app.router.add_get("/static/{name}", self._asset)
         app.router.add_get("/ca.pem", self._ca)
         app.router.add_get("/ws", self._websocket)
+        app.router.add_get("/puzzle.png", self._puzzle)
         app.on_startup.append(self._on_startup)
         app.on_shutdown.append(self._on_shutdown)
         return app
@@ -170,6 +206,13 @@ class TabletServer:
             raise web.HTTPNotFound()
         return web.Response(body=self.authority.read_bytes(), content_type="application/x-pem-file")
 
+    async def _puzzle(self, request: web.Request) -> web.StreamResponse:
+        if not self._authorised(request):
+            return self._forbidden("missing or wrong access token")
+        if self.study is None:
+            raise web.HTTPNotFound()
+        return web.Response(body=self._puzzle_png, content_type="image/png")
+
     async def _websocket(self, request: web.Request) -> web.StreamResponse:
         if not self._authorised(request):
             return self._forbidden("missing or wrong access token")
@@ -187,14 +230,19 @@ class TabletServer:
         if len(self.clients) >= self.options.max_clients:
             self.counters["refused_full"] += 1
             return web.Response(status=503, text=f"503: at most {self.options.max_clients} pages at once\n")
-        mode = request.query.get("mode", self.options.default_mode)
-        if mode not in ("ar", "viewer"):
-            return web.Response(status=400, text="400: mode is ar or viewer\n")
+        if self.study is not None:
+            # The trial decides, never the page: the sim's stream (AR conditions) or the map alone.
+            mode = "map" if self.study.trial.robots_view == "map" else "viewer"
+        else:
+            mode = request.query.get("mode", self.options.default_mode)
+            if mode not in ("ar", "viewer"):
+                return web.Response(status=400, text="400: mode is ar or viewer\n")
         # max_msg_size: aiohttp itself refuses (close 1009) anything larger than a frame can be.
         ws = web.WebSocketResponse(max_msg_size=wire.MAX_FRAME_BYTES + wire.HEADER.size, heartbeat=15.0, compress=False)
         await ws.prepare(request)
         self._numbers += 1
         session = ClientSession(self, ws, self._numbers, mode, str(request.remote))
+        session.early_questionnaire = self.study is not None and request.query.get("questionnaire") == "1"
         self.clients[session.number] = session
         self.counters["connections"] += 1
         log.info("client %d connected from %s (%s mode)", session.number, request.remote, mode)
@@ -210,6 +258,66 @@ class TabletServer:
                 session.counters["feedback"],
             )
         return ws
+
+    # ------------------------------------------------------------------ study mode
+
+    def _publish_record(self, msg: ParticipantAction | QuestionnaireAnswers) -> None:
+        """Publish a participant's action or answers (the event loop; a Zenoh put does not block long)."""
+        try:
+            if isinstance(msg, QuestionnaireAnswers):
+                self.bridge.publish_answers(msg)
+            else:
+                self.bridge.publish_action(msg)
+        except Exception as exc:  # Zenoh closing under us: the log keeps what could not be sent
+            log.error("could not publish %s: %s (%s)", msg.TYPE, exc, msg)
+
+    async def study_request(self, session: ClientSession, message: StudyMessage) -> None:
+        """A study page's request: judged by the trial; a refusal goes back to that page only."""
+        if self.study is None:  # the session refuses study messages first; nothing to judge here
+            return
+        outcome = self.study.handle(message, early_questionnaire=session.early_questionnaire)
+        if outcome.refused is not None:
+            what = {v: k for k, v in wire.PAGE_MESSAGES.items()}.get(type(message), "request")
+            self.note_refusal(session, what, outcome.refused)
+            await session.send_text(json.dumps({"type": "refused", "what": what, "reason": outcome.refused}))
+        if outcome.changed:
+            await self.broadcast_study()
+
+    def study_feedback(self, session: ClientSession, kind: str, params: dict[str, Any], wall: float) -> str | None:
+        """Record a study page's feedback; why it is refused in this trial, or None (send it on)."""
+        if self.study is None:
+            return None
+        refused = self.study.feedback(kind, params, wall or time.time())
+        if refused is not None:
+            self.note_refusal(session, "feedback", refused)
+        return refused
+
+    def note_refusal(self, session: ClientSession, what: str, reason: str) -> None:
+        """Count a study request turned down (the page stays connected); log it unless many were logged."""
+        self.counters["study_refused"] += 1
+        self.bridge.count("study_refused")  # in the tablet's stats on Zenoh, with one count per kind
+        self.bridge.count(f"study_refused_{what}")
+        now = time.monotonic()
+        self._refusal_log = [t for t in self._refusal_log if now - t < 60.0]
+        if len(self._refusal_log) < REFUSAL_LOG_PER_MINUTE:
+            self._refusal_log.append(now)
+            log.warning("client %d (%s): %s refused: %s", session.number, session.remote, what, reason)
+
+    async def broadcast_study(self) -> None:
+        if self.study is not None:
+            await self._broadcast(json.dumps(self.study.page_state(), separators=(",", ":")))
+
+    def _human_state(self, msg: HumanState) -> None:
+        if self.study is not None and self.study.human_changed(msg):
+            asyncio.get_running_loop().create_task(self.broadcast_study())
+
+    def _clock(self, msg: Clock) -> None:
+        if self.study is not None and self.study.clock_changed(msg):
+            asyncio.get_running_loop().create_task(self.broadcast_study())
+
+    def _mission_done(self, msg: Event) -> None:
+        if self.study is not None and self.study.mission_ended():
+            asyncio.get_running_loop().create_task(self.broadcast_study())
 
     def note_violation(self, session: ClientSession, reason: str) -> None:
         """Count a client's protocol violation; log it unless many were logged this minute."""
@@ -236,6 +344,7 @@ class TabletServer:
             "library": self.bridge.library,  # None until a restrictor answers: then a "library" message
             "constraints": self._constraints_json(self.bridge.constraints),
             "world": self._world(),
+            "study": self.study.hello_state() if self.study is not None else None,
         }
 
     @staticmethod
@@ -248,7 +357,11 @@ class TabletServer:
         return {"type": "constraints", "version": msg.version, "items": items}
 
     def _world(self) -> dict[str, Any]:
-        return wire.world_json(self.bridge.world.snapshot(self.bridge.now()), self.colours.colour)
+        world = wire.world_json(self.bridge.world.snapshot(self.bridge.now()), self.colours.colour)
+        human = self.study.human if self.study is not None else None
+        if human is not None:  # where the simulator has her, for the map (her desk otherwise)
+            world["human"] = [round(human.x, 3), round(human.y, 3), round(human.theta, 3)]
+        return world
 
     def new_pipeline(self, camera_id: str) -> Pipeline:
         detector = TagDetector(self.options.detector, known_ids=[lm.tag for lm in self.site.landmarks])
@@ -306,7 +419,7 @@ class TabletServer:
 
     def _sim_frame_arrived(self, msg: CameraFrame) -> None:
         self._sim_frame = msg
-        if not self._viewer_busy and any(c.mode == "viewer" for c in self.clients.values()):
+        if not self._viewer_busy and any(c.wants_stream for c in self.clients.values()):
             self._viewer_busy = True
             asyncio.get_running_loop().create_task(self._viewer_frames())
 
@@ -322,7 +435,7 @@ class TabletServer:
                     self.bridge.count("bad_sim_frames")
                     log.debug("sim frame %s/%d dropped: %s", msg.src, msg.seq, exc)
                     continue
-                viewers = [c for c in self.clients.values() if c.mode == "viewer" and not c.busy_sending]
+                viewers = [c for c in self.clients.values() if c.wants_stream and not c.busy_sending]
                 if viewers:
                     image = wire.pack_frame(msg.seq, msg.jpeg, wire.VIEWER_MAGIC)
                     await asyncio.gather(*(self._send_viewer(c, image, text) for c in viewers))
@@ -373,6 +486,9 @@ class TabletServer:
         self.bridge.on_constraints = lambda msg: self._from_worker(self._constraints_changed, msg)
         self.bridge.on_library = lambda entries: self._from_worker(self._library_arrived, entries)
         self.bridge.on_sim_frame = lambda msg: self._from_worker(self._sim_frame_arrived, msg)
+        self.bridge.on_human_state = lambda msg: self._from_worker(self._human_state, msg)
+        self.bridge.on_clock = lambda msg: self._from_worker(self._clock, msg)
+        self.bridge.on_mission_done = lambda msg: self._from_worker(self._mission_done, msg)
         self._world_task = self._loop.create_task(self._world_updates())
 
     async def _on_shutdown(self, app: web.Application) -> None:
@@ -381,6 +497,9 @@ class TabletServer:
         self.bridge.on_constraints = lambda msg: None
         self.bridge.on_library = lambda entries: None
         self.bridge.on_sim_frame = lambda msg: None
+        self.bridge.on_human_state = lambda msg: None
+        self.bridge.on_clock = lambda msg: None
+        self.bridge.on_mission_done = lambda msg: None
         for client in list(self.clients.values()):
             await client.ws.close(code=1001, message=b"server stopping")
 

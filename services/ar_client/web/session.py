@@ -7,7 +7,9 @@ replaces a waiting one, counted as ``superseded``), so a slow client never queue
 reading its socket never stops (feedback is answered while a frame is processed).
 
 Anything that breaks :mod:`.wire`'s protocol, or a message rate above the limits, closes this
-client's socket with the matching close code; other clients are not affected.
+client's socket with the matching close code; other clients are not affected. A study page's
+well-formed requests go to the server's study (:meth:`TabletServer.study_request`), which may refuse
+them with a reason: the socket stays open.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from aiohttp import WSMsgType, web
 from ..pipeline import BadFrame, Pipeline
 from . import wire
 from .security import TokenBucket
+from .study_wire import STUDY_MESSAGES, ViewChange
 from .wire import Frame, Violation
 
 if TYPE_CHECKING:
@@ -42,7 +45,9 @@ class ClientSession:
         self.ws = ws
         self.number = number
         self.camera_id = f"tablet-{number}"
-        self.mode = mode  # "ar" (the page's camera) or "viewer" (the sim's stream and the map)
+        self.mode = mode  # "ar" (the page's camera), "viewer" (the sim's stream and the map), "map" (study: map only)
+        self.early_questionnaire = False  # study: the experimenter opened this page with ?questionnaire=1
+        self.watching = False  # study: the page shows the robots' AR view (it gets the sim's stream only then)
         self.remote = remote
         self.pipeline: Pipeline | None = None
         self.counters: dict[str, int] = {"frames": 0, "superseded": 0, "feedback": 0}
@@ -57,6 +62,11 @@ class ClientSession:
         self.closed = False
 
     # ------------------------------------------------------------------ sending
+
+    @property
+    def wants_stream(self) -> bool:
+        """The sim's frames are for this page: a viewer page, and on a study page only while its AR view shows."""
+        return self.mode == "viewer" and (self.server.study is None or self.watching)
 
     @property
     def busy_sending(self) -> bool:
@@ -111,6 +121,12 @@ class ClientSession:
         message = wire.parse_text(text)
         if isinstance(message, wire.FeedbackRequest):
             self._spawn(self._on_feedback(message))
+        elif isinstance(message, tuple(STUDY_MESSAGES.values())):
+            if self.server.study is None:
+                raise Violation(wire.CLOSE_POLICY, "a study message to a server that runs no study (no --study-trial)")
+            if isinstance(message, ViewChange):
+                self.watching = message.view == "ar" and message.note != "hidden"
+            self._spawn(self.server.study_request(self, message))
         else:
             self._spawn(self.send_text(json.dumps({"type": "pong", "t": message.t})))
 
@@ -175,6 +191,8 @@ class ClientSession:
             answer.update(status="busy", reason="the previous feedback is still waiting for its answer")
         elif not self._feedback.take():
             answer.update(status="busy", reason="too much feedback at once; wait a moment")
+        elif (refused := self.server.study_feedback(self, request.kind, request.params, request.wall)) is not None:
+            answer.update(status="refused", reason=refused)
         else:
             self._feedback_pending = True
             self.counters["feedback"] += 1

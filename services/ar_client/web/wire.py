@@ -8,9 +8,11 @@ Page → server:
   gravity at capture in the camera frame (three float32, little-endian, OpenCV axes, pointing down,
   m/s²; NaN when unknown), then a baseline or progressive JPEG of at most :data:`MAX_FRAME_BYTES`
   bytes and :data:`MAX_SIDE` pixels a side. ``b"ARF1"`` frames (seq, JPEG: no gravity) are still taken;
-- ``{"type": "feedback", "id": n, "kind": "<library entry>", "params": {name: value}}``: one choice
-  from the constraint library (values: integers, short strings or finite numbers);
-- ``{"type": "ping", "t": x}``: answered with ``{"type": "pong", "t": x}`` (link round trip).
+- ``{"type": "feedback", "id": n, "kind": "<library entry>", "params": {name: value}, "wall": t}``: one
+  choice from the constraint library (values: integers, short strings or finite numbers; ``wall``, the
+  page's clock when sent, optional: a study records it);
+- ``{"type": "ping", "t": x}``: answered with ``{"type": "pong", "t": x}`` (link round trip);
+- on a study server (``--study-trial``), the study page's messages (:mod:`.study_wire`).
 
 Server → page:
 
@@ -20,7 +22,10 @@ Server → page:
 - ``overlay`` per processed frame (its ``seq``; pose quality; the primitives in frame pixels);
 - ``ack`` per feedback (``status`` accepted / refused / no answer, the restrictor's ``reason``);
 - ``world`` a few times a second (robots, intents, doors: the map view) and ``constraints`` on change;
-- viewer mode: the sim's frames as binary ``b"ARV1"`` + seq + JPEG, each followed by its ``overlay``.
+- viewer mode: the sim's frames as binary ``b"ARV1"`` + seq + JPEG, each followed by its ``overlay``;
+- study mode: ``study`` (the trial's state: consent, puzzle, where she is, the site clock's rate,
+  questionnaire) on every change, and ``refused`` (``what``, ``reason``) to a page whose request the
+  study turned down.
 
 The page's text messages are declared as msgspec Structs (:data:`PAGE_MESSAGES`) and checked like
 every other input (a refusal names the field: ``feedback: params.minutes: expected int or float or
@@ -45,6 +50,8 @@ from msgspec import Meta, Struct
 
 from protocol.messages import Overlay
 from protocol.validation import field_error
+
+from .study_wire import STUDY_MESSAGES, StudyMessage
 
 FRAME_MAGIC = b"ARF1"
 GRAVITY_FRAME_MAGIC = b"ARF2"
@@ -180,6 +187,7 @@ class FeedbackRequest(Struct, frozen=True, kw_only=True):
     id: Annotated[int, Meta(ge=0, lt=2**53)]
     kind: Annotated[str, Meta(min_length=1, max_length=MAX_STRING)]
     params: Annotated[dict[ParamName, ParamValue], Meta(max_length=MAX_PARAMS)]
+    wall: Annotated[float, Meta(ge=0.0, lt=1e10)] = 0.0  # the page's clock when sent (study records); 0: unknown
 
 
 class Ping(Struct, frozen=True, kw_only=True):
@@ -188,10 +196,10 @@ class Ping(Struct, frozen=True, kw_only=True):
     t: int | float
 
 
-PAGE_MESSAGES: dict[str, type[Struct]] = {"feedback": FeedbackRequest, "ping": Ping}
+PAGE_MESSAGES: dict[str, type[Struct]] = {"feedback": FeedbackRequest, "ping": Ping, **STUDY_MESSAGES}
 
 
-def parse_text(text: str) -> FeedbackRequest | Ping:
+def parse_text(text: str) -> FeedbackRequest | Ping | StudyMessage:
     """A text message from the page, checked against its type's declaration (:data:`PAGE_MESSAGES`)."""
     if len(text) > MAX_TEXT_BYTES:
         raise Violation(CLOSE_TOO_BIG, f"text message of {len(text)} characters exceeds {MAX_TEXT_BYTES}")

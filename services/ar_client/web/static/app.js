@@ -1,5 +1,7 @@
 // The tablet page: connects to the server, runs the camera (AR mode) or shows the sim's stream
 // (viewer mode), draws each frame's overlay over the live picture, the map, and the feedback panel.
+// On a study server (arroch tablet --study-trial) the hello carries the trial, and study.js turns
+// the page into the study page of its condition (the server then sets the mode: viewer, or map).
 //
 // Honesty rules of the display: world geometry is drawn only from an overlay computed for a recent
 // frame (older than STALE_MS: hidden, and the status says so); "LOST" is shown with the age of the
@@ -9,6 +11,7 @@ import { clearCanvas, drawMap, drawPrimitives, letterbox } from "./draw.js";
 import { GravitySource } from "./gravity.js";
 import { FrameSender, parseViewerFrame } from "./link.js";
 import { FeedbackPanel } from "./panel.js";
+import { StudyPage } from "./study.js";
 
 const STALE_MS = 1000;
 const MAX_SAMPLES = 5000;
@@ -17,6 +20,7 @@ const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
 const token = params.get("token");
 const askedMode = ["ar", "viewer"].includes(params.get("mode")) ? params.get("mode") : null;
+const earlyQuestionnaire = params.get("questionnaire") === "1"; // study: the experimenter opens it early
 
 const state = {
   ws: null,
@@ -42,6 +46,7 @@ const sender = new FrameSender(() => state.ws, { getGravity: () => gravity.curre
 // iOS gives motion data only after the user allowed it, from a tap.
 window.addEventListener("pointerdown", () => gravity.ask(), { once: true });
 const panel = new FeedbackPanel($("entries"), sendFeedback);
+const study = new StudyPage({ send, early: earlyQuestionnaire });
 
 // ------------------------------------------------------------------------------- connection
 
@@ -50,6 +55,7 @@ function socketUrl() {
   url.protocol = location.protocol === "https:" ? "wss:" : "ws:";
   if (token) url.searchParams.set("token", token);
   if (askedMode) url.searchParams.set("mode", askedMode);
+  if (earlyQuestionnaire) url.searchParams.set("questionnaire", "1");
   return url.toString();
 }
 
@@ -86,7 +92,7 @@ function send(obj) {
 
 function sendFeedback(kind, values) {
   const id = ++state.requestId;
-  return send({ type: "feedback", id, kind, params: values }) ? id : null;
+  return send({ type: "feedback", id, kind, params: values, wall: Date.now() / 1000 }) ? id : null;
 }
 
 function onText(msg) {
@@ -96,10 +102,13 @@ function onText(msg) {
     case "world":
       state.world = msg;
       panel.setNow(msg.now);
+      if (state.hello && state.hello.study) study.onWorld(msg);
       return renderMap();
     case "constraints": return panel.setConstraints(msg.items);
     case "library": return panel.setLibrary(msg.entries);
     case "ack": return panel.onAck(msg);
+    case "study": return study.onState(msg);
+    case "refused": return study.onRefused(msg);
     default: return undefined;
   }
 }
@@ -116,9 +125,10 @@ function onHello(msg) {
   panel.setNow(msg.world.now);
   panel.setLibrary(msg.library);
   panel.setConstraints(msg.constraints.items);
+  if (msg.study) study.start(msg);
   renderMap();
   if (state.mode === "ar") startCamera();
-  else notice(msg.stream ? "" : "No sim camera on this server (start it with --camera-source sim:CID): map only.");
+  else if (state.mode === "viewer") notice(msg.stream ? "" : "No sim camera on this server (start it with --camera-source sim:CID): map only.");
 }
 
 // ------------------------------------------------------------------------------- camera (AR mode)
@@ -290,7 +300,7 @@ function watch() {
 function renderMap() {
   if (!state.hello) return;
   const tablet = state.overlay && !state.stale ? state.overlay : null;
-  if (state.mode === "viewer" || state.showMap) drawMap($("map"), state.hello.site, state.world, tablet);
+  if (state.mode !== "ar" || state.showMap) drawMap($("map"), state.hello.site, state.world, tablet);
 }
 
 // ------------------------------------------------------------------------------- controls
@@ -330,6 +340,7 @@ window.arroch = {
     robots: state.world ? Object.keys(state.world.robots) : [],
     acks: panel.results.slice(),
   }),
+  study: () => (state.hello && state.hello.study ? study.snapshot() : null),
 };
 
 notice("");

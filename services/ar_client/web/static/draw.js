@@ -157,7 +157,8 @@ export function drawMap(canvas, site, world, tablet) {
     const [a, b] = P(lx, ly);
     ctx.fillRect(a - 1.5, b - 1.5, 3, 3);
   }
-  const [hx, hy] = P(...site.human);
+  // Where the human is: the simulator's word in a study (world.human), her desk otherwise.
+  const [hx, hy] = P(...(world && world.human ? world.human.slice(0, 2) : site.human));
   dot(ctx, hx, hy, 6, MAP.human);
 
   if (world) {

@@ -30,6 +30,7 @@ COMMANDS: dict[str, tuple[str, ...]] = {
     "services.supervisor.cli": ("up", "deploy"),
     "services.experiments.cli": ("experiment",),
     "services.recorder.cli": ("record", "view", "replay", "runs"),
+    "services.study.cli": ("study",),  # arroch study plan|run|report|calibrate
 }
 #: Modules whose ``register`` extends another's commands, with the module they need first.
 REQUIRES: dict[str, str] = {"services.ar_client.web.cli": "services.ar_client.cli"}

@@ -34,8 +34,12 @@ class MissionOptions:
     mode: str | None = None  # sim clock mode: realtime, rate or lockstep
     rate: float | None = None
     seed: int | None = None
+    time_limit: float | None = None  # site seconds after which the sim ends the mission unfinished
     camera: str | None = None  # the sim's virtual camera ('tablet' or X,Y,Z,YAW,PITCH); None: no camera
     view_port: int | None = None  # serve the recorder's channels live to Foxglove on this port; None: don't
+    human: str | None = None  # the sim's human: 'simulated' or 'participant' (a person on her tablet page)
+    doors: str | None = None  # the sim's human-operated doors: 'sim' or 'sensor' (real doors' sensors)
+    study_trial: str | None = None  # the tablet page's study trial file (arroch study run writes it)
 
 
 # How each option is spelled on a service's command line (the services' own flags).
@@ -44,6 +48,9 @@ OPTION_FLAGS: dict[str, Callable[[Launch], list[str]]] = {
     "mode": lambda launch: ["--mode", launch.mission.mode] if launch.mission.mode else [],
     "rate": lambda launch: ["--rate", f"{launch.mission.rate:g}"] if launch.mission.rate is not None else [],
     "seed": lambda launch: ["--seed", str(launch.mission.seed)] if launch.mission.seed is not None else [],
+    "time_limit": lambda launch: (
+        ["--time-limit", f"{launch.mission.time_limit:g}"] if launch.mission.time_limit is not None else []
+    ),
     # Persisted state of this run only: a new run must not inherit the last run's constraints,
     # while a restarted service within the run must find its own.
     "state": lambda launch: ["--state-dir", str(launch.run_dir / "state")] if launch.run_dir else [],
@@ -60,6 +67,11 @@ OPTION_FLAGS: dict[str, Callable[[Launch], list[str]]] = {
         + (["--view", "--view-port", str(launch.mission.view_port)] if launch.mission.view_port is not None else [])
     ),
     "view": lambda launch: ["--port", str(launch.mission.view_port)] + _logs(launch),
+    # A study trial: a person plays the human (the sim), real doors' sensors (the sim), and the page
+    # shows the trial's condition and task (the tablet).
+    "human": lambda launch: ["--human", launch.mission.human] if launch.mission.human else [],
+    "doors": lambda launch: ["--doors", launch.mission.doors] if launch.mission.doors else [],
+    "study_trial": lambda launch: ["--study-trial", launch.mission.study_trial] if launch.mission.study_trial else [],
 }
 RECORDING = "run.mcap"
 
@@ -103,7 +115,7 @@ SERVICES: dict[str, ServiceSpec] = {
         ServiceSpec(
             "sim",
             ("sim",),
-            ("method", "mode", "rate", "seed", "camera"),
+            ("method", "mode", "rate", "seed", "time_limit", "camera", "human", "doors"),
             "simulated robots, doors, human, tablet camera",
             after=("planner", "restrictor", "ar", RECORDER_NAME),
         ),
@@ -112,7 +124,7 @@ SERVICES: dict[str, ServiceSpec] = {
         ServiceSpec(
             "tablet",
             ("tablet", "--port", "0", "--no-qr"),
-            ("camera_source",),
+            ("camera_source", "study_trial"),
             "tablet page (HTTPS; URL and token printed)",
             role="ar",
         ),

@@ -8,5 +8,5 @@ per-sample attachment and its liveliness tokens (graph discovery). See docs/ros2
 | ``keys.py`` | ``TopicNaming``: data keys and liveliness tokens for a topic, in either key format |
 | ``attachment.py`` | ``rmw_zenoh``'s attachment: sequence number, source timestamp, publisher GID |
 | ``node.py`` | ``RosNode``: ROS publishers/subscriptions on a :class:`protocol.service.Service`'s session |
-| ``config.py`` | the ``[ros2]`` and ``[ros2.robots.<id>]`` sections of a robot config file |
+| ``config.py`` | the ``[ros2]``, ``[ros2.robots.<id>]`` and ``[ros2.doors.<id>]`` sections of a robot config file |
 """

@@ -23,6 +23,11 @@ max_speed = 0.5                 # m/s sent at most (default: the site's robot_sp
 max_turn_rate = 1.5             # rad/s
 pose_timeout = 0.3              # s of site time without a pose before the base is stopped
 control_period = 0.05           # s between two poses (odometry rate); the controller's step
+
+[ros2.doors.d_storage]
+# A real door's sensor, std_msgs/Bool (true: open), which `arroch ros2 bridge` turns into
+# DoorState on door/d_storage/sensor (the simulator with --doors sensor follows it).
+topic = "/doors/d_storage/open" # the default; a relative name is in the bridge's --ros-namespace
 ```
 
 Every key is optional; a robot without a table gets the defaults. Errors name the file and key.
@@ -31,6 +36,7 @@ Every key is optional; a robot without a table gets the defaults. Errors name th
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -72,12 +78,25 @@ class RobotLink:
 
 
 @dataclass(frozen=True)
+class DoorLink:
+    """A real door's sensor on ROS 2: ``std_msgs/Bool`` on ``topic`` (true: open)."""
+
+    door: str
+    topic: str
+
+    @staticmethod
+    def default_topic(door: str) -> str:
+        return f"/doors/{door}/open"
+
+
+@dataclass(frozen=True)
 class Ros2Config:
     key_format: str = "rmw_zenoh"
     domain: int = 0
     bridge_namespace: str = ""
     robots: dict[str, RobotLink] = field(default_factory=dict)
     source: str = "<defaults>"
+    doors: dict[str, DoorLink] = field(default_factory=dict)  # door id -> its sensor's topic
 
     def naming(self, robot: str | None = None) -> TopicNaming:
         """Keys for the whole deployment, or for ``robot`` (its own key format and domain, if set)."""
@@ -143,7 +162,49 @@ def parse_ros2_config(table: Any, name: str = "<config>") -> Ros2Config:
     robots: dict[str, RobotLink] = {}
     for rid, entry in (table.get("robots") or {}).items():
         robots[rid] = _parse_link(rid, entry, lambda key, problem, rid=rid: fail(f"robots.{rid}.{key}", problem))
-    return Ros2Config(key_format, domain, bridge_ns, robots, name)
+    doors_table = table.get("doors", {})
+    if not isinstance(doors_table, dict):
+        raise fail("doors", "must be a table of [ros2.doors.<door id>] tables")
+    doors = {
+        did: _parse_door(did, entry, lambda key, problem, did=did: fail(f"doors.{did}{key}", problem))
+        for did, entry in doors_table.items()
+    }
+    return Ros2Config(key_format, domain, bridge_ns, robots, name, doors)
+
+
+_DOOR_ID = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]{0,63}$")
+
+
+def _parse_door(did: str, entry: Any, fail: Any) -> DoorLink:
+    if not _DOOR_ID.match(did):
+        raise fail("", "not a door id (letters, digits, '_' or '-', at most 64)")
+    if not isinstance(entry, dict):
+        raise fail("", 'must be a table (topic = "/doors/<door>/open")')
+    for key in entry:
+        if key != "topic":
+            raise fail(f".{key}", "unknown key (known: topic)")
+    topic = entry.get("topic", DoorLink.default_topic(did))
+    if not isinstance(topic, str):
+        raise fail(".topic", f"expected a string, got {topic!r}")
+    try:
+        full_topic("/", topic)
+    except ValueError as exc:
+        raise fail(".topic", str(exc)) from None
+    return DoorLink(did, topic)
+
+
+def check_doors(config: Ros2Config, site: Any) -> None:
+    """Every door of ``config.doors`` is a human-operated door of ``site`` (RosConfigError if not):
+    a sensor of a door the site lacks, or of an automatic one, would be listened to for nothing."""
+    human = sorted(d.id for d in site.doors.values() if d.human_operated)
+    for did in config.doors:
+        door = site.doors.get(did)
+        if door is None or not door.human_operated:
+            problem = "no such door on" if door is None else "an automatic door of"
+            raise RosConfigError(
+                f"{config.source}: ros2.doors.{did}: {problem} site {site.name} "
+                f"(its human-operated doors: {', '.join(human) or 'none'})"
+            )
 
 
 def _is_domain(value: Any) -> bool:

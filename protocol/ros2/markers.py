@@ -1,5 +1,6 @@
 """The site as ``visualization_msgs/MarkerArray`` for RViz 2 (map frame): walls, doors with their
-state, tags, objects. Pure: site and state in, a message out.
+state, tags, objects. Pure: site and state in, a message out. Shared by ``arroch ros2 bridge`` (live)
+and the recorder's ROS 2 bags, so a bag shows the same markers and frames as the bridge.
 
 Namespaces (``ns``) and ids are stable, so each publication replaces the last one in RViz:
 ``walls`` (grey boxes, one per wall segment, id = its index), ``doors`` (the leaf where it stands:
@@ -26,16 +27,55 @@ from protocol.site.model import Site
 FLOOR_Z = 0.1  # object cubes rest on the floor (centre 0.1 m up)
 CARRIED_Z = 0.45  # on a robot's top
 ROBOT_HEIGHT = 0.35
+MAP_FRAME = "map"
+
+
+def robot_frame(robot: str) -> str:
+    """A robot's base frame, child of the map frame on ``/tf`` (REP 105's ``base_link``, one per robot)."""
+    return f"{robot}/base_link"
 
 
 @dataclass
 class SiteState:
-    """What changes: doors open or not, where objects are (None: on their robot), delivered ones."""
+    """What changes: doors open or not, where objects are (None: on their robot), delivered ones.
+
+    The ``door``, ``carrying`` and ``delivered_at`` methods apply what the team's messages say and
+    return whether the markers changed."""
 
     doors_open: dict[str, bool] = field(default_factory=dict)
     object_at: dict[str, tuple[float, float] | None] = field(default_factory=dict)
     carried_by: dict[str, str] = field(default_factory=dict)
     delivered: set[str] = field(default_factory=set)
+
+    def door(self, door: str, is_open: bool) -> bool:
+        """A DoorState: the door is open (or not) now."""
+        if self.doors_open.get(door) == is_open:
+            return False
+        self.doors_open[door] = is_open
+        return True
+
+    def carrying(self, robot: str, objects: list[str], where: tuple[float, float]) -> bool:
+        """A RobotStatus: ``robot`` carries ``objects`` now, standing at ``where``; what it carried
+        before and no longer does was put down there."""
+        changed = False
+        for oid, rid in list(self.carried_by.items()):
+            if rid == robot and oid not in objects:
+                del self.carried_by[oid]
+                self.object_at[oid] = where
+                changed = True
+        for oid in objects:
+            if self.carried_by.get(oid) != robot:
+                self.carried_by[oid] = robot
+                changed = True
+        return changed
+
+    def delivered_at(self, obj: str, where: tuple[float, float] | None) -> bool:
+        """A ``delivered`` Event: the object is at its destination (at ``where`` when known)."""
+        self.delivered.add(obj)
+        self.carried_by.pop(obj, None)
+        if where is not None:
+            self.object_at[obj] = where
+        return True
 
 
 def _color(r: float, g: float, b: float, a: float = 1.0) -> Any:
@@ -84,7 +124,7 @@ def marker(
     )
 
 
-def site_markers(site: Site, state: SiteState, at: float, frame: str = "map") -> Any:
+def site_markers(site: Site, state: SiteState, at: float, frame: str = MAP_FRAME) -> Any:
     """The whole site as one MarkerArray."""
     cube, cylinder, text = 1, 3, 9
     out = []
@@ -127,7 +167,7 @@ def site_markers(site: Site, state: SiteState, at: float, frame: str = "map") ->
         out.append(
             marker(
                 at,
-                f"{rid}/base_link",
+                robot_frame(rid),
                 "robots",
                 i,
                 cylinder,
@@ -148,7 +188,7 @@ def site_markers(site: Site, state: SiteState, at: float, frame: str = "map") ->
             out.append(
                 marker(
                     at,
-                    f"{carrier}/base_link",
+                    robot_frame(carrier),
                     "objects",
                     i,
                     cube,

@@ -7,7 +7,7 @@ not changed since Humble.
 RIHS01 type hashes (the last chunk of an ``rmw_zenoh`` data key and of its liveliness tokens) are
 computed by ``rosbags`` (``Typestore.hash_rihs01``) and checked against :data:`PUBLISHED_HASHES`,
 values that ROS 2 itself reported or that projects talking to ROS 2 through ``rmw_zenoh`` use
-(tests/ros2/test_types.py). A mismatch means ROS 2 nodes would not match our topics.
+(tests/ros2/test_wire.py). A mismatch means ROS 2 nodes would not match our topics.
 """
 
 from __future__ import annotations
@@ -27,8 +27,9 @@ TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 PATH = "nav_msgs/msg/Path"
 MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
 STRING = "std_msgs/msg/String"
+BOOL = "std_msgs/msg/Bool"  # a real door's sensor: open or shut
 
-USED_TYPES = (TWIST, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE, PATH, MARKER_ARRAY, STRING)
+USED_TYPES = (TWIST, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE, PATH, MARKER_ARRAY, STRING, BOOL)
 
 # RIHS01 hashes as ROS 2 reports them, each with where the value was seen (public sources found by
 # code search; no ROS 2 installation on the development machine, see docs/ros2.md):
@@ -42,6 +43,10 @@ USED_TYPES = (TWIST, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE, PATH, MARKER_ARRAY,
 # - Odometry, PoseWithCovarianceStamped, Path, MarkerArray: golden-hash tables of ROS 2 client
 #   libraries that talk to rmw_zenoh nodes (C/C++ `CdrTopicInfo`/`CTYPE` type tables, a `rihs01_hash<>`
 #   unit test for PoseWithCovarianceStamped, Rust/Elixir message crates).
+# - Bool: the expected subscription token of a `std_msgs/Bool` topic in the tests of a Rust client
+#   that talks to rmw_zenoh (`.../MS/%/%/rovi/%rovi%arm/std_msgs::msg::dds_::Bool_/RIHS01_feb9...`);
+#   tests/ros2/test_wire.py also recomputes it (and String's) from the .msg definition by ROS 2's
+#   rule (rosidl_generator_type_description: SHA-256 of the type description's JSON).
 PUBLISHED_HASHES: dict[str, str] = {
     TWIST: "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a",
     ODOMETRY: "RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0",
@@ -50,6 +55,7 @@ PUBLISHED_HASHES: dict[str, str] = {
     PATH: "RIHS01_1957a5bb3cee5da65c4e52e52b65a93df227efce4c20f8458b36e73066ca334b",
     MARKER_ARRAY: "RIHS01_86cb8800b6fb05b5eff1abd7a56f62a5641d3ae9a1c29e78e67e704f1d067dcf",
     STRING: "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18",
+    BOOL: "RIHS01_feb91e995ff9ebd09c0cb3d2aed18b11077585839fb5db80193b62d74528f6c9",
 }
 
 
@@ -158,6 +164,10 @@ def transform_stamped(at: float, parent: str, child: str, x: float, y: float, ya
 
 def string(text: str) -> Any:
     return t(STRING)(data=text)
+
+
+def boolean(value: bool) -> Any:
+    return t(BOOL)(data=bool(value))
 
 
 # ---------------------------------------------------------------------- reading messages

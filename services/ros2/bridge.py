@@ -15,6 +15,10 @@ restrictor's constraint library, e.g. ``{"kind": "door_unavailable", "params": {
 answered with ``accepted: false`` and the reason. JSON in a String keeps the bridge free of custom
 message packages, which every ROS 2 machine would have to build; any ROS 2 tool can publish it
 (``ros2 topic pub /arroch/feedback std_msgs/msg/String "{data: '{...}'}"``).
+In, for each real door mapped in the config's ``[ros2.doors.<door>]`` tables: its sensor,
+``std_msgs/Bool`` on the door's ``topic`` (true: open), republished as ``DoorState(door, open=data,
+by="sensor")`` on ``door/<door>/sensor``, every message as it comes (a simulator with ``--doors
+sensor`` follows it, and ignores repetitions).
 """
 
 from __future__ import annotations
@@ -27,12 +31,11 @@ from typing import Any
 from protocol.messages import DoorState, Event, Intent, RobotPose, RobotStatus
 from protocol.ros2 import types as ros
 from protocol.ros2.keys import TopicNaming
+from protocol.ros2.markers import SiteState, robot_frame, site_markers
 from protocol.ros2.node import RosNode
 from protocol.service import Service
 from protocol.site.model import Site
 from protocol.transport import ZenohOptions
-
-from .markers import SiteState, site_markers
 
 MARKER_PERIOD = 1.0  # wall s between republications of the site markers
 FEEDBACK_TIMEOUT = 5.0  # s to wait for the restrictor's ack
@@ -49,8 +52,10 @@ class BridgeService(Service):
         ros_namespace: str = "/arroch",
         map_frame: str = "map",
         clock: Any = None,
+        door_topics: dict[str, str] | None = None,
     ) -> None:
         super().__init__("ros2bridge", namespace or site.name, zenoh_options, clock=clock)
+        self.door_topics = dict(door_topics or {})  # door id -> its sensor's std_msgs/Bool topic
         self.site = site
         self.naming = naming
         self.ros_namespace = ros_namespace
@@ -69,6 +74,9 @@ class BridgeService(Service):
         self._acks = node.publisher("feedback_ack", ros.STRING)
         self._paths = {rid: node.publisher(f"{rid}/path", ros.PATH) for rid in sorted(self.site.robots)}
         node.subscribe("feedback", ros.STRING, self._on_feedback)
+        for door, topic in sorted(self.door_topics.items()):
+            node.subscribe(topic, ros.BOOL, lambda msg, key, door=door: self._on_door_sensor(door, msg))
+            self.log.info("door %s: its sensor is std_msgs/Bool on %s", door, node.topic(topic))
         keys = self.keys
         self.subscribe(keys.robot_pose(), RobotPose, self._on_pose, latest=True)
         self.subscribe(keys.intent(), Intent, self._on_intent)
@@ -87,7 +95,7 @@ class BridgeService(Service):
 
     def _on_pose(self, pose: RobotPose, key: str) -> None:
         self.poses[pose.robot] = (pose.x, pose.y, pose.theta)  # where a robot puts down what it carried
-        tf = ros.transform_stamped(pose.stamp, self.map_frame, f"{pose.robot}/base_link", pose.x, pose.y, pose.theta)
+        tf = ros.transform_stamped(pose.stamp, self.map_frame, robot_frame(pose.robot), pose.x, pose.y, pose.theta)
         self._tf.publish(ros.t(ros.TF_MESSAGE)(transforms=[tf]))
 
     def _on_intent(self, intent: Intent, key: str) -> None:
@@ -103,30 +111,20 @@ class BridgeService(Service):
         publisher.publish(ros.t(ros.PATH)(header=ros.header(intent.stamp, self.map_frame), poses=poses))
 
     def _on_door(self, door: DoorState, key: str) -> None:
-        if self.state.doors_open.get(door.door) != door.open:
-            self.state.doors_open[door.door] = door.open
+        if self.state.door(door.door, door.open):
             self._markers_dirty = True
 
     def _on_status(self, status: RobotStatus, key: str) -> None:
-        carried = {oid: status.robot for oid in status.carrying}
-        for oid, rid in list(self.state.carried_by.items()):
-            if rid == status.robot and oid not in carried:
-                del self.state.carried_by[oid]
-                self.state.object_at[oid] = self.poses.get(rid, (0.0, 0.0, 0.0))[:2]
-                self._markers_dirty = True
-        for oid in carried:
-            if self.state.carried_by.get(oid) != status.robot:
-                self.state.carried_by[oid] = status.robot
-                self._markers_dirty = True
+        where = self.poses.get(status.robot, (0.0, 0.0, 0.0))[:2]
+        if self.state.carrying(status.robot, list(status.carrying), where):
+            self._markers_dirty = True
 
     def _on_event(self, event: Event, key: str) -> None:
         if event.kind == "delivered" and event.object:
-            self.state.delivered.add(event.object)
-            self.state.carried_by.pop(event.object, None)
             pose = event.data.get("pose") if isinstance(event.data, dict) else None
-            if isinstance(pose, list) and len(pose) >= 2:
-                self.state.object_at[event.object] = (float(pose[0]), float(pose[1]))
-            self._markers_dirty = True
+            where = (float(pose[0]), float(pose[1])) if isinstance(pose, list) and len(pose) >= 2 else None
+            if self.state.delivered_at(event.object, where):
+                self._markers_dirty = True
 
     def _markers_if_changed(self) -> None:
         if self._markers_dirty:
@@ -152,6 +150,10 @@ class BridgeService(Service):
             self._ack({"request": msg.data[:512], "accepted": False, "reason": f"not a feedback: {exc}"})
             return
         self._feedback.put(request)
+
+    def _on_door_sensor(self, door: str, msg: Any) -> None:
+        self.count("door_sensor_reports")
+        self.publish(self.keys.door_sensor(door), DoorState(door=door, open=bool(msg.data), by="sensor"))
 
     def _send_feedback(self) -> None:
         # Blocking queries (the restrictor's client helper), so on a thread of their own.

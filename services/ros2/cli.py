@@ -1,4 +1,7 @@
-"""Command line: ``arroch ros2 bridge [--ros2-config FILE] [--key-format F] [--domain N] [--ros-namespace NS]``."""
+"""Command line: ``arroch ros2 bridge [--ros2-config FILE] [--key-format F] [--domain N] [--ros-namespace NS]``.
+
+The config's ``[ros2.doors.<door>]`` tables name the real doors' sensors it forwards; a door the
+site lacks, or an automatic one, is a configuration error (exit 2)."""
 
 from __future__ import annotations
 
@@ -18,7 +21,9 @@ def register(subparsers: Any) -> None:
         description=(
             "Publishes tf2_msgs/TFMessage (map -> <robot>/base_link), nav_msgs/Path per robot's intent and a "
             "visualization_msgs/MarkerArray of the site (walls, doors with state, tags, objects) over Zenoh in "
-            "rmw_zenoh's or zenoh-bridge-ros2dds's key format; std_msgs/String JSON feedback in, acks out."
+            "rmw_zenoh's or zenoh-bridge-ros2dds's key format; std_msgs/String JSON feedback in, acks out; "
+            "std_msgs/Bool door sensors in (the config's [ros2.doors.<door>] topics) as DoorState on "
+            "door/<door>/sensor."
         ),
     )
     add_common_arguments(bridge)
@@ -39,6 +44,7 @@ def register(subparsers: Any) -> None:
 def _run(args: argparse.Namespace) -> int:
     def build() -> Any:
         from protocol.clock import make_clock
+        from protocol.ros2.config import check_doors
         from protocol.ros2.keys import full_topic
         from protocol.site import load_site
         from protocol.transport import options_from
@@ -48,6 +54,7 @@ def _run(args: argparse.Namespace) -> int:
         full_topic("/", args.ros_namespace.strip("/") or "arroch")  # ValueError (exit 2) for a bad namespace
         site = load_site(args.site)
         config = ros2_config_from(args)
+        check_doors(config, site)
         return BridgeService(
             site,
             config.naming(),
@@ -56,6 +63,7 @@ def _run(args: argparse.Namespace) -> int:
             ros_namespace=args.ros_namespace,
             map_frame=args.map_frame,
             clock=make_clock(args.clock),
+            door_topics={did: link.topic for did, link in config.doors.items()},
         )
 
     return run_service(build)

@@ -1,8 +1,9 @@
 """Command line of the simulator: ``arroch sim [options]`` and ``arroch sim snapshot ...``.
 
 ``arroch sim`` runs the simulation service until SIGINT/SIGTERM (or, with ``--until-done``, until
-the mission is done; exit code 0). Bad configuration (site file, human config, options) exits 2
-before any Zenoh session is opened.
+the mission is done; exit code 0, or 4 when the experimenter aborted the trial). Bad configuration
+(site file, human config, options; ``--human participant`` with ``--mode lockstep``) exits 2 before
+any Zenoh session is opened.
 
 ``--mode`` here is the clock mode (realtime, rate, lockstep), as the issue's command line has it;
 the Zenoh session mode every other service calls ``--mode`` is ``--zenoh-mode`` here (or env
@@ -12,14 +13,17 @@ the Zenoh session mode every other service calls ``--mode`` is ``--zenoh-mode`` 
 from __future__ import annotations
 
 import argparse
+import re
 from typing import Any
 
 from protocol.runner import add_common_arguments, run_service
+from protocol.schema import ID_REGEX
 from protocol.transport import MODES as ZENOH_MODES
 from protocol.transport import options_from
 
 from .human import FOCUS_READINGS, METHODS, HumanConfig
 from .pacing import MODES
+from .participant import DOOR_MODES, HUMAN_MODES
 
 
 def register(subparsers: Any) -> None:
@@ -90,6 +94,29 @@ def register(subparsers: Any) -> None:
     from protocol.ros2.config import add_ros2_link_arguments
 
     add_ros2_link_arguments(real)
+    study = parser.add_argument_group("study: a participant in place of the simulated human, real doors")
+    study.add_argument(
+        "--human",
+        choices=HUMAN_MODES,
+        default="simulated",
+        help="simulated (default): the human model plays her; participant: a person does, on her tablet page "
+        "(ParticipantAction on participant/action). Needs site time that follows the wall clock: realtime "
+        "(default) or rate, never lockstep",
+    )
+    study.add_argument(
+        "--doors",
+        choices=DOOR_MODES,
+        default="sim",
+        help="sim (default): doors are simulated; sensor: the human-operated doors are real and follow their "
+        "sensors (DoorState on door/<door>/sensor: a door controller, `arroch ros2 bridge`, the experimenter's "
+        "console); goes with --human participant",
+    )
+    study.add_argument(
+        "--participant", metavar="ID", help="with --human participant: take the acts of this participant only"
+    )
+    study.add_argument(
+        "--trial", metavar="ID", help="take the participant's acts and the experimenter's controls of this trial only"
+    )
     human = parser.add_argument_group("simulated human")
     human.add_argument(
         "--human-config", metavar="FILE", help="TOML file with the human model's parameters ([human] table; see docs)"
@@ -150,6 +177,19 @@ def build_options(args: argparse.Namespace) -> Any:
     from .service import SimOptions
 
     mode, rate = _clock_mode(args)
+    if args.human == "participant" and mode == "lockstep":
+        raise ValueError(
+            "--human participant: a person acts in real time, so site time must follow the wall clock: "
+            "--mode realtime (the default) or --rate K, not --mode lockstep"
+        )
+    if args.doors == "sensor" and args.human != "participant":
+        raise ValueError("--doors sensor: real doors are opened by a real person: it goes with --human participant")
+    if args.participant and args.human != "participant":
+        raise ValueError("--participant ID filters a participant's acts: it goes with --human participant")
+    if args.participant and not re.match(ID_REGEX, args.participant):
+        raise ValueError(f"--participant {args.participant!r} is not an id a ParticipantAction can carry")
+    if args.trial and len(args.trial) > 64:
+        raise ValueError("--trial: at most 64 characters (a ParticipantAction's trial)")
     ros2_bases = None
     if args.ros2_bases:
         from protocol.ros2.config import ros2_config_from
@@ -187,6 +227,10 @@ def build_options(args: argparse.Namespace) -> Any:
         **({"lockstep_abort": args.lockstep_abort} if args.lockstep_abort is not None else {}),
         robots=args.robots,
         ros2_bases=ros2_bases,
+        human_mode=args.human,
+        doors=args.doors,
+        participant=args.participant or "",
+        trial=args.trial or "",
     )
 
 

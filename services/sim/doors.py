@@ -3,6 +3,10 @@
 - A human-operated door opens only when the human opens it. It stays open ``door_hold_time``
   seconds from the moment it is fully open (she holds it, or it is propped open), and then closes
   as soon as the doorway is clear of robots.
+- A human-operated door that follows its sensor (``arroch sim --doors sensor``: a real door) opens
+  when its sensor says open and closes, as soon as the doorway is clear, when it says shut; no hold
+  time: the sensor says how long it stays open. Its sensor saying shut while the leaf still swings
+  open swings it back at once when the doorway is clear (it never became passable).
 - Any other door opens for an approaching robot (the robot asks every tick while its path reaches
   the door within ``auto_open_distance``) and closes ``auto_close_delay`` seconds after no robot
   asks any more and the doorway is clear.
@@ -58,6 +62,8 @@ class Door:
     hold_until: float = 0.0  # human doors: earliest closing time once fully open
     unneeded_since: float | None = None  # automatic doors: since when no robot has asked
     requests: set[str] = field(default_factory=set)  # robots asking this tick
+    sensor: bool = False  # follows its sensor (a real door): open while it says open
+    sensor_open: bool = False  # what its sensor said last
 
     @property
     def id(self) -> str:
@@ -74,6 +80,12 @@ class Door:
     @property
     def open_or_opening(self) -> bool:
         return self.target_open
+
+    @property
+    def open_until(self) -> float:
+        """When a human opening's hold ends (``DoorState.until``); 0 when not held open by a human, or
+        for a door following its sensor (nobody knows when it will be shut)."""
+        return self.hold_until if self.human_operated and not self.sensor and self.passable else 0.0
 
 
 class Doors:
@@ -114,6 +126,25 @@ class Doors:
             door.hold_until = now + self.config.hold_time
         door.target_open = True
 
+    def follow_sensors(self, door_ids: Iterable[str]) -> None:
+        """These (human-operated) doors follow their sensors from now on (see the module docstring)."""
+        for door_id in door_ids:
+            door = self.doors[door_id]
+            if not door.human_operated:
+                raise ValueError(f"door {door_id!r} is not human-operated: automatic doors open for the robots")
+            door.sensor = True
+
+    def sensor_says(self, door_id: str, is_open: bool, by: str) -> bool:
+        """Its sensor reports ``door_id`` open or shut. Returns whether the door starts opening (it
+        was shut or closing); a shut report takes effect in :meth:`step`, once the doorway is clear."""
+        door = self.doors[door_id]
+        door.sensor_open = is_open
+        if not is_open or door.target_open:
+            return False
+        door.opened_by = by
+        door.target_open = True
+        return True
+
     def doorway_clear(self, door: Door, robots: Iterable[tuple[float, float]]) -> bool:
         a, b = door.opening.endpoints
         limit = self.robot_radius + self.config.clear_margin
@@ -137,14 +168,20 @@ class Doors:
         for door in self.doors.values():
             if not door.human_operated:
                 self._automatic(door, now)
-            if door.target_open and door.fraction < 1.0:
+            if (
+                door.target_open
+                and door.fraction < 1.0
+                and door.sensor
+                and not door.sensor_open
+                and self.doorway_clear(door, robot_positions)
+            ):
+                door.target_open = False  # shut again before it was ever passable: no change to report
+            elif door.target_open and door.fraction < 1.0:
                 door.fraction = min(1.0, door.fraction + rate)
                 if door.fraction >= 1.0:
-                    if door.human_operated:
+                    if door.human_operated and not door.sensor:
                         door.hold_until = now + dt + self.config.hold_time
-                    changes.append(
-                        DoorChange(door.id, True, door.opened_by, door.hold_until if door.human_operated else 0.0)
-                    )
+                    changes.append(DoorChange(door.id, True, door.opened_by, door.open_until))
             elif door.target_open and self._closing_due(door, now + dt, robot_positions):
                 door.target_open = False
                 changes.append(DoorChange(door.id, False, door.opened_by))
@@ -163,7 +200,9 @@ class Doors:
             door.unneeded_since = now
 
     def _closing_due(self, door: Door, t: float, robot_positions: list[tuple[float, float]]) -> bool:
-        if door.human_operated:
+        if door.sensor:
+            due = not door.sensor_open
+        elif door.human_operated:
             due = t >= door.hold_until
         else:
             due = door.unneeded_since is not None and t - door.unneeded_since >= self.config.auto_close_delay

@@ -14,6 +14,12 @@ the same commands at the same ticks, it produces the same events.
 start, every action done or failed (except a ``stop``), every opening or closing of a
 human-operated door. Automatic doors open and close for robots without a new version: they never
 block a plan, and a version per automatic door swing would only make the planner replan for nothing.
+
+The human is the simulated one (:class:`~.human.HumanModel`) or, with ``human="participant"``, a
+person on her tablet page (:class:`~.participant.ParticipantHuman`), whose acts come in through
+:meth:`Engine.human_act`. With ``door_sensors`` the human-operated doors are real ones and follow
+their sensors (:meth:`Engine.door_sensor`); a participant then opens them herself, and those
+openings count as hers. :meth:`Engine.abort` ends the mission at once, not completed.
 """
 
 from __future__ import annotations
@@ -31,6 +37,7 @@ from .human import Declare, HumanConfig, HumanModel, OpenDoor, TaskDone
 from .metrics import MetricsRecorder
 from .objects import Objects
 from .overlaps import OverlapWatch
+from .participant import HUMAN_MODES, ParticipantHuman, Refused
 from .robots import Outcome, Robot, RobotConfig, RobotExecutor
 from .streams import Streams
 from .walls import WallWatch
@@ -98,7 +105,14 @@ class Engine:
         seed: int,
         human: HumanConfig | None = None,
         config: EngineConfig | None = None,
+        human_mode: str = "simulated",
+        door_sensors: bool = False,
     ) -> None:
+        if human_mode not in HUMAN_MODES:
+            raise ValueError(f"human mode {human_mode!r} is not one of {', '.join(HUMAN_MODES)}")
+        if door_sensors and human_mode != "participant":
+            # A real door is opened by a real hand: the simulated human cannot open it.
+            raise ValueError("door sensors (real doors) go with a participant, not the simulated human")
         self.site = site
         self.method = method
         self.seed = seed
@@ -144,13 +158,16 @@ class Engine:
         self.wall_contacts = WallWatch(site, p.robot_radius)  # robot-wall contact, checked every tick
         her_room = site.human.room
         self.human_doors = sorted(d.id for d in site.doors.values() if d.human_operated and her_room in d.rooms)
-        self.human = HumanModel(
-            self.human_config,
-            method,
-            self.streams,
-            site.human.position,
-            {d: site.doors[d].beside(her_room, HUMAN_DOOR_STANDOFF) for d in self.human_doors},
-        )
+        door_points = {d: site.doors[d].beside(her_room, HUMAN_DOOR_STANDOFF) for d in self.human_doors}
+        self.participant = human_mode == "participant"
+        self.door_sensors = door_sensors
+        self.human: HumanModel | ParticipantHuman
+        if self.participant:
+            self.human = ParticipantHuman(self.human_config, site.human.position, door_points, sensor=door_sensors)
+        else:
+            self.human = HumanModel(self.human_config, method, self.streams, site.human.position, door_points)
+        if door_sensors:
+            self.doors.follow_sensors(d.id for d in site.doors.values() if d.human_operated)
         self.ticks = 0
         self.world_version = 0
         self.done = False
@@ -161,6 +178,7 @@ class Engine:
         self._feedback: list[FeedbackRequest] = []
         self._feedback_ids = 0
         self._waiting_since: dict[str, tuple[str, float]] = {}  # robot -> (door, since)
+        self.end_reason = ""  # why the mission ended early (an abort)
         self.metrics = MetricsRecorder(
             params={
                 "site": site.name,
@@ -173,6 +191,8 @@ class Engine:
                 "robots": len(self.robots),
                 "objects": len(self.objects.items),
                 "human_doors": self.human_doors,
+                "human_mode": human_mode,
+                "doors": "sensor" if door_sensors else "sim",
             }
         )
 
@@ -275,6 +295,50 @@ class Engine:
         self._report(self.executor.assign(robot, cmd), self.time)
         return "applied"
 
+    def human_act(self, act: str, door: str = "") -> str:
+        """A participant's act (``go_to_door``, ``open_door``, ``back_to_desk``, ``task_done``), taken
+        now. Returns ``""``, or why it was refused (naming the field at fault); never raises."""
+        if not isinstance(self.human, ParticipantHuman):
+            return "act: the simulated human plays her part here (arroch sim --human participant takes acts)"
+        if self.done:
+            return f"act: the mission is over (t={self.time:.2f})"
+        t = self.time
+        try:
+            actions = self.human.act(act, door, t)
+        except Refused as exc:
+            return str(exc)
+        for action in actions:
+            self._human_action(action, t)
+        self._check_end(t)
+        return ""
+
+    def door_sensor(self, door: str, is_open: bool, by: str = "") -> str:
+        """A real door's sensor says it is open or shut (``by``: who opened it, "sensor" if nobody
+        says). Returns ``""``, or why the report was refused (naming the field); never raises."""
+        if door not in self.doors:
+            return f"door: no door {door!r} on site {self.site.name}"
+        if not self.doors[door].sensor:
+            kind = "human-operated, but the doors are simulated" if self.doors[door].human_operated else "automatic"
+            return f"door: {door!r} follows no sensor ({kind})"
+        if self.done:
+            return f"open: the mission is over (t={self.time:.2f})"
+        by = by or "sensor"
+        if self.doors.sensor_says(door, is_open, by):
+            self.door_changed.add(door)
+            if isinstance(self.human, ParticipantHuman) and door in self.human_doors:
+                self.human.sensor_opening(door, self.time)  # a real door of hers opened: her opening
+            self._emit("human_opens_door", door=door, data={"opening": self.human.counters.door_openings, "by": by})
+        return ""
+
+    def abort(self, reason: str) -> None:
+        """End the mission now, not completed (the experimenter aborted the trial)."""
+        if self.done:
+            return
+        self.done = True
+        self.completed = False
+        self.end_reason = reason
+        self._emit("mission_done", data=self.summary())
+
     def feedback_answered(
         self, request: FeedbackRequest, *, accepted: bool | None, reason: str = "", constraints_version: int = 0
     ) -> None:
@@ -304,6 +368,15 @@ class Engine:
 
     def human_pose(self) -> tuple[float, float, float]:
         return self.human.pose()
+
+    def human_place(self) -> tuple[str, str]:
+        """Where the human is (``HumanState.place``: desk, to_door, at_door, back) and the door of her walk."""
+        h = self.human
+        if isinstance(h, ParticipantHuman):
+            return h.place, h.door
+        if h.trip is None:
+            return "desk", ""
+        return {"to": "to_door", "at": "at_door", "back": "back"}[h.trip.leg], h.trip.door
 
     # ------------------------------------------------------------------ internals
 
@@ -354,7 +427,8 @@ class Engine:
             data["world_version"] = self._new_world()
         if change.opened:
             self.door_by[change.door] = change.by
-            self.metrics.opened(change.door, change.by)
+            # A real door's opening is the human's (or the experimenter's), whatever its sensor calls it.
+            self.metrics.opened(change.door, "human" if self.doors[change.door].sensor else change.by)
             if change.until:
                 data["until"] = change.until
         self._emit("door_opened" if change.opened else "door_closed", door=change.door, data=data, at=t)
@@ -422,7 +496,10 @@ class Engine:
             "focus": h.focus_report(),
             "focus_started": h.counters.focus_started,
         }
-        return self.metrics.summary(
+        if isinstance(h, ParticipantHuman):
+            human["participant"] = True  # so analysis tells a person's trial from the model's
+            human["doors"] = "sensor" if self.door_sensors else "sim"
+        out = self.metrics.summary(
             time=self.time,
             completed=self.completed,
             robots=robots,
@@ -430,6 +507,9 @@ class Engine:
             world_versions=self.world_version,
             wall_depth_max=self.wall_contacts.deepest,
         )
+        if self.end_reason:
+            out["reason"] = self.end_reason
+        return out
 
 
 def engine_config_with(**overrides: Any) -> EngineConfig:

@@ -1,10 +1,20 @@
 """The ``arroch sim`` process: the engine on Zenoh, in one of the three clock modes.
 
 Inputs: ``robot/*/command`` (RobotCommand), ``plan`` (TeamPlan, for lockstep), the restrictor's
-acks of the human's feedback (queries on ``feedback``), and in lockstep with a camera the AR
-client's ``ar/<cid>/overlay`` (a held frame's overlay lets time go on: :class:`~.camfeed.FrameHold`).
+acks of the human's feedback (queries on ``feedback``), in lockstep with a camera the AR
+client's ``ar/<cid>/overlay`` (a held frame's overlay lets time go on: :class:`~.camfeed.FrameHold`),
+``study/control`` (StudyControl: the experimenter pauses, resumes or aborts the trial), and with
+``--human participant`` her ``participant/action`` (ParticipantAction), with ``--doors sensor`` the
+real doors' ``door/<did>/sensor`` (DoorState). What cannot be taken (an act she cannot take now, a
+sensor of a door that has none) is dropped, counted and logged at WARNING with the reason.
 Outputs: ``clock``, ``robot/<rid>/pose``, ``robot/<rid>/status``, ``door/<did>/state``, ``event``,
-and with ``--camera`` the virtual tablet camera's ``camera/<cid>/frame`` and ``truth``.
+``human/state`` (HumanState: on every change of her place, door, task or the pause, and once a wall
+second), and with ``--camera`` the virtual tablet camera's ``camera/<cid>/frame`` and ``truth``.
+
+Pause (StudyControl ``pause``): no step runs and the Clock says ``paused``; on ``resume`` the wall
+pacer starts counting again from the paused instant, so site time goes on from there without a jump.
+``abort`` ends the mission at once (``mission_done``, ``completed`` false, ``reason`` "aborted by the
+experimenter: ..."); with ``--until-done`` the process then exits with :data:`EXIT_STUDY_ABORTED`.
 
 Order of publication after a tick that changed the world: poses, then statuses and door states,
 then the events, then the clock. A planner woken by an event (or by the new ``world_version`` on
@@ -39,7 +49,19 @@ from pathlib import Path
 from typing import IO, Any
 
 from protocol.keys import chunk_at
-from protocol.messages import Clock, DoorState, Event, Overlay, RobotCommand, RobotPose, RobotStatus, TeamPlan
+from protocol.messages import (
+    Clock,
+    DoorState,
+    Event,
+    HumanState,
+    Overlay,
+    ParticipantAction,
+    RobotCommand,
+    RobotPose,
+    RobotStatus,
+    StudyControl,
+    TeamPlan,
+)
 from protocol.service import Service
 from protocol.site.model import Site
 from protocol.transport import ZenohOptions
@@ -49,6 +71,7 @@ from .engine import Engine, EngineConfig, FeedbackRequest, SimEvent
 from .feedback import FeedbackSender
 from .human import HumanConfig
 from .pacing import LockstepGate, WallPacer
+from .participant import ACTS as SIM_ACTS
 
 log = logging.getLogger("arroch.sim")
 
@@ -58,6 +81,8 @@ LOCKSTEP_BUDGET = 0.02  # wall s of stepping per turn of the loop in lockstep, s
 STALL_WARNING = 10.0  # wall s paused on one reason before lockstep says so at WARNING level
 FEEDBACK_ABORT = 120.0  # lockstep: default wall s without an ack of the human's feedback before the run is aborted
 EXIT_ABORTED = 3  # exit code of a lockstep run aborted for want of an answer (feedback ack)
+EXIT_STUDY_ABORTED = 4  # exit code (--until-done) of a trial the experimenter aborted (StudyControl abort)
+REFUSAL_LOG_INTERVAL = 60.0  # wall s between two WARNING lines about one door sensor's same fault
 
 
 @dataclass
@@ -78,6 +103,10 @@ class SimOptions:
     )
     robots: str = "sim"  # "none": every robot is real, executed by its own driver (services/sim/ros2_base.py)
     ros2_bases: Any = None  # a protocol.ros2.config.Ros2Config: every robot is a simulated ROS 2 base
+    human_mode: str = "simulated"  # "participant": a person on her tablet page plays the human
+    doors: str = "sim"  # "sensor": the human-operated doors are real and follow door/<did>/sensor
+    participant: str = ""  # take acts of this participant only ("" any)
+    trial: str = ""  # take acts and controls of this trial only ("" any)
 
     def as_params(self) -> dict[str, Any]:
         return {
@@ -107,7 +136,15 @@ class SimService(Service):
         super().__init__("sim", namespace or site.name, zenoh_options, clock=clock)  # type: ignore[arg-type]
         self.site = site
         self.options = options
-        self.engine = Engine(site, method=options.method, seed=options.seed, human=options.human, config=options.engine)
+        self.engine = Engine(
+            site,
+            method=options.method,
+            seed=options.seed,
+            human=options.human,
+            config=options.engine,
+            human_mode=options.human_mode,
+            door_sensors=options.doors == "sensor",
+        )
         self.engine.metrics.params.update(options.as_params())
         clock.engine = self.engine
         self.gate = LockstepGate()
@@ -128,10 +165,15 @@ class SimService(Service):
         self._events_file: IO[str] | None = None
         self._started_wall = 0.0
         self._exit_at: float | None = None
+        self._finished = False
         self._camera = None
         self.exit_code = 0  # run_service's exit code: EXIT_ABORTED when lockstep had to give up
         self._door_since: dict[str, float] = {}  # door -> site time its open/closed state last changed
         self._external = None
+        self.paused = False  # the experimenter paused the trial: no step runs
+        self._human_sent: tuple[str, str, bool, bool] | None = None  # the HumanState last published
+        self._last_human_wall = 0.0
+        self._refusals_logged: dict[str, float] = {}  # door sensor fault -> wall time of its last WARNING
         if options.robots == "none" or options.ros2_bases is not None:
             from .ros2_base import ExternalRobots
 
@@ -146,6 +188,11 @@ class SimService(Service):
             self._events_file = open(self.options.events_out, "w", encoding="utf-8")
         self.subscribe(self.keys.robot_command(), RobotCommand, self._on_command)
         self.subscribe(self.keys.plan(), TeamPlan, self._on_plan)
+        self.subscribe(self.keys.study_control(), StudyControl, self._on_study_control)
+        if self.options.human_mode == "participant":
+            self.subscribe(self.keys.participant_action(), ParticipantAction, self._on_participant)
+        if self.options.doors == "sensor":
+            self.subscribe(self.keys.door_sensor(), DoorState, self._on_door_sensor)
         hc = self.options.human
         lockstep = self.options.mode == "lockstep"
         self._sender = FeedbackSender(
@@ -174,7 +221,7 @@ class SimService(Service):
             period = min(0.01, self.options.engine.tick / self.pacer.rate / 2.0)
         self.every(period, self._pump, first=0.0)
         log.info(
-            "sim %s: method %s, mode %s%s, seed %d, %d robots, %d objects",
+            "sim %s: method %s, mode %s%s, seed %d, %d robots, %d objects, human %s, doors %s",
             self.site.name,
             self.options.method,
             self.options.mode,
@@ -182,6 +229,8 @@ class SimService(Service):
             self.options.seed,
             len(self.engine.robots),
             len(self.engine.objects.items),
+            self.options.human_mode,
+            self.options.doors,
         )
 
     def teardown(self) -> None:
@@ -211,6 +260,93 @@ class SimService(Service):
         else:
             self.count("plans_stale")
 
+    def _on_participant(self, action: ParticipantAction, key: str) -> None:
+        if action.act not in SIM_ACTS:
+            self.count("participant_actions_other")  # views, puzzle moves, feedback...: for the recording
+            return
+        reason = self._not_this_trial(action.trial, required=True)
+        if not reason and self.options.participant and action.participant != self.options.participant:
+            reason = f"participant: {action.participant!r} is not this run's {self.options.participant!r}"
+        reason = reason or self.engine.human_act(action.act, action.door)
+        what = f"{action.participant} {action.act}{f' {action.door}' if action.door else ''}"
+        if reason:
+            self.count("participant_actions_refused")
+            self.log.warning("participant action %s at t=%.2f refused: %s", what, self.engine.time, reason)
+            return
+        self.count("participant_actions")
+        self.log.info("participant action %s at t=%.2f", what, self.engine.time)
+        self._after_input()
+
+    def _on_door_sensor(self, state: DoorState, key: str) -> None:
+        keyed = chunk_at(key, 3)
+        if keyed != state.door:
+            reason = f"door: a report of {state.door!r} on {keyed!r}'s sensor key"
+        else:
+            reason = self.engine.door_sensor(state.door, state.open, state.by)
+        if reason:
+            self.count("door_sensor_refused")
+            self._warn_limited(
+                f"{keyed}:{reason}", "door sensor report on %s (open=%s) refused: %s", key, state.open, reason
+            )
+            return
+        self.count("door_sensor_reports")
+        self._after_input()
+
+    def _on_study_control(self, control: StudyControl, key: str) -> None:
+        # A control without a trial id is the console's to whatever runs: an abort is never lost for it.
+        reason = self._not_this_trial(control.trial, required=False)
+        if not reason and self.engine.done:
+            reason = f"command: the mission is over (t={self.engine.time:.2f})"
+        if not reason and control.command == "pause" and self.paused:
+            reason = "command: pause, but the trial is paused already"
+        if not reason and control.command == "resume" and not self.paused:
+            reason = "command: resume, but the trial is not paused"
+        if reason:
+            self.count("study_control_refused")
+            self.log.warning("study control %s refused: %s", control.command, reason)
+            return
+        self.count(f"study_{control.command}")
+        wall = time.monotonic()
+        if control.command == "pause":
+            self.paused = True
+            self.log.info("trial paused by the experimenter at t=%.2f%s", self.engine.time, _why(control.reason))
+        elif control.command == "resume":
+            self.paused = False
+            if self.pacer is not None:
+                self.pacer.resync(self.engine.time, wall)  # count from now: no jump, no sprint to catch up
+            self.log.info("trial resumed at t=%.2f%s", self.engine.time, _why(control.reason))
+        else:
+            reason = f"aborted by the experimenter: {control.reason or 'no reason given'}"
+            self.log.warning("trial %s at t=%.2f", reason, self.engine.time)
+            self.paused = False
+            self.engine.abort(reason)
+            if self.options.until_done:
+                self.exit_code = EXIT_STUDY_ABORTED
+        self._after_input()
+        self._publish_clock()
+
+    def _not_this_trial(self, trial: str, *, required: bool) -> str:
+        if not self.options.trial or trial == self.options.trial or (not trial and not required):
+            return ""
+        return f"trial: {trial!r} is not this run's {self.options.trial!r}"
+
+    def _after_input(self) -> None:
+        """Publish what an input changed between two ticks; end the run if it ended the mission."""
+        self._publish_tick(force_poses=False)
+        if self.engine.done and not self._finished:
+            self._finish()
+
+    def _warn_limited(self, fault: str, message: str, *args: Any) -> None:
+        """WARNING once per ``fault`` per REFUSAL_LOG_INTERVAL (a sensor may repeat itself many times a second)."""
+        wall = time.monotonic()
+        last = self._refusals_logged.get(fault)
+        if last is not None and wall - last < REFUSAL_LOG_INTERVAL:
+            return
+        if len(self._refusals_logged) > 256:
+            self._refusals_logged.clear()  # bounded, whatever a peer sends
+        self._refusals_logged[fault] = wall
+        self.log.warning(message, *args)
+
     def _on_overlay(self, overlay: Overlay, key: str) -> None:
         hold = self._camera.hold if self._camera is not None else None
         if hold is None:
@@ -231,8 +367,11 @@ class SimService(Service):
             return
         if self.engine.done:
             self._paused_heartbeat(wall)
+            self._human_heartbeat(wall)
             return
-        if self.options.mode == "lockstep":
+        if self.paused:
+            self._paused_heartbeat(wall)
+        elif self.options.mode == "lockstep":
             self._run_lockstep(wall)
         else:
             assert self.pacer is not None
@@ -241,11 +380,12 @@ class SimService(Service):
                     break
         if self._camera is not None:
             self._camera.maybe_render(self, wall)
-        lockstep_running = self.options.mode == "lockstep" and not self._blocker
+        lockstep_running = self.options.mode == "lockstep" and not self._blocker and not self.paused
         if wall - self._last_heartbeat >= HEARTBEAT and not lockstep_running:
             self._last_heartbeat = wall
             self._publish_poses()
             self._publish_states(everything=True)
+        self._human_heartbeat(wall)
 
     def _run_lockstep(self, wall: float) -> None:
         deadline = wall + LOCKSTEP_BUDGET
@@ -308,6 +448,7 @@ class SimService(Service):
         self._publish_states(everything=force_poses and self.options.mode == "lockstep")
         for event in events:
             self._publish_event(event)
+        self._publish_human()
         if force_poses or due or events:
             self._publish_clock()
 
@@ -347,7 +488,7 @@ class SimService(Service):
             door = doors[did]
             if did in self.engine.door_changed or did not in self._door_since:
                 self._door_since[did] = self.engine.time
-            until = door.hold_until if door.human_operated and door.passable else 0.0
+            until = door.open_until
             state = DoorState(
                 door=did, open=door.passable, by=self.engine.door_by.get(did, ""), until=until, world_version=version
             )
@@ -355,6 +496,36 @@ class SimService(Service):
             state.src, state.seq, state.stamp = self.src, self.next_seq(), self._door_since[did]
             self.publish(self.keys.door_state(did), state, stamp=False)
         self.engine.door_changed = set()
+
+    def _publish_human(self, *, force: bool = False) -> None:
+        """HumanState when her place, door, task or the pause changed (``force``: anyway, a heartbeat)."""
+        place, door = self.engine.human_place()
+        now = (place, door, self.engine.human.done, self.paused)
+        if now == self._human_sent and not force:
+            return
+        self._human_sent = now
+        self._last_human_wall = time.monotonic()
+        x, y, theta = self.engine.human_pose()
+        participant = self.options.human_mode == "participant"
+        self.publish(
+            self.keys.human_state(),
+            HumanState(
+                mode=("sensor" if self.options.doors == "sensor" else "participant") if participant else "simulated",
+                place=place,
+                door=door,
+                doors=list(self.engine.human_doors),
+                x=x,
+                y=y,
+                theta=theta,
+                task_done=self.engine.human.done,
+                paused=self.paused,
+                open_time=self.options.human.open_time,
+            ),
+        )
+
+    def _human_heartbeat(self, wall: float) -> None:
+        if wall - self._last_human_wall >= HEARTBEAT:
+            self._publish_human(force=True)
 
     def _publish_event(self, event: SimEvent) -> None:
         msg = Event(kind=event.kind, robot=event.robot, door=event.door, object=event.object, data=event.data)
@@ -430,7 +601,7 @@ class SimService(Service):
                 mode=mode,
                 rate=rate,
                 world_version=self.engine.world_version,
-                paused=self.engine.done or bool(blocker),
+                paused=self.engine.done or bool(blocker) or self.paused,
                 awaiting=awaiting,
                 constraints_version=self.gate.constraints_needed,
             ),
@@ -487,6 +658,7 @@ class SimService(Service):
     # ------------------------------------------------------------------ the end
 
     def _finish(self) -> None:
+        self._finished = True
         wall = time.monotonic() - self._started_wall
         self._publish_states(everything=True)
         self._publish_clock()
@@ -521,3 +693,7 @@ class SimService(Service):
             self._events_file.flush()
         if self.options.until_done:
             self._exit_at = time.monotonic() + 0.3  # let the last messages leave before closing
+
+
+def _why(reason: str) -> str:
+    return f" ({reason})" if reason else ""

@@ -22,7 +22,9 @@ One study, one folder; everything about its participants stays inside it, under 
 ``log.jsonl`` lines are ``{"t": site seconds (the message's stamp), "wall": Unix seconds when it was
 heard, "key": the key's part after the namespace, "type": the message type, **its fields}`` for
 Event, ParticipantAction, QuestionnaireAnswers, HumanState (changes), DoorState (changes) and
-ConstraintSet messages, in the order heard.
+ConstraintSet messages, in the order heard (also StudyControl, and DoorState from ``door/<d>/sensor``).
+A message's own ``wall`` field (the page's clock) is written as ``sender_wall``. ``runner.log`` beside
+them is the runner's own log of the trial.
 
 Files are written whole to a temporary name and renamed, so a crash never leaves half a file.
 """
@@ -91,7 +93,7 @@ class StudyPlan(msgspec.Struct, kw_only=True, forbid_unknown_fields=True):
     created: str  # ISO 8601, UTC
     design: str  # how the orders were balanced, e.g. "balanced-latin-square"
     conditions: list[str]
-    questionnaires: list[str] = ["arroch-q"]
+    questionnaires: list[str] = msgspec.field(default_factory=lambda: ["arroch-q"])
     puzzle: PuzzleSpec = msgspec.field(default_factory=PuzzleSpec)
     world: WorldSpec = msgspec.field(default_factory=WorldSpec)
     participants: list[PlannedParticipant]

@@ -16,11 +16,13 @@ Examples:
   arroch up --services ping --child 'pinger={python} -m services.cli ping send --count 50'
   arroch up --no-router --zenoh-config-dir /etc/arroch/zenoh --services sim   # one host of several
   arroch up --services planner,restrictor,sim,ar,tablet --camera tablet --until-done   # what `arroch demo` runs
+  arroch up --services planner,restrictor,sim,ar,tablet --human participant --study-trial trial.json   # a study trial
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import sys
 from pathlib import Path
@@ -82,6 +84,12 @@ def _connect_for(listen: str) -> str:
 def _recording(args: argparse.Namespace, services: list) -> list:
     """The recorder to add: by default to every run with a sim; --record always, --no-record never (but --view)."""
     record = args.record if args.record is not None else any(s.name == "sim" for s in services)
+    if record and args.record_profile == "ros2":
+        # run.mcap as always (runs show, replay read it), and the run as a ROS 2 bag in <run>/run_ros2/.
+        extra = ("--profile", "foxglove,ros2", "--ros-distro", args.ros_distro)
+        return [dataclasses.replace(RECORDER, command=(*RECORDER.command, *extra))]
+    if args.record_profile == "ros2":
+        raise ValueError("--record-profile ros2 records the run as a ROS 2 bag too: not with --no-record")
     if record:
         return [RECORDER]
     return [VIEWER] if args.view else []
@@ -101,10 +109,25 @@ def build_config(args: argparse.Namespace) -> tuple[UpConfig, ZenohOptions]:
             raise ValueError(
                 f"missing Zenoh configs {', '.join(missing)} (arroch deploy render --out-dir {config_dir})"
             )
+    if args.time_limit is not None and args.time_limit < 0:
+        raise ValueError(f"--time-limit must be >= 0 site seconds (0: never), got {args.time_limit:g}")
     if args.rate is not None and args.rate <= 0:
         raise ValueError(f"--rate must be positive, got {args.rate}")
     if args.linger and not args.until_done:
         raise ValueError("--linger keeps a run up after its mission: it goes with --until-done")
+    if args.human == "participant" and args.mode == "lockstep":
+        raise ValueError(
+            "--human participant: a person acts in real time, so the simulation cannot run in lockstep "
+            "(leave --mode out for realtime, or give --rate K)"
+        )
+    if args.doors == "sensor" and args.human != "participant":
+        raise ValueError("--doors sensor: real doors are opened by a real person: it goes with --human participant")
+    study_trial = None
+    if args.study_trial:
+        path = Path(args.study_trial)
+        if not path.is_file():
+            raise ValueError(f"--study-trial {args.study_trial}: no such file")
+        study_trial = str(path.resolve())  # the children may run elsewhere than here
     if args.rate is not None and args.mode not in (None, "rate", "lockstep"):
         raise ValueError(
             "--rate K runs the simulation K times faster (at most, in lockstep); it does not go with --mode "
@@ -135,8 +158,12 @@ def build_config(args: argparse.Namespace) -> tuple[UpConfig, ZenohOptions]:
             mode=args.mode,
             rate=args.rate,
             seed=args.seed,
+            time_limit=args.time_limit,
             camera=args.camera,
             view_port=args.view_port if args.view else None,
+            human=args.human,
+            doors=args.doors,
+            study_trial=study_trial,
         ),
     )
     extra = [parse_child(entry, launch) for entry in args.child or []]
@@ -216,10 +243,36 @@ def add_up_arguments(parser: argparse.ArgumentParser) -> None:
     )
     mission.add_argument("--seed", type=int, metavar="N", help="random seed of the simulation")
     mission.add_argument(
+        "--time-limit",
+        type=float,
+        metavar="S",
+        help="the sim ends the mission unfinished after S site seconds (default the sim's, 7200; 0: never)",
+    )
+    mission.add_argument(
         "--camera",
         metavar="SPEC",
         help="the sim's virtual camera: 'tablet' (the human's tablet) or X,Y,Z,YAW,PITCH; "
         "the ar client and the tablet page (viewer mode) show it",
+    )
+    study = parser.add_argument_group("study trials (docs/study.md)")
+    study.add_argument(
+        "--human",
+        choices=("simulated", "participant"),
+        help="who plays the human in the sim: simulated (default, the human model) or participant (a person, "
+        "on her tablet page). participant needs site time that follows the wall clock: without --mode it runs "
+        "realtime; --rate K is allowed, --mode lockstep is refused",
+    )
+    study.add_argument(
+        "--doors",
+        choices=("sim", "sensor"),
+        help="the sim's human-operated doors: sim (default) or sensor (real doors: they follow DoorState on "
+        "door/<door>/sensor from a door controller, `arroch ros2 bridge` or the experimenter's console); "
+        "with --human participant",
+    )
+    study.add_argument(
+        "--study-trial",
+        metavar="FILE",
+        help="the trial file (arroch study plan/run) the tablet page shows: its condition and task",
     )
     view = parser.add_argument_group("recording and live view")
     view.add_argument(
@@ -227,6 +280,19 @@ def add_up_arguments(parser: argparse.ArgumentParser) -> None:
         action=argparse.BooleanOptionalAction,
         default=None,
         help="record the run to <run folder>/run.mcap (default: when the run has a sim; arroch runs show DIR reads it)",
+    )
+    view.add_argument(
+        "--record-profile",
+        choices=("foxglove", "ros2"),
+        default="foxglove",
+        help="foxglove (default): run.mcap; ros2: run.mcap and the run as a ROS 2 bag in <run folder>/run_ros2/ "
+        "(ros2 bag play, RViz 2)",
+    )
+    view.add_argument(
+        "--ros-distro",
+        choices=("humble", "jazzy"),  # the recorder's --ros-distro
+        default="jazzy",
+        help="with --record-profile ros2: the ROS 2 distribution whose rosbag2 reads the bag (default jazzy)",
     )
     view.add_argument(
         "--view",

@@ -4,6 +4,8 @@ the robot config file's checks."""
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import struct
 
@@ -19,6 +21,39 @@ from protocol.ros2.keys import TopicNaming, full_topic
 @pytest.mark.parametrize("typename", ros.USED_TYPES)
 def test_type_hashes_match_what_ros2_publishes(typename):
     assert ros.type_hash(typename) == ros.PUBLISHED_HASHES[typename]
+
+
+# ROS 2's field type ids (type_description_interfaces/msg/FieldType) of the one-field types below.
+FIELD_TYPE_BOOLEAN, FIELD_TYPE_STRING = 15, 17
+
+
+@pytest.mark.parametrize(("typename", "type_id"), [(ros.BOOL, FIELD_TYPE_BOOLEAN), (ros.STRING, FIELD_TYPE_STRING)])
+def test_type_hashes_recomputed_from_the_msg_definition(typename, type_id):
+    """``data`` is their only field (``bool data``, ``string data``): the hash is ROS 2's rule
+    (rosidl_generator_type_description.calculate_type_hash) applied to that definition, by hand,
+    independently of rosbags: SHA-256 of the type description as JSON, default values left out,
+    with the C++ implementation's separators."""
+    description = {
+        "type_description": {
+            "type_name": typename,
+            "fields": [
+                {
+                    "name": "data",
+                    "type": {"type_id": type_id, "capacity": 0, "string_capacity": 0, "nested_type_name": ""},
+                }
+            ],
+        },
+        "referenced_type_descriptions": [],
+    }
+    text = json.dumps(description, ensure_ascii=True, indent=None, separators=(", ", ": "), sort_keys=False)
+    expected = "RIHS01_" + hashlib.sha256(text.encode("utf-8")).hexdigest()
+    assert expected == ros.type_hash(typename) == ros.PUBLISHED_HASHES[typename]
+
+
+def test_a_bool_round_trip():
+    for value in (True, False):
+        payload = ros.serialize(ros.boolean(value), ros.BOOL)
+        assert payload == b"\x00\x01\x00\x00" + bytes([value]) and ros.deserialize(payload, ros.BOOL).data is value
 
 
 def test_rmw_zenoh_keys_and_tokens():
@@ -90,6 +125,26 @@ def test_config_file(tmp_path):
     assert mixed.with_overrides(domain=2).naming("r1").domain == 2  # the command line wins
 
 
+def test_door_sensors_in_the_config(tmp_path):
+    from protocol.ros2.config import check_doors
+    from protocol.site import load_site
+
+    f = tmp_path / "robots.toml"
+    f.write_text('[ros2]\ndomain = 4\n[ros2.doors.d_storage]\ntopic = "/building/storage_door"\n[ros2.doors.d_x]\n')
+    config = load_ros2_config(f).with_overrides(key_format="ros2dds")
+    assert config.doors["d_storage"].topic == "/building/storage_door"
+    assert config.doors["d_x"].topic == "/doors/d_x/open"  # the default topic
+    assert config.naming().data_key(config.doors["d_storage"].topic, ros.BOOL) == "building/storage_door"
+    site = load_site()
+    with pytest.raises(RosConfigError, match=r"robots.toml: ros2.doors.d_x: no such door on site office"):
+        check_doors(config, site)
+    f.write_text("[ros2.doors.d_lab]\n")
+    with pytest.raises(RosConfigError, match=r"ros2.doors.d_lab: an automatic door of site office \(its human-op"):
+        check_doors(load_ros2_config(f), site)
+    f.write_text("[ros2.doors.d_storage]\n")
+    check_doors(load_ros2_config(f), site)  # a human-operated door: fine
+
+
 @pytest.mark.parametrize(
     "table, where",
     [
@@ -101,6 +156,12 @@ def test_config_file(tmp_path):
         ({"robots": {"r0": {"speed": 1}}}, "ros2.robots.r0.speed"),
         ({"robots": {"r0": {"pose_timeout": -1}}}, "ros2.robots.r0.pose_timeout"),
         ({"robots": {"r0": {"key_format": "fastdds"}}}, "ros2.robots.r0.key_format"),
+        ({"doors": {"d_storage": {"topic": "no spaces"}}}, "ros2.doors.d_storage.topic"),
+        ({"doors": {"d_storage": {"topic": 3}}}, "ros2.doors.d_storage.topic"),
+        ({"doors": {"d_storage": {"topc": "/x"}}}, "ros2.doors.d_storage.topc"),
+        ({"doors": {"d_storage": "/x"}}, "ros2.doors.d_storage: must be a table"),
+        ({"doors": {"bad door": {}}}, "ros2.doors.bad door: not a door id"),
+        ({"doors": ["d_storage"]}, "ros2.doors: must be a table"),
     ],
 )
 def test_config_errors_name_the_key(table, where):
@@ -109,8 +170,8 @@ def test_config_errors_name_the_key(table, where):
 
 
 def test_site_markers_follow_the_state():
+    from protocol.ros2.markers import SiteState, site_markers
     from protocol.site import load_site
-    from services.ros2.markers import SiteState, site_markers
 
     site = load_site()
     state = SiteState(

@@ -103,7 +103,11 @@ GUARDS: tuple[Guard, ...] = (
     Guard("robot/*/pose", "robot poses come from the robots (or the simulator)", publishers=("sim",)),
     Guard("robot/*/status", "robot statuses come from the robots (or the simulator)", publishers=("sim",)),
     Guard("door/*/state", "door states come from the simulator or door sensors", publishers=("sim",)),
-    Guard("door/*/sensor", "real doors' sensors reach the world through a door controller or bridge", publishers=("sim",)),
+    Guard(
+        "door/*/sensor",
+        "real doors' sensors reach the world through a door controller or bridge, or the study console",
+        publishers=("sim", "supervisor"),
+    ),
     Guard("human/state", "where the human is comes from the simulator (or her sensors)", publishers=("sim",)),
     Guard(
         "participant/*",

@@ -116,6 +116,7 @@ class TrialRun:
         self.drops: Counter[str] = Counter()
         self._stop_at: float | None = None
         self._last_control = 0.0
+        self._pause_said = False  # a pause went out (it may still be on its way to the world)
         self._unanswered_since: float | None = None
         self._warned_unanswered = False
         self._world_exit_noted = False
@@ -282,8 +283,14 @@ class TrialRun:
         if self.service is None or self.outcome is not None or self.mission_done:
             return
         want_paused = self.consent == "pending" or self.experimenter_paused
-        # Unknown (no HumanState yet) counts as running: a pause must be seen taken, a resume need not.
-        if want_paused == (self.world_paused is True):
+        # A pause must be seen taken. A resume need not be when the world was never told to pause (no
+        # HumanState yet counts as running); once a pause went out it may still be on its way, so the
+        # world must be seen running.
+        if want_paused:
+            settled = self.world_paused is True
+        else:
+            settled = self.world_paused is False if self._pause_said else not self.world_paused
+        if settled:
             self._unanswered_since = None
             return
         if self._unanswered_since is None:
@@ -304,6 +311,7 @@ class TrialRun:
         if paused:
             why = "waiting for her consent" if self.consent == "pending" else "paused by the experimenter"
             self.service.send_control("pause", why)
+            self._pause_said = True
         else:
             self.service.send_control("resume")
         self._last_control = now

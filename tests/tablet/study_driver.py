@@ -1,7 +1,7 @@
 """A scripted participant on the study page (``arroch tablet --study-trial``), in headless Chromium.
 
 :class:`StudyPageDriver` uses the page as a person does: it reads what the page shows and touches
-elements at their centres (``Input.dispatchTouchEvent``: taps, and a press held for a while). It
+elements at their centres (clicks, and a touch held for a while on the door's control). It
 solves the puzzle by looking — each piece's pixels against the picture to make, both as the page
 draws them — never by asking the page where a piece belongs. It waits for the page's answer after
 each step, so a test (or a whole scripted study) can chain the steps:
@@ -107,12 +107,15 @@ class StudyPageDriver:
     # ------------------------------------------------------------------ touching it
 
     def tap(self, selector: str) -> None:
-        """Bring the element into view and tap its centre."""
+        """Bring the element into view and touch its centre (a click)."""
         self.browser.evaluate(
             f"document.querySelector({json.dumps(selector)}).scrollIntoView({{block: 'center', inline: 'center'}})"
         )
         x, y = self.browser.center_of(selector)
-        self.browser.tap(x, y)
+        # A click (press and release), not a touch tap: the page's buttons act on "click", which
+        # Chromium makes of a touch only when it ends within its long-press time, and on a loaded
+        # machine the two dispatches of a tap can be further apart than that (a long press: no click).
+        self.browser.click(x, y)
 
     def press(self, selector: str, seconds: float) -> None:
         """Touch the element's centre, keep the finger there ``seconds``, lift it."""

@@ -338,6 +338,8 @@ window.arroch = {
     gravity: gravity.current(), gravity_source: gravity.kind,
     video: [$("video").videoWidth, $("video").videoHeight],
     robots: state.world ? Object.keys(state.world.robots) : [],
+    // What the robots' view shows of each robot's state (a person sees "waiting at the door" there).
+    robot_states: state.world ? Object.fromEntries(Object.entries(state.world.robots).map(([k, r]) => [k, r.state])) : {},
     acks: panel.results.slice(),
   }),
   study: () => (state.hello && state.hello.study ? study.snapshot() : null),

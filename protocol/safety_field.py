@@ -13,6 +13,9 @@ corridor. Two zones, both growing with the speed:
   can always stop short of it, and is not stopped by the obstacle it is slowing for (only by one
   that comes closer: a person stepping in).
 
+A robot the field stopped *waits*: it goes on only once the way is clear of the stop zone at its
+cruising speed (``resume_speed``), not creeping up to whoever stepped in front of it.
+
 Turning on the spot sweeps nothing outside the disc: only a point inside the grown disc (something
 touching) stops a turn.
 """
@@ -95,13 +98,22 @@ def clearance_ahead(points: np.ndarray, radius: float, backwards: bool, cfg: Fie
 
 
 def limit(
-    points: np.ndarray, v: float, omega: float, speed_now: float, radius: float, cfg: FieldConfig = FieldConfig()
+    points: np.ndarray,
+    v: float,
+    omega: float,
+    speed_now: float,
+    radius: float,
+    cfg: FieldConfig = FieldConfig(),
+    resume_speed: float | None = None,
 ) -> Verdict:
-    """The velocity the field allows instead of (v, omega), the robot going at ``speed_now``."""
+    """The velocity the field allows instead of (v, omega), the robot going at ``speed_now``;
+    ``resume_speed``: the field stopped it, and it waits until the way is clear at that speed."""
     if points.size and v == 0.0:
         touching = bool((np.hypot(points[:, 0], points[:, 1]) < radius + cfg.side_margin).any())
         return Verdict(0.0, 0.0, True, 0.0) if touching and omega != 0.0 else Verdict(v, omega, False, math.inf)
     clearance = clearance_ahead(points, radius, v < 0.0, cfg)
+    if resume_speed is not None and clearance < stop_distance(resume_speed, cfg) + cfg.slow_gap:
+        return Verdict(0.0, 0.0, True, clearance)
     if clearance < stop_distance(speed_now, cfg) or clearance <= cfg.stop_base:
         return Verdict(0.0, 0.0, True, clearance)
     cap = speed_cap(clearance - cfg.slow_gap, cfg)

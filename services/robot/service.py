@@ -113,6 +113,7 @@ class RobotService(Service):
         self._scan = np.zeros((0, 2))
         self._scan_at = -math.inf
         self._blocked_since: float | None = None  # site time the field started holding a driving robot
+        self._stopped_by_field = False  # it waits for the way to clear at cruising speed before going on
         self._speed = 0.0  # m/s the robot goes at (odometry's, else the last command's)
         self._bad_logged: set[str] = set()
 
@@ -237,6 +238,7 @@ class RobotService(Service):
             # Someone stepping in front of the robot stops it now, not at the next pose.
             verdict = limit(points, v, omega, max(abs(v), abs(self._speed)), self.site.params.robot_radius, self.field)
             if verdict.stop:
+                self._stopped_by_field = True
                 self._send(0.0, 0.0)
                 self._note_field(verdict, self._scan_at)
                 self._publish_status()

@@ -20,13 +20,14 @@ import numpy as np
 import pytest
 import zenoh.ext
 
-from protocol.messages import Event, RobotPose, RobotStatus
+from protocol.messages import Event, RobotCommand, RobotPose, RobotStatus
 from protocol.ros2 import types as ros
 from protocol.ros2.config import load_ros2_config
 from protocol.safety_field import FieldConfig, limit, scan_points, stop_distance
 from protocol.site import load_site
 from services.sim.human import HUMAN_RADIUS
 from tests.conftest import wait_for_message
+from tests.procs import arroch
 from tests.ros2.harness import FakeBase, straight_command
 from tests.ros2.test_safety import start_driver
 
@@ -217,3 +218,51 @@ def test_transient_local_pose_published_before_the_driver_starts(spawn, router, 
         base.close()
         amcl.undeclare()
         session.close()
+
+
+# ---------------------------------------------------------------------- the simulator's scanner
+
+
+def test_simulated_bases_publish_a_scan_the_driver_goes_by(spawn, router, namespace, client, tmp_path):
+    """``arroch sim --ros2-bases``: r1's base takes TwistStamped and has a laser scanner; its scan
+    shows d_lab's closed leaf 2 m ahead; the driver, with the field on, takes r1 through the door
+    once it opens for it."""
+    robot = "r1"  # in the lab, 2 m in front of d_lab (automatic), facing it
+    f = tmp_path / "robots.toml"
+    f.write_text(f'[ros2.robots.{robot}]\nscan_topic = "scan"\ncmd_vel_type = "twist_stamped"\n')
+    config = load_ros2_config(f)
+    scans: list = []
+    key = config.naming(robot).subscription_key(f"/{robot}/scan", ros.LASER_SCAN)
+    client.hold(
+        client.session.declare_subscriber(
+            key, lambda s: scans.append(ros.deserialize(s.payload.to_bytes(), ros.LASER_SCAN))
+        )
+    )
+    events = client.collect(client.keys.event(), Event)
+    common = ("--connect", router, "--namespace", namespace, "--ros2-config", str(f))
+    spawn(arroch("sim", "--ros2-bases", *common), name="sim").wait_for("sim sim-", timeout=20)
+    deadline = time.monotonic() + 10
+    while not scans and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert scans, "no LaserScan from the simulated base"
+    first = scans[0]
+    ranges = np.asarray(first.ranges)
+    ahead = int(round((0.0 - first.angle_min) / first.angle_increment))
+    assert first.header.frame_id == "base_link" and ranges[ahead] == pytest.approx(2.0, abs=0.03)
+    spawn(arroch("robot", "--ros2", "--robot", robot, *common), name="robot").wait_for("robot robot-r1-", timeout=20)
+    time.sleep(1.5)  # the driver hears the base's odometry (heartbeat)
+    start = SITE.robots[robot].start
+    rows = straight_command(robot, start, 3.0).trajectory
+    client.publish(
+        client.keys.robot_command(robot),
+        RobotCommand(robot=robot, plan_id=1, action_id=1, action="gothrough", args=["d_lab"], trajectory=rows),
+    )
+    done = wait_for_message(
+        events,
+        lambda e: e.kind in ("action_done", "action_failed", "closed_door_crossing") and e.robot == robot,
+        timeout=40,
+    )
+    assert done.kind == "action_done", done
+    assert done.data["pose"][1] < SITE.doors["d_lab"].center[1] - RADIUS
+    (stats,) = [e.data for e in client.query(client.keys.stats("robot"), Event)]
+    assert stats["scans"] > 10, stats

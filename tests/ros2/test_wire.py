@@ -162,6 +162,31 @@ def test_config_file(tmp_path):
     assert mixed.with_overrides(domain=2).naming("r1").domain == 2  # the command line wins
 
 
+def test_real_base_keys_in_the_config(tmp_path):
+    f = tmp_path / "robots.toml"
+    f.write_text(
+        '[ros2.robots.r0]\ncmd_vel_type = "twist_stamped"\npose_type = "pose"\npose_topic = "amcl_pose"\n'
+        'pose_durability = "transient_local"\nodom_topic = "odom"\nscan_topic = "scan"\nscan_timeout = 0.3\n'
+        'obstacle_patience = 20\ntype_hash = "TypeHashNotSupported"\n'
+    )
+    link = load_ros2_config(f).link("r0")
+    assert link.cmd_vel_typename == ros.TWIST_STAMPED and link.pose_durability == "transient_local"
+    assert (link.topic(link.odom_topic), link.topic(link.scan_topic)) == ("/r0/odom", "/r0/scan")
+    assert (link.scan_timeout, link.obstacle_patience, link.type_hash) == (0.3, 20.0, "TypeHashNotSupported")
+    default = load_ros2_config(None).link("r0")
+    assert (default.cmd_vel_typename, default.scan_topic, default.pose_durability) == (ros.TWIST, "", "volatile")
+
+
+def test_twist_stamped_carries_stamp_and_frame():
+    msg = ros.deserialize(
+        ros.serialize(ros.cmd_vel(ros.TWIST_STAMPED, 0.4, -0.2, 1_700_000_000.25, "base_link"), ros.TWIST_STAMPED),
+        ros.TWIST_STAMPED,
+    )
+    assert ros.twist_of(msg, ros.TWIST_STAMPED) == pytest.approx((0.4, -0.2))
+    assert msg.header.frame_id == "base_link" and ros.seconds(msg.header.stamp) == pytest.approx(1_700_000_000.25)
+    assert ros.twist_of(ros.cmd_vel(ros.TWIST, 0.4, -0.2, 0.0, ""), ros.TWIST) == pytest.approx((0.4, -0.2))
+
+
 def test_door_sensors_in_the_config(tmp_path):
     from protocol.ros2.config import check_doors
     from protocol.site import load_site
@@ -199,6 +224,12 @@ def test_door_sensors_in_the_config(tmp_path):
         ({"doors": {"d_storage": "/x"}}, "ros2.doors.d_storage: must be a table"),
         ({"doors": {"bad door": {}}}, "ros2.doors.bad door: not a door id"),
         ({"doors": ["d_storage"]}, "ros2.doors: must be a table"),
+        ({"robots": {"r0": {"cmd_vel_type": "twiststamped"}}}, "ros2.robots.r0.cmd_vel_type"),
+        ({"robots": {"r0": {"pose_durability": "durable"}}}, "ros2.robots.r0.pose_durability"),
+        ({"robots": {"r0": {"odom_topic": "odom"}}}, "ros2.robots.r0.odom_topic: odometry between"),
+        ({"robots": {"r0": {"scan_topic": "bad scan"}}}, "ros2.robots.r0.scan_topic"),
+        ({"robots": {"r0": {"scan_timeout": 0}}}, "ros2.robots.r0.scan_timeout"),
+        ({"robots": {"r0": {"obstacle_patience": "long"}}}, "ros2.robots.r0.obstacle_patience"),
     ],
 )
 def test_config_errors_name_the_key(table, where):

@@ -191,13 +191,13 @@ class RobotService(Service):
             if self.map_to_odom is None:
                 self.count("poses_without_map_to_odom")
                 return
-            self._moved(_compose(self.map_to_odom, (p.x, p.y, p.theta)), p.v)
+            self._moved(_compose(self.map_to_odom, (p.x, p.y, p.theta)), (p.v, p.omega))
             return
         pose = (p.x, p.y, wrap(p.theta))
         if self.link.odom_topic:
             self._fix = (pose, self._odom_last)
             self.count("localisation_fixes")
-        self._moved(pose, self._velocity[0])
+        self._moved(pose, self._velocity)
 
     def _on_odometry(self, msg: Any, key: str) -> None:
         """Sparse localisation: odometry moves the robot from the last fix until the next one."""
@@ -212,17 +212,18 @@ class RobotService(Service):
         if odom_at_fix is None:
             self._fix = (fix, odom)  # the first odometry after the fix stands for the fix's instant
             odom_at_fix = odom
-        self._moved(_compose(fix, _between(odom_at_fix, odom)), p.v)
+        self._moved(_compose(fix, _between(odom_at_fix, odom)), (p.v, p.omega))
 
-    def _moved(self, pose: tuple[float, float, float], speed: float) -> None:
-        """A new pose of the robot (map frame): answer it with the velocity to send."""
+    def _moved(self, pose: tuple[float, float, float], velocity: tuple[float, float]) -> None:
+        """A new pose of the robot (map frame), going at ``velocity`` (odometry's, else the last
+        command's): answer it with the velocity to send."""
         self.pose = pose
-        self._speed = speed
+        self._speed = velocity[0]
         self._pose_at = self.clock.now()
         self.count("poses")
         v, omega = self._control()
         self._send(v, omega)
-        self._publish_pose((speed, omega))
+        self._publish_pose(velocity)
         self._publish_status()
 
     def _on_scan(self, msg: Any, key: str) -> None:

@@ -91,6 +91,8 @@ def rerecord(recording: Path, image_scale: float = 1.0, passes: int = 5) -> tupl
     from services.recorder.profile import FoxgloveProfile
     from services.recorder.reading import messages, metadata
     from services.recorder.sink import FoxgloveSink
+    from services.recorder.timebase import Timebase
+    from services.recorder.topics import key_of
 
     keys = Keys(metadata(recording)["namespace"])
     site = load_site()
@@ -99,11 +101,13 @@ def rerecord(recording: Path, image_scale: float = 1.0, passes: int = 5) -> tupl
     with tempfile.TemporaryDirectory() as tmp:
         for k in range(passes):
             path = Path(tmp) / f"{k}.mcap"
-            profile = FoxgloveProfile(FoxgloveSink(path), keys, site, image_scale=image_scale)
+            timebase = Timebase(time.time_ns())
+            profile = FoxgloveProfile(FoxgloveSink(path), keys, site, timebase, image_scale=image_scale)
             start = time.perf_counter()
-            profile.start(0.0)
+            profile.start(timebase.at(0.0))
+            profile.origin_fixed()
             for rec in recorded:
-                profile.handle(rec.message, f"{keys.prefix}/{rec.topic[len('/arroch/') :]}")
+                profile.handle(rec.message, key_of(keys, rec.topic), rec.payload)
             profile.close()
             times.append(time.perf_counter() - start)
             size = path.stat().st_size

@@ -42,7 +42,7 @@ def micro(fn, number: int = 200) -> float:  # noqa: ANN001
 
 
 def codec_figures() -> dict:
-    from services.ros2.markers import SiteState, site_markers
+    from protocol.ros2.markers import SiteState, site_markers
 
     site = load_site()
     PoseStamped = ros.t("geometry_msgs/msg/PoseStamped")

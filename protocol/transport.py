@@ -215,3 +215,51 @@ def on_zenoh_thread(fn: Callable[[T], object]) -> zenoh.handlers.Callback:
         fn(arg)
 
     return zenoh.handlers.Callback(call, indirect=False)
+
+
+class NoRouter(ConnectionError):
+    """No Zenoh router answers where a client would connect (the message says what to start)."""
+
+
+def router_answers(endpoint: str, timeout: float = 0.5) -> bool | None:
+    """Whether something accepts TCP connections at a ``tcp/HOST:PORT`` (or ``tls/...``) endpoint;
+    None for other kinds of endpoint, which cannot be checked this way."""
+    proto, _, address = endpoint.partition("/")
+    host, _, port = address.rpartition(":")
+    if proto not in ("tcp", "tls") or not port.isdigit():
+        return None
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout):
+            return True
+    except OSError:
+        return False
+
+
+def through_local_router(opts: ZenohOptions, *, become: bool) -> tuple[ZenohOptions, str]:
+    """Options for a client that joins through a router, checked before Zenoh is asked (whose own
+    error would be a raw one): unchanged when a router answers, or when they cannot be checked (a
+    config file, another mode, endpoints other than TCP).
+
+    When none answers: with ``become`` and the default endpoint (no ``--connect``), this process
+    becomes the router there (router mode, listening on it: other processes connect to it as to
+    ``arroch router``), and the second value says so in one line; otherwise :class:`NoRouter`."""
+    if opts.config_file or opts.mode != "client":
+        return opts, ""
+    endpoints = opts.effective_connect()
+    answers = [router_answers(endpoint) for endpoint in endpoints]
+    if not endpoints or any(a is not False for a in answers):
+        return opts, ""
+    where = ", ".join(endpoints)
+    if become and "connect" not in opts.explicit:
+        routing = ZenohOptions(
+            mode="router",
+            listen=list(endpoints),
+            multicast=opts.multicast,
+            shared_memory=opts.shared_memory,
+            explicit={"mode", "listen"},
+        )
+        return routing, f"no Zenoh router answers on {where}: this process is the router there until it stops"
+    raise NoRouter(
+        f"no Zenoh router answers on {where}: start one (`arroch router --listen {endpoints[0]}`, or `arroch up`, "
+        "or `arroch view`, which becomes one), or give --connect"
+    )

@@ -14,16 +14,23 @@
 
 Each (level, baseline) gets the verdict of :class:`~.comparisons.Test` (primary test: Wilcoxon
 signed-rank for times, the sign-flip permutation test for counts; Holm over the claim's family:
-all levels × baselines of its metric, the same family as ``tests.csv``). A claim is
+all levels × baselines of its metric, the same family as ``tests.csv``). A claim is worded as the
+tests give it:
 
-- *confirmed* when every (level, baseline) is ``lower (significant)``;
-- *partly confirmed* when some are;
-- *not confirmed* when none is (the detail says which are higher, equivalent or not significant);
+- *confirmed* when every comparison supports it (each ``lower (significant)``);
+- *contradicted* when any Holm-significant comparison goes against it (``higher (significant)``;
+  the detail says which, and whether TOST puts them inside the equivalence margin);
+- *equivalent* when every comparison is equivalent within the margin (TOST, Holm);
+- *partly* otherwise, when some comparison supports it;
+- *not confirmed* when none supports it and none goes against it (not significant, or a mix of
+  not significant and equivalent): the tests say nothing either way, which is not "partly";
 - *cannot be checked* when the sweep lacks ARROCH, a baseline, or complete pairs.
 
-The crossover is confirmed when both halves hold (no-comm significantly faster at the lowest
-probability, ARROCH significantly lowest against every baseline from 0.1 on), partly when one half
-or part of the second holds.
+The crossover has two halves, no-comm significantly faster at the lowest probability and ARROCH
+significantly lowest against every baseline from 0.1 on: confirmed when both hold, contradicted
+when a Holm-significant comparison goes against either (ARROCH significantly faster than no-comm
+at the lowest probability, or significantly slower from 0.1 on), partly when some part holds, not
+confirmed otherwise.
 """
 
 from __future__ import annotations
@@ -32,6 +39,7 @@ from dataclasses import dataclass, field
 
 from .comparisons import (
     DOOR_OPENINGS,
+    EQUIVALENT,
     HIGHER,
     LOWER,
     NO_DATA,
@@ -47,15 +55,51 @@ from .results import Results
 
 COOPERATIVE_P = 0.1  # the paper's caption: ARROCH is best "as long as ... >= 0.1 probability"
 BASELINE_FOR_CROSSOVER = "no-comm"
+CONFIRMED, CONTRADICTED, EQUIVALENT_CLAIM, PARTLY, NOT_CONFIRMED, CANNOT = (
+    "confirmed",
+    "contradicted",
+    "equivalent",
+    "partly",
+    "not confirmed",
+    "cannot be checked",
+)
 
 
 @dataclass
 class Claim:
     title: str
     statement: str
-    verdict: str  # confirmed, partly confirmed, not confirmed, cannot be checked
+    verdict: str  # one of CONFIRMED, CONTRADICTED, EQUIVALENT_CLAIM, PARTLY, NOT_CONFIRMED, CANNOT
     detail: str
     tests: list[Test] = field(default_factory=list)
+
+
+def label(supports: list[bool], against: list[bool], equivalent: list[bool]) -> str:
+    """A claim's label from its comparisons (module docstring): each list holds one flag per comparison
+    with data; ``supports`` significant in the claim's direction, ``against`` significant against it,
+    ``equivalent`` TOST-equivalent within the margin."""
+    if not supports:
+        return CANNOT
+    if all(supports):
+        return CONFIRMED
+    if any(against):
+        return CONTRADICTED
+    if all(equivalent):
+        return EQUIVALENT_CLAIM
+    return PARTLY if any(supports) else NOT_CONFIRMED
+
+
+def _against(tests: list[Test]) -> str:
+    """The comparisons that go against a claim, and whether they lie inside the margin."""
+    higher = [t for t in tests if t.outcome == HIGHER]
+    if not higher:
+        return ""
+    inside = sum(t.within_margin for t in higher)
+    return (
+        f" Against it: {len(higher)} significantly higher"
+        + (f", {inside} of them within the equivalence margin (TOST)" if inside else "")
+        + "."
+    )
 
 
 def _tally(tests: list[Test]) -> str:
@@ -63,6 +107,15 @@ def _tally(tests: list[Test]) -> str:
     for t in tests:
         counts[t.verdict] = counts.get(t.verdict, 0) + 1
     return ", ".join(f"{n} {v}" for v, n in counts.items())
+
+
+def _flags(tests: list[Test]) -> tuple[list[bool], list[bool], list[bool]]:
+    known = [t for t in tests if t.outcome != NO_DATA]
+    return (
+        [t.outcome == LOWER for t in known],
+        [t.outcome == HIGHER for t in known],
+        [t.outcome == EQUIVALENT or (t.outcome == HIGHER and t.within_margin) for t in known],
+    )
 
 
 def _by_level(results: Results, tests: list[Test]) -> str:
@@ -77,27 +130,19 @@ def _by_level(results: Results, tests: list[Test]) -> str:
 def lowest_everywhere(results: Results, tests: list[Test], metric: Metric, title: str, statement: str) -> Claim:
     """ARROCH significantly lower than each baseline at every level (module docstring)."""
     if not baselines(results):
-        return Claim(title, statement, "cannot be checked", "the sweep needs ARROCH and at least one baseline")
-    verdicts = [t.verdict for t in tests]
-    if not verdicts or all(v == NO_DATA for v in verdicts):
-        verdict = "cannot be checked"
-    elif all(v == LOWER for v in verdicts):
-        verdict = "confirmed"
-    elif LOWER in verdicts:
-        verdict = "partly confirmed"
-    else:
-        verdict = "not confirmed"
-    lower = sum(v == LOWER for v in verdicts)
+        return Claim(title, statement, CANNOT, "the sweep needs ARROCH and at least one baseline")
+    supports, against, within = _flags(tests)
+    verdict = label(supports, against, within)
     detail = (
-        f"{lower} of {len(verdicts)} (level, baseline) comparisons of the {metric.label} are lower (significant) "
-        f"({_tally(tests)}). {_by_level(results, tests)}"
+        f"{sum(supports)} of {len(tests)} (level, baseline) comparisons of the {metric.label} are lower (significant) "
+        f"({_tally(tests)}).{_against(tests)} {_by_level(results, tests)}"
     )
     return Claim(title, statement, verdict, detail, tests)
 
 
 def _crossing(tests: list[Test]) -> str:
     """Where ARROCH's mean difference to no-comm turns negative and stays so (descriptive)."""
-    ahead = [(t.level, t.result.mean_diff < 0) for t in sorted(tests, key=lambda t: t.level) if t.result.n >= 2]
+    ahead = [(t.level, t.result.mean_diff < 0) for t in sorted(tests, key=lambda t: t.level) if t.result.n >= 2]  # type: ignore[arg-type, return-value]
     for i, (level, better) in enumerate(ahead):
         if better and all(b for _, b in ahead[i:]):
             return f"ARROCH's mean stays below no-comm's from p = {level:g} on."
@@ -112,34 +157,34 @@ def crossover(results: Results, tests: list[Test]) -> Claim:
         f">= {COOPERATIVE_P:g}; at very low probabilities no-comm is faster."
     )
     if results.kind != "laziness":
-        return Claim(title, statement, "cannot be checked", "needs the laziness sweep")
+        return Claim(title, statement, CANNOT, "needs the laziness sweep")
     if REFERENCE not in results.methods or BASELINE_FOR_CROSSOVER not in results.methods:
-        return Claim(title, statement, "cannot be checked", "the sweep needs arroch and no-comm")
+        return Claim(title, statement, CANNOT, "the sweep needs arroch and no-comm")
     lowest = min(results.levels)  # type: ignore[type-var]
     nocomm = [t for t in tests if t.baseline == BASELINE_FOR_CROSSOVER]
     at_low = next(t for t in nocomm if t.level == lowest)
     cooperative = [t for t in tests if t.level >= COOPERATIVE_P]  # type: ignore[operator]
-    if lowest >= COOPERATIVE_P or at_low.verdict == NO_DATA:  # type: ignore[operator]
+    if lowest >= COOPERATIVE_P or at_low.outcome == NO_DATA:  # type: ignore[operator]
         return Claim(
             title,
             statement,
-            "cannot be checked",
+            CANNOT,
             f"needs complete pairs at a probability below {COOPERATIVE_P:g} (lowest: {lowest:g})",
             tests,
         )
-    nocomm_faster = at_low.verdict == HIGHER
-    lowest_after = [t.verdict == LOWER for t in cooperative]
-    if nocomm_faster and lowest_after and all(lowest_after):
-        verdict = "confirmed"
-    elif nocomm_faster or any(lowest_after):
-        verdict = "partly confirmed"
-    else:
-        verdict = "not confirmed"
+    # The first half is supported by ARROCH significantly *higher* there (no-comm faster), contradicted by lower.
+    known = [t for t in cooperative if t.outcome != NO_DATA]
+    supports = [at_low.outcome == HIGHER, *(t.outcome == LOWER for t in known)]
+    against = [at_low.outcome == LOWER, *(t.outcome == HIGHER for t in known)]
+    verdict = label(supports, against, [False] * len(supports))
+    nocomm_faster = supports[0]
+    lowest_after = supports[1:]
     detail = (
         f"at p = {lowest:g}, ARROCH − baseline {at_low.describe()}: "
         f"{'no-comm significantly faster' if nocomm_faster else 'no-comm not significantly faster'}; "
         f"from p = {COOPERATIVE_P:g} on: {sum(lowest_after)} of {len(lowest_after)} (level, baseline) comparisons "
-        f"lower (significant) ({_tally(cooperative)}). {_by_level(results, cooperative)} {_crossing(nocomm)}"
+        f"lower (significant) ({_tally(cooperative)}).{_against(cooperative)} {_by_level(results, cooperative)} "
+        f"{_crossing(nocomm)}"
     )
     return Claim(title, statement, verdict, detail, [at_low, *cooperative])
 
@@ -148,9 +193,12 @@ def check_claims(results: Results, tested: dict[str, list[Test]] | None = None) 
     """The claims this sweep can speak to, in the paper's order; ``tested``: :func:`.comparisons.families`
     already computed for ``results`` (else computed here)."""
     tested = tested if tested is not None else families(results, (DOOR_OPENINGS, TEAM_TIME, SUM_OF_TIMES))
-    where = {"robots": "at every team size", "laziness": "at every door-opening probability"}.get(
-        results.kind, "in every cell of task length × interruption cost"
-    )
+    where = {
+        "robots": "at every team size",
+        "laziness": "at every door-opening probability",
+        "map": "in every cell of task length × interruption cost",
+        "population": "over the population of simulated people",
+    }.get(results.kind, f"at every point ({results.variable})")
     claims = [
         lowest_everywhere(
             results,

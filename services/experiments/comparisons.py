@@ -20,6 +20,15 @@ The paired t-test is reported alongside; it decides nothing. See :mod:`.stats` f
 - ``equivalent within ±margin``: otherwise, when the TOST Holm p < ``ALPHA``;
 - ``not significant``: otherwise; ``no data`` with fewer than two complete pairs.
 
+A significant difference that TOST also finds inside the margin is both, and says so: ``higher
+(significant), within ±30 s (TOST)`` (two 1 s declarations make ARROCH reliably a little slower,
+by less than anything the margin counts). :attr:`Test.outcome` is the category alone.
+
+**Interval.** Each test's table shows the interval of the test that decides its verdict, at the
+level Holm tested it at (:func:`.stats.holm_alphas`): for times the Hodges–Lehmann estimate with its
+Wilcoxon interval, for counts the mean difference with its sign-flip interval. The paired t
+interval stays in ``tests.csv`` (``t_ci_low``, ``t_ci_high``) for reference; it decides nothing.
+
 **Equivalence margins** (chosen before the runs; the paper states none):
 
 - team completion time and sum of times: ±``TIME_MARGIN`` = 30 s, 5 % of the paper-scale task
@@ -40,7 +49,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 from .results import COUNTS, Level, Results
-from .stats import Paired, holm, paired
+from .stats import Interval, Paired, differences, hodges_lehmann, holm, holm_alphas, paired, sign_flip_interval
 
 ALPHA = 0.05
 REFERENCE = "arroch"
@@ -86,6 +95,7 @@ TIME_AWAY = Metric("human_time_away", "human's time away from her task", "s", AW
 TESTED = (TEAM_TIME, SUM_OF_TIMES, DOOR_OPENINGS, TIME_AWAY)
 
 LOWER, HIGHER, NOT_SIGNIFICANT, NO_DATA = "lower (significant)", "higher (significant)", "not significant", "no data"
+EQUIVALENT = "equivalent"  # the category; its text names the margin (equivalent())
 
 
 def equivalent(metric: Metric) -> str:
@@ -94,7 +104,8 @@ def equivalent(metric: Metric) -> str:
 
 @dataclass(frozen=True)
 class Test:
-    """ARROCH against one baseline at one level of the sweep, with its family's Holm values."""
+    """ARROCH against one baseline at one level of the sweep, with its family's Holm values and the
+    interval of its deciding test at its Holm level."""
 
     metric: Metric
     level: Level
@@ -102,13 +113,15 @@ class Test:
     result: Paired
     primary_p_holm: float
     tost_p_holm: float
+    interval: Interval | None = None
 
     @property
     def primary_p(self) -> float:
         return self.result.perm_p if self.metric.count else self.result.wilcoxon.p
 
     @property
-    def verdict(self) -> str:
+    def outcome(self) -> str:
+        """LOWER, HIGHER, EQUIVALENT, NOT_SIGNIFICANT or NO_DATA (module docstring)."""
         r = self.result
         if r.n < 2:
             return NO_DATA
@@ -118,21 +131,56 @@ class Test:
                 return LOWER
             if r.mean_diff > 0 and ranks_agree:
                 return HIGHER
-        if not math.isnan(self.tost_p_holm) and self.tost_p_holm < ALPHA:
+        return EQUIVALENT if self.within_margin else NOT_SIGNIFICANT
+
+    @property
+    def within_margin(self) -> bool:
+        """TOST (Holm) puts the difference inside the equivalence margin."""
+        return not math.isnan(self.tost_p_holm) and self.tost_p_holm < ALPHA
+
+    @property
+    def verdict(self) -> str:
+        outcome = self.outcome
+        if outcome == EQUIVALENT:
             return equivalent(self.metric)
-        return NOT_SIGNIFICANT
+        if outcome in (LOWER, HIGHER) and self.within_margin:
+            return f"{outcome}, within ±{self.metric.margin:g}{self.metric.suffix} (TOST)"
+        return outcome
+
+    def interval_text(self) -> str:
+        """``-12.3 [-20.1, -4.5]`` (the deciding test's estimate and interval), ``n/a`` without one."""
+        i, d = self.interval, self.metric.digits
+        if i is None or math.isnan(i.estimate):
+            return "n/a"
+
+        def bound(v: float) -> str:
+            return "−∞" if v == -math.inf else "+∞" if v == math.inf else f"{v:+.{d}f}"
+
+        return f"{i.estimate:+.{d}f} [{bound(i.low)}, {bound(i.high)}]"
 
     def describe(self) -> str:
-        """``vs no-comm: lower (significant), Δ -12.3 s [-20.1, -4.5], Holm p = 0.003``."""
-        r, d = self.result, self.metric.digits
+        """``vs no-comm: lower (significant), HL Δ -12.3 s [-20.1, -4.5] (Wilcoxon interval at 98.8 %), ...``."""
+        r = self.result
         if r.n < 2:
             return f"vs {self.baseline}: no data ({r.n} complete pair{'s' if r.n != 1 else ''})"
         return (
-            f"vs {self.baseline}: {self.verdict}, Δ {r.mean_diff:+.{d}f}{self.metric.suffix} [{r.ci_low:+.{d}f}, "
-            f"{r.ci_high:+.{d}f}], "
+            f"vs {self.baseline}: {self.verdict}, {interval_label(self.metric, short=True)} "
+            f"{self.interval_text()}{self.metric.suffix}{level_text(self)}, "
             f"{self.metric.primary_test} Holm p = {format_p_value(self.primary_p_holm)}, "
             f"TOST Holm p = {format_p_value(self.tost_p_holm)}, {r.n} pairs"
         )
+
+
+def interval_label(metric: Metric, short: bool = False) -> str:
+    """What a test's interval is, for a table's header (module docstring)."""
+    if metric.count:
+        return "mean Δ" if short else "mean Δ [sign-flip interval, Holm level]"
+    return "HL Δ" if short else "Hodges–Lehmann Δ [Wilcoxon interval, Holm level]"
+
+
+def level_text(test: Test) -> str:
+    i = test.interval
+    return "" if i is None or math.isnan(i.level) else f" (at {100 * i.level:.4g} %)"
 
 
 def baselines(results: Results) -> list[str]:
@@ -152,11 +200,18 @@ def family(results: Results, metric: Metric) -> list[Test]:
                     paired([p.a for p in pairs], [p.b for p in pairs], margin=metric.margin, permutation=metric.count),
                 )
             )
-    primary = holm([(r.perm_p if metric.count else r.wilcoxon.p) for _, _, r in raw])
+    primaries = [(r.perm_p if metric.count else r.wilcoxon.p) for _, _, r in raw]
+    primary = holm(primaries)
     equivalence = holm([r.tost_p for _, _, r in raw])
+    alphas = holm_alphas(primaries, ALPHA)
+    intervals = []
+    for (level, baseline, _), a in zip(raw, alphas, strict=True):
+        pairs = results.pairs(metric.name, level, REFERENCE, baseline)
+        d = differences([p.a for p in pairs], [p.b for p in pairs])
+        intervals.append(sign_flip_interval(d, a) if metric.count else hodges_lehmann(d, a))
     return [
-        Test(metric, level, baseline, r, hp, ht)
-        for (level, baseline, r), hp, ht in zip(raw, primary, equivalence, strict=True)
+        Test(metric, level, baseline, r, hp, ht, interval)
+        for (level, baseline, r), hp, ht, interval in zip(raw, primary, equivalence, intervals, strict=True)
     ]
 
 

@@ -2,10 +2,11 @@
 the cost of an interruption, ARROCH's difference to each baseline is significant.
 
 One PNG per metric (``map_team_completion_time.png``, ``map_sum_of_times.png``,
-``map_door_openings.png``), one panel per baseline: each cell is ARROCH − baseline, the mean of the
-paired differences, annotated with that mean, its 95 % CI and a mark from the Holm-adjusted
-p-values of :mod:`.comparisons` (``*`` < 0.05, ``**`` < 0.01, ``***`` < 0.001 for the primary test;
-``≈`` equivalent within the margin). The colour map diverges around 0 (blue: ARROCH lower), on
+``map_door_openings.png``), one panel per baseline: each cell is ARROCH − baseline, the estimate of
+the deciding test (the Hodges–Lehmann estimate for times, the mean difference for counts), annotated
+with it, the deciding test's interval at its Holm level (:mod:`.comparisons`) and a mark from the
+Holm-adjusted p-values (``*`` < 0.05, ``**`` < 0.01, ``***`` < 0.001 for the primary test; ``≈``
+equivalent within the margin). The colour map diverges around 0 (blue: ARROCH lower), on
 one scale for both panels so they compare. Matplotlib runs headless (Agg).
 """
 
@@ -21,19 +22,21 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.colors import CenteredNorm  # noqa: E402
 
-from .comparisons import (
+from .comparisons import (  # noqa: E402
     ALPHA,
     DOOR_OPENINGS,
+    EQUIVALENT,
     HIGHER,
     LOWER,
     NO_DATA,
     NOT_SIGNIFICANT,
-    SUM_OF_TIMES,  # noqa: E402
+    SUM_OF_TIMES,
     TEAM_TIME,
     Metric,
     Test,
     equivalent,
     format_p_value,
+    interval_label,
 )
 from .design import format_p  # noqa: E402
 from .plots import LABELS  # noqa: E402
@@ -55,9 +58,9 @@ def _axes(results: Results) -> tuple[list[float], list[float]]:
 def mark(test: Test) -> str:
     """The cell's significance mark (module docstring)."""
     p = test.primary_p_holm
-    if test.verdict in (LOWER, HIGHER):
-        return "***" if p < 0.001 else "**" if p < 0.01 else "*"
-    return "≈" if test.verdict.startswith("equivalent") else ""
+    if test.outcome in (LOWER, HIGHER):
+        return ("***" if p < 0.001 else "**" if p < 0.01 else "*") + ("≈" if test.within_margin else "")
+    return "≈" if test.outcome == EQUIVALENT else ""
 
 
 def _by_cell(tests: list[Test], baseline: str) -> dict[tuple[float, float], Test]:
@@ -70,8 +73,8 @@ def plot_map(results: Results, metric: Metric, tests: list[Test], out: Path) -> 
     grids = {b: np.full((len(tasks), len(costs)), np.nan) for b in panels}
     for b in panels:
         for (task, cost), t in _by_cell(tests, b).items():
-            if t.result.n >= 2:
-                grids[b][tasks.index(task), costs.index(cost)] = t.result.mean_diff
+            if t.result.n >= 2 and t.interval is not None:
+                grids[b][tasks.index(task), costs.index(cost)] = t.interval.estimate
     finite = [abs(v) for g in grids.values() for v in g.flat if not math.isnan(v)]
     halfrange = max(finite) if finite and max(finite) > 0 else 1.0
     norm = CenteredNorm(vcenter=0.0, halfrange=halfrange)
@@ -87,17 +90,16 @@ def plot_map(results: Results, metric: Metric, tests: list[Test], out: Path) -> 
     )
     image = None
     unit = f" ({metric.unit})" if metric.unit else ""
-    d = metric.digits
     for ax, b in zip(axes[0], panels, strict=True):
         image = ax.imshow(np.ma.masked_invalid(grids[b]), cmap=cmap, norm=norm, origin="lower", aspect="auto")
         for (task, cost), t in _by_cell(tests, b).items():
             i, j = tasks.index(task), costs.index(cost)
-            r = t.result
-            if r.n < 2:
+            if t.result.n < 2 or t.interval is None:
                 text, dark = "n/a", False
             else:
-                text = f"{r.mean_diff:+.{d}f}{mark(t)}\n[{r.ci_low:+.{d}f}, {r.ci_high:+.{d}f}]"
-                dark = abs(norm(r.mean_diff) - 0.5) > 0.3
+                estimate, interval = t.interval_text().split(" ", 1)
+                text = f"{estimate}{mark(t)}\n{interval}"
+                dark = abs(norm(t.interval.estimate) - 0.5) > 0.3
             ax.text(j, i, text, ha="center", va="center", fontsize=7, color="white" if dark else "black")
         ax.set_xticks(range(len(costs)), [format_p(c) for c in costs])
         ax.set_yticks(range(len(tasks)), [format_p(w) for w in tasks])
@@ -105,12 +107,12 @@ def plot_map(results: Results, metric: Metric, tests: list[Test], out: Path) -> 
         ax.set_title(f"ARROCH − {LABELS.get(b, b)}", fontsize=10)
     axes[0][0].set_ylabel("Human's mean task length (s)")
     if image is not None:
-        fig.colorbar(image, ax=list(axes[0]), shrink=0.9, label=f"mean difference{unit}")
+        fig.colorbar(image, ax=list(axes[0]), shrink=0.9, label=f"{interval_label(metric, short=True)}{unit}")
     fig.suptitle(f"{metric.label.capitalize()}: ARROCH − baseline, paired (blue: ARROCH lower)", fontsize=10)
     fig.text(
         0.01,
         -0.02,
-        f"mean [95 % CI] of the paired differences; Holm-adjusted {metric.primary_label}: * < {ALPHA:g}, "
+        f"{interval_label(metric)} of the paired differences; Holm-adjusted {metric.primary_label}: * < {ALPHA:g}, "
         f"** < 0.01, *** < 0.001; ≈ {equivalent(metric)} (Holm-adjusted TOST)",
         ha="left",
         va="top",
@@ -131,15 +133,12 @@ def plot_maps(results: Results, tested: dict[str, list[Test]], out: Path) -> lis
 
 
 def _cell(t: Test) -> str:
-    r, d = t.result, t.metric.digits
-    if r.n < 2:
-        return "n/a"
-    return f"{r.mean_diff:+.{d}f} [{r.ci_low:+.{d}f}, {r.ci_high:+.{d}f}]"
+    return "n/a" if t.result.n < 2 else t.interval_text()
 
 
 def _verdict(t: Test) -> str:
     """The verdict with the Holm-adjusted p that decided it (the TOST's for an equivalence)."""
-    if t.verdict.startswith("equivalent"):
+    if t.outcome == EQUIVALENT:
         return f"{t.verdict} (TOST {format_p_value(t.tost_p_holm)})"
     return f"{t.verdict} ({format_p_value(t.primary_p_holm)})"
 
@@ -148,7 +147,7 @@ def _table(results: Results, metric: Metric, tests: list[Test]) -> list[str]:
     panels = sorted({t.baseline for t in tests}, key=results.methods.index)
     head = ["task (s)", "cost (s)", "pairs (per baseline)"]
     for b in panels:
-        head += [f"ARROCH − {LABELS.get(b, b)} [95 % CI]", "verdict (Holm p)"]
+        head += [f"ARROCH − {LABELS.get(b, b)}: {interval_label(metric)}", "verdict (Holm p)"]
     lines = ["| " + " | ".join(head) + " |", "|" + "|".join("---" for _ in head) + "|"]
     for level in results.levels:
         mine = {t.baseline: t for t in tests if t.level == level}
@@ -176,9 +175,9 @@ def reading(results: Results, tested: dict[str, list[Test]]) -> str:
         for b in sorted({t.baseline for t in tests}, key=results.methods.index):
             mine = [t for t in tests if t.baseline == b]
             groups = {
-                v: [t for t in mine if t.verdict == v]
-                for v in (LOWER, HIGHER, equivalent(metric), NOT_SIGNIFICANT, NO_DATA)
+                v: [t for t in mine if t.outcome == v] for v in (LOWER, HIGHER, EQUIVALENT, NOT_SIGNIFICANT, NO_DATA)
             }
+            inside = sum(t.within_margin for t in groups[LOWER] + groups[HIGHER])
             by_cost = ", ".join(
                 f"{sum(1 for t in groups[LOWER] if t.level[1] == c)}/{sum(1 for t in mine if t.level[1] == c)}"  # type: ignore[index]
                 for c in costs
@@ -190,7 +189,8 @@ def reading(results: Results, tested: dict[str, list[Test]]) -> str:
                 + f" — by interruption cost {'/'.join(format_p(c) for c in costs)} s: {by_cost}",
                 f"significantly higher in {len(groups[HIGHER])}"
                 + (f" ({_where(groups[HIGHER])})" if groups[HIGHER] else ""),
-                f"{equivalent(metric)} in {len(groups[equivalent(metric)])}",
+                f"{equivalent(metric)} in {len(groups[EQUIVALENT])}"
+                + (f" (and {inside} of the significant ones within the margin too)" if inside else ""),
                 f"not significant in {len(groups[NOT_SIGNIFICANT])}",
             ]
             if groups[NO_DATA]:
@@ -205,10 +205,10 @@ def map_section(results: Results, tested: dict[str, list[Test]]) -> list[str]:
     out = [
         "## Map: where feedback pays",
         "",
-        "ARROCH − baseline per cell (task length × interruption cost), mean of the paired differences with its 95 % "
-        "CI; "
-        "verdicts from the Holm-adjusted p-values over each metric's family (all cells × baselines), as in the tests "
-        "above. Negative: ARROCH lower.",
+        "ARROCH − baseline per cell (task length × interruption cost): the deciding test's estimate and interval at "
+        "its Holm level (Hodges–Lehmann with its Wilcoxon interval for times, the mean with its sign-flip interval "
+        "for counts); verdicts from the Holm-adjusted p-values over each metric's family (all cells × baselines), as "
+        "in the tests above. Negative: ARROCH lower.",
         "",
         "**Reading.** " + reading(results, tested),
         "",

@@ -7,7 +7,8 @@ router; each trial opens a :class:`TrialWatch` on its own namespace, which liste
   restrictor are listening (as ``arroch up`` does: the sim starts the mission clock, and the
   human's first feedback must find a restrictor);
 - ``plan`` (TeamPlan), to count the plans the planner published and add up their solve times: the
-  planner's share of a trial's wall time.
+  planner's share of a trial's wall time; and, for the point sweeps, to keep what each plan says
+  (:class:`~.plan_changes.PlanRecord`: how feedback changed the plans).
 
 Handlers run on Zenoh's threads and only update counters under a lock, so they never slow a link.
 """
@@ -27,6 +28,8 @@ from protocol.keys import Keys
 from protocol.messages import TeamPlan
 from protocol.transport import ZenohOptions, open_session
 
+from .plan_changes import PlanRecord
+
 log = logging.getLogger("arroch.experiment")
 
 
@@ -40,6 +43,7 @@ class TrialWatch:
         self._alive: dict[str, set[str]] = {}
         self.plans = 0
         self.solve_time = 0.0
+        self.records: list[PlanRecord] = []
         self._decode_plan = decoder_for(TeamPlan)
         self._declared: list[Any] = [
             # history=True: a token declared before this subscriber counts too.
@@ -63,9 +67,11 @@ class TrialWatch:
             plan = self._decode_plan(sample.payload.to_bytes())
         except ProtocolError:
             return  # the planner's own tests cover its messages; a bad one is simply not counted
+        record = PlanRecord.of(plan)
         with self._lock:
             self.plans += 1
             self.solve_time += plan.solve_time
+            self.records.append(record)
 
     def alive(self, service: str) -> bool:
         with self._lock:
@@ -87,6 +93,11 @@ class TrialWatch:
         """(plans published, their total solve time in s) so far."""
         with self._lock:
             return self.plans, self.solve_time
+
+    def plan_records(self) -> list[PlanRecord]:
+        """What every plan published so far said."""
+        with self._lock:
+            return list(self.records)
 
     def close(self) -> None:
         for entity in self._declared:

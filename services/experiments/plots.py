@@ -31,7 +31,21 @@ PANELS = (
 
 
 def _name(metric: str, results: Results) -> str:
+    if results.points:
+        return f"{metric}_by_point.png"
     return f"{metric}_vs_{'robots' if results.kind == 'robots' else 'p'}.png"
+
+
+def _tick(results: Results, level: object) -> str:
+    if results.points:
+        return results.level_label(level).replace(", ", "\n")  # type: ignore[arg-type]
+    return f"{int(level)}" if results.kind == "robots" else f"{level:g}"  # type: ignore[call-overload]
+
+
+def _axis(results: Results) -> str:
+    if results.points:
+        return results.variable
+    return "Number of robots" if results.kind == "robots" else "Door-opening probability (lower = lazier human)"
 
 
 def plot_metric(results: Results, metric: str, ylabel: str, title: str, out: Path) -> Path:
@@ -61,8 +75,8 @@ def plot_metric(results: Results, metric: str, ylabel: str, title: str, out: Pat
             error_kw={"linewidth": 0.9},
         )
     ax.set_xticks(range(len(levels)))
-    ax.set_xticklabels([f"{int(v)}" if results.kind == "robots" else f"{v:g}" for v in levels])
-    ax.set_xlabel("Number of robots" if results.kind == "robots" else "Door-opening probability (lower = lazier human)")
+    ax.set_xticklabels([_tick(results, v) for v in levels], fontsize=8 if results.points else None)
+    ax.set_xlabel(_axis(results))
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.grid(axis="y", alpha=0.3)

@@ -5,6 +5,10 @@ metrics every time), so the same sweep gives the same file byte for byte. Anythi
 wall clock, or depending on how the planner's replan bursts happened to fall, goes to
 ``timing.csv`` under the same identity columns. Numbers are written with fixed formats (times to the
 millisecond), never ``repr`` of a float, so the text does not depend on how a value was computed.
+
+A point sweep's files (:data:`.design.POINT_SWEEPS`) have a ``point`` identity column and one column
+per factor its points set (:func:`trial_fields`), and its trials.csv adds how feedback changed the
+plans (:data:`PLAN_FIELDS`, from :mod:`.plan_changes`). The earlier sweeps' columns are unchanged.
 """
 
 from __future__ import annotations
@@ -13,6 +17,14 @@ from typing import Any
 
 from .design import SweepSpec, TrialKey, format_p
 from .trial import TrialOutcome
+
+POINT_FIELD = "point"  # the identity column of a point sweep (TrialKey.point)
+PLAN_FIELDS = (
+    "constraint_replans",  # plans that answered a constraint (an accepted a2(N)) at the world version it came in
+    "plans_changed",  # those whose robots' actions differ from the plan they replaced
+    "deliveries_reordered",  # robots whose order of the deliveries still to make changed in one of them (summed)
+    "door_wait_time",  # s, all robots together, waiting at a human-operated door for it to open
+)
 
 KEY_FIELDS = ("method", "robots", "objects", "door_probability", "task_mean", "interruption_cost", "trial")
 
@@ -61,6 +73,19 @@ TIMING_FIELDS = KEY_FIELDS + (
 DONE = ("ok", "unfinished")  # outcomes of the model: recorded for good, skipped by --resume
 
 
+def trial_fields(spec: SweepSpec | None) -> tuple[str, ...]:
+    """trials.csv's columns for ``spec`` (module docstring); the earlier sweeps' without one."""
+    if spec is None or not spec.points:
+        return TRIAL_FIELDS
+    return KEY_FIELDS + (POINT_FIELD, *spec.factor_names()) + TRIAL_FIELDS[len(KEY_FIELDS) :] + PLAN_FIELDS
+
+
+def timing_fields(spec: SweepSpec | None) -> tuple[str, ...]:
+    if spec is None or not spec.points:
+        return TIMING_FIELDS
+    return KEY_FIELDS + (POINT_FIELD,) + TIMING_FIELDS[len(KEY_FIELDS) :]
+
+
 def _t(value: Any) -> str:
     """A time (or any real number) to the millisecond; empty when unknown."""
     return "" if value is None else f"{float(value):.3f}"
@@ -71,7 +96,7 @@ def _n(value: Any) -> str:
 
 
 def key_cells(key: TrialKey) -> dict[str, str]:
-    return {
+    cells = {
         "method": key.method,
         "robots": str(key.robots),
         "objects": str(key.objects),
@@ -80,6 +105,9 @@ def key_cells(key: TrialKey) -> dict[str, str]:
         "interruption_cost": format_p(key.cost),
         "trial": str(key.trial),
     }
+    if key.point >= 0:
+        cells[POINT_FIELD] = str(key.point)
+    return cells
 
 
 def key_of(row: dict[str, str]) -> TrialKey:
@@ -92,16 +120,18 @@ def key_of(row: dict[str, str]) -> TrialKey:
         float(row["task_mean"]),
         float(row["interruption_cost"]),
         int(row["trial"]),
+        int(row.get(POINT_FIELD) or -1),
     )
 
 
 def trial_row(spec: SweepSpec, outcome: TrialOutcome) -> dict[str, str]:
     key = outcome.key
-    row = {name: "" for name in TRIAL_FIELDS}
+    row = {name: "" for name in trial_fields(spec)}
     row.update(key_cells(key))
     row.update(
         site_seed=str(spec.site_seed(key)), seed=str(spec.sim_seed(key)), status=outcome.status, reason=outcome.reason
     )
+    row.update({name: format_p(value) for name, value in spec.point(key).items() if name in row})
     m = outcome.metrics
     if m is None:
         return row
@@ -137,6 +167,14 @@ def trial_row(spec: SweepSpec, outcome: TrialOutcome) -> dict[str, str]:
         wall_depth_max=_t(m.get("wall_depth_max")),
         sim_time=_t(m.get("time")),
     )
+    changes = m.get("plan_changes")
+    if changes is not None and PLAN_FIELDS[0] in row:
+        row.update(
+            constraint_replans=_n(changes.get("constraint_replans")),
+            plans_changed=_n(changes.get("plans_changed")),
+            deliveries_reordered=_n(changes.get("deliveries_reordered")),
+            door_wait_time=_t(changes.get("door_wait_time")),
+        )
     return row
 
 

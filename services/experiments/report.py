@@ -7,14 +7,16 @@ Writes into DIR:
   figure (completed trials only);
 - ``tests.csv``: ARROCH against each baseline per level, paired trial by trial, for the metrics of
   :data:`.comparisons.TESTED` (team completion time, sum of times, door openings, the human's
-  time away): mean difference with its CI, paired t, Wilcoxon signed-rank, the sign-flip
-  permutation test (counts), d_z, TOST equivalence, Holm-adjusted p-values and the verdict;
+  time away): mean difference with its t interval, paired t, Wilcoxon signed-rank, the sign-flip
+  permutation test (counts), d_z, TOST equivalence, Holm-adjusted p-values, the deciding test's
+  estimate and interval at its Holm level, and the verdict;
 - the figures: bars (:mod:`.plots`) for the robots and laziness sweeps, heatmaps (:mod:`.maps`)
   for the map;
 - ``REPORT.md``: the sweep's parameters and the human model's (``params.json``), the design, the
-  above, the paper's claims checked (:mod:`.claims`), the map's reading, what drives team completion
-  time, the wall time of the sweep and where it went (``timing.csv``, ``runs.json``), and
-  ``discussion.md`` (written by a person, if present).
+  above, the paper's claims checked (:mod:`.claims`), the map's reading, how feedback changed the
+  plans (point sweeps), the mixed model (population), what drives team completion time, the wall
+  time of the sweep and where it went (``timing.csv``, ``runs.json``), and ``discussion.md``
+  (written by a person, if present).
 
 Only the CSV is needed; the side files add their sections when present.
 """
@@ -31,9 +33,9 @@ from pathlib import Path
 from typing import Any
 
 from .claims import Claim, check_claims
-from .comparisons import ALPHA, TESTED, Test, families, format_p_value
+from .comparisons import ALPHA, TESTED, Test, families, format_p_value, interval_label, level_text
 from .design import format_p
-from .params import write_params
+from .params import varied_paths, write_params
 from .record import key_of
 from .results import COUNTS, METRICS, Level, ReportError, Results, TrialResult, load_results, statuses
 from .stats import EXACT_FLIPS_MAX, PERMUTATION_RESAMPLES, PERMUTATION_SEED, Summary, summarize
@@ -62,7 +64,18 @@ TITLES = {
     "robots": "Different number of robots",
     "laziness": "Human laziness (door-opening probability)",
     "map": "Map of where feedback pays (task length × interruption cost)",
+    "detour": "A task the planner can reorder (only some deliveries behind her door)",
+    "sensitivity": "Sensitivity analysis (one stage)",
+    "population": "A population of simulated people",
 }
+MAX_POINTS_SHOWN = 60  # a sweep's points table in REPORT.md; beyond, trials.csv has them
+PLAN_COLUMNS = (
+    ("constraint_replans", "constraint replans"),
+    ("plans_changed", "plans changed"),
+    ("deliveries_reordered", "robots reordered"),
+    ("door_wait_time", "wait at her door (s)"),
+    ("robot_wait_time", "wait at any door (s)"),
+)
 
 __all__ = ["ReportError", "build_report", "claims_of", "summary_rows", "test_rows"]
 
@@ -121,7 +134,16 @@ def _share(k: int, n: int) -> str:
 # ---------------------------------------------------------------------------- tables
 
 
+def _point_columns(results: Results) -> list[int]:
+    """Which of a point sweep's level columns summary.csv adds (those it has no column for yet)."""
+    if not results.points:
+        return []
+    keyed = ("door_probability", "task_mean", "interruption_cost")
+    return [i for i, name in enumerate(results.level_columns) if name not in keyed]
+
+
 def summary_rows(results: Results) -> tuple[list[str], list[list[str]]]:
+    extra = _point_columns(results)
     header = [
         "method",
         "robots",
@@ -129,6 +151,7 @@ def summary_rows(results: Results) -> tuple[list[str], list[list[str]]]:
         "door_probability",
         "task_mean",
         "interruption_cost",
+        *(results.level_columns[i] for i in extra),
         "trials",
         *STATUSES,
         "human_slowest",
@@ -148,6 +171,7 @@ def summary_rows(results: Results) -> tuple[list[str], list[list[str]]]:
             format_p(first.p),
             format_p(first.task),
             format_p(first.cost),
+            *(results.level_cells(level)[i] for i in extra),
             str(len(trials)),
             *(str(counts.get(s, 0)) for s in STATUSES),
             str(slow),
@@ -172,8 +196,8 @@ def test_rows(results: Results, tested: dict[str, list[Test]] | None = None) -> 
         "mean_arroch",
         "mean_baseline",
         "mean_diff",
-        "ci_low",
-        "ci_high",
+        "t_ci_low",
+        "t_ci_high",
         "sd_diff",
         "paired_t",
         "paired_t_p",
@@ -187,6 +211,11 @@ def test_rows(results: Results, tested: dict[str, list[Test]] | None = None) -> 
         "tost_p",
         "tost_p_holm",
         "d_z",
+        "estimate",
+        "interval_low",
+        "interval_high",
+        "interval_level",
+        "interval_kind",
         "verdict",
     ]
     rows = []
@@ -220,10 +249,18 @@ def test_rows(results: Results, tested: dict[str, list[Test]] | None = None) -> 
                     _g(r.tost_p),
                     _g(t.tost_p_holm),
                     _g(r.d_z),
+                    *_interval_cells(t),
                     t.verdict,
                 ]
             )
     return header, rows
+
+
+def _interval_cells(t: Test) -> list[str]:
+    i = t.interval
+    if i is None:
+        return ["", "", "", "", ""]
+    return [_num(i.estimate), _num(i.low), _num(i.high), _g(i.level), i.kind]
 
 
 # ---------------------------------------------------------------------------- sections
@@ -254,6 +291,9 @@ def _section_design() -> list[str]:
         "baselines), "
         "separately for the primary and the TOST p-values; every verdict uses the Holm-adjusted values at α = "
         f"{ALPHA:g}. "
+        "Each table's interval is the deciding test's at the level Holm tested it at: the Hodges–Lehmann estimate "
+        "with its Wilcoxon interval (times), the mean difference with its sign-flip interval (counts); the paired t "
+        "interval is in tests.csv only. "
         "Conventions in detail: `services/experiments/stats.py` and `comparisons.py`.",
         "",
     ]
@@ -264,16 +304,22 @@ def _section_sweep(results: Results) -> list[str]:
     lines = ["## Sweep", ""]
     if spec is None:
         return lines + ["No sweep.json in this folder: the conditions are those trials.csv shows.", ""]
+    per_point = {name for point in spec.points for name in point}
+
+    def keyed(name: str, values: tuple[float, ...]) -> str:
+        return "set per point (below, or trials.csv)" if name in per_point else _value(values)
+
     rows = [
         ["kind", spec.kind],
         ["methods", _value(spec.methods)],
         ["robots", _value(spec.robots)],
         ["objects per robot", str(spec.objects)],
-        ["door-opening probabilities", _value(spec.ps)],
-        ["mean task lengths (s)", _value(spec.tasks)],
-        ["interruption costs (s)", _value(spec.costs)],
+        ["door-opening probabilities", keyed("door_probability", spec.ps)],
+        ["mean task lengths (s)", keyed("task_mean", spec.tasks)],
+        ["interruption costs (s)", keyed("interruption_cost", spec.costs)],
         ["trials per condition", str(spec.trials)],
         ["base seed", str(spec.seed)],
+        ["buildings", "detour (only some deliveries behind her door)" if spec.domain == "detour" else "the paper's"],
         ["time limit (sim s)", "the simulator's default" if spec.time_limit is None else _value(spec.time_limit)],
         [
             "human model",
@@ -281,7 +327,15 @@ def _section_sweep(results: Results) -> list[str]:
         ],
     ]
     rows += [[name, _value(value)] for name, value in sorted(spec.extra.items())]
-    return lines + _table(["parameter", "value"], rows) + [""]
+    rows += [[f"human: {name}", _value(value)] for name, value in sorted(spec.human.items())]
+    lines += _table(["parameter", "value"], rows) + [""]
+    if spec.points and len(spec.points) <= MAX_POINTS_SHOWN:
+        names = sorted({n for p in spec.points for n in p})
+        lines += _table(
+            ["point", *names], [[str(i), *(_value(p.get(n, "")) for n in names)] for i, p in enumerate(spec.points)]
+        )
+        lines += [""]
+    return lines
 
 
 def _section_params(results: Results) -> list[str]:
@@ -400,8 +454,9 @@ def _section_tests(results: Results, tested: dict[str, list[Test]]) -> list[str]
         "## ARROCH against each baseline (paired)",
         "",
         "Δ = ARROCH − baseline over the pairs (negative: ARROCH lower). Holm: over all levels and baselines of one "
-        "metric. "
-        "The verdict reads the Holm-adjusted p-values only (Design).",
+        "metric. The verdict reads the Holm-adjusted p-values only (Design). The interval is the deciding test's, at "
+        "the level Holm tested it at (given beside it): the Hodges–Lehmann estimate with its Wilcoxon interval for "
+        "times, the mean with its sign-flip interval for counts; it excludes 0 where the verdict is significant.",
         "",
     ]
     for metric in TESTED:
@@ -416,7 +471,7 @@ def _section_tests(results: Results, tested: dict[str, list[Test]]) -> list[str]
                     t.baseline,
                     str(r.n),
                     f"{r.mean_a:.{d}f} vs {r.mean_b:.{d}f}",
-                    f"{r.mean_diff:+.{d}f} [{r.ci_low:+.{d}f}, {r.ci_high:+.{d}f}]",
+                    t.interval_text() + level_text(t),
                     "n/a" if math.isnan(r.t) else f"{r.t:.2f} ({format_p_value(r.t_p)})",
                     f"{r.wilcoxon.w:g} ({format_p_value(r.wilcoxon.p)})",
                     *([format_p_value(r.perm_p)] if metric.count else []),
@@ -431,7 +486,7 @@ def _section_tests(results: Results, tested: dict[str, list[Test]]) -> list[str]
             "baseline",
             "pairs",
             "mean ARROCH vs baseline",
-            "Δ [95 % CI]",
+            interval_label(metric),
             "paired t (p)",
             "Wilcoxon W (p)",
             *(["permutation p"] if metric.count else []),
@@ -444,16 +499,84 @@ def _section_tests(results: Results, tested: dict[str, list[Test]]) -> list[str]
     return out
 
 
+def _section_plans(results: Results) -> list[str]:
+    """How feedback changed the plans (point sweeps: ``plan_changes`` of the trials, :mod:`.plan_changes`)."""
+    rows = []
+    for level, method, trials in results.conditions():
+        row = [*results.level_cells(level), method]
+        for metric, _ in PLAN_COLUMNS:
+            row.append(_mean_ci(summarize(results.values(method, level, metric)), 2 if metric in COUNTS else 1))
+        ok = [t for t in trials if t.ok]
+        changed = sum(1 for t in ok if (t.values.get("plans_changed") or 0) > 0)
+        rows.append([*row, _share(changed, len(ok))])
+    head = [*results.level_columns, "method", *(label for _, label in PLAN_COLUMNS), "trials with a plan changed"]
+    return [
+        "## How feedback changed the plans",
+        "",
+        "Per trial (mean [95 % CI] over completed trials): *constraint replans*, plans that answered an accepted "
+        "a2(N) at the world version it came in; *plans changed*, those in which some robot's actions (not only their "
+        "times) differ from the plan they replaced; *robots reordered*, robots whose order of the deliveries still "
+        "to make changed in one of them (summed); the robots' time waiting at her door for it to open, and at any "
+        "door (`services/experiments/plan_changes.py`). Without feedback (no-feedback, no-comm) the first three are 0.",
+        "",
+        *_table(head, rows),
+        "",
+    ]
+
+
+def _section_mixed(results: Results) -> list[str]:
+    """The population's mixed model beside the paired tests (:mod:`.mixed`)."""
+    from .mixed import Observation, fit_mixed
+
+    lines = [
+        "## Mixed-effects model (method fixed, person random)",
+        "",
+        "y = β_method + u_person + ε, fitted by REML (statsmodels MixedLM, a random intercept per simulated person); "
+        "ARROCH − baseline with its 95 % Wald interval. Beside the paired tests above, which pool every person's "
+        "pairs. Person sd: how much people differ; residual sd: how much one person's missions do.",
+        "",
+    ]
+    rows = []
+    for metric in ("team_completion_time", "sum_of_times", "door_openings", "human_time_away"):
+        observations = [
+            Observation(t.point, t.method, t.values[metric])  # type: ignore[arg-type]
+            for t in results.trials
+            if t.ok and t.values.get(metric) is not None
+        ]
+        fit = fit_mixed(metric, observations)
+        if not fit.effects:
+            rows.append([metric, "–", "–", "–", "–", "–", fit.note or "not fitted"])
+            continue
+        for e in fit.effects:
+            rows.append(
+                [
+                    metric,
+                    e.baseline,
+                    f"{e.estimate:+.2f} [{e.low:+.2f}, {e.high:+.2f}]",
+                    format_p_value(e.p),
+                    f"{fit.person_sd:.2f}",
+                    f"{fit.residual_sd:.2f}",
+                    f"{fit.persons} persons, {fit.observations} missions" + (f"; {fit.note}" if fit.note else ""),
+                ]
+            )
+    head = ["metric", "baseline", "ARROCH − baseline [95 %]", "p", "person sd", "residual sd", "data"]
+    priors = (results.spec.extra.get("priors") if results.spec else None) or []
+    return (
+        lines + _table(head, rows) + [""] + (["Persons drawn from: " + "; ".join(priors) + ".", ""] if priors else [])
+    )
+
+
 def _section_claims(claims: list[Claim]) -> list[str]:
     out = [
         "## The paper's claims",
         "",
         "Each (level, baseline) is *lower (significant)* when the primary test's Holm-adjusted p < 0.05 and ARROCH's "
-        "mean "
-        "difference is negative; *higher (significant)* likewise with a positive one; *equivalent* when the "
-        "Holm-adjusted "
-        "TOST p < 0.05; otherwise *not significant*. A claim is confirmed only when every (level, baseline) is lower "
-        "(significant); partly confirmed when some are.",
+        "mean difference is negative; *higher (significant)* likewise with a positive one (with *within ±margin* "
+        "added when TOST also puts it inside the equivalence margin); *equivalent* when only the Holm-adjusted TOST "
+        "p < 0.05; otherwise *not significant*. A claim is *confirmed* when every comparison supports it; "
+        "*contradicted* when any Holm-significant comparison goes against it; *equivalent* when every comparison is "
+        "inside the margin (TOST); *partly* otherwise when some comparison supports it; *not confirmed* when none "
+        "supports it and none goes against it.",
         "",
     ]
     for claim in claims:
@@ -624,16 +747,22 @@ def _section_discussion(results: Results) -> list[str]:
 
 
 def build_report(folder: Path) -> list[Path]:
-    """Write every report file into ``folder``; returns their paths."""
+    """Write every report file into ``folder``; returns their paths. A sensitivity analysis's folder
+    (its two stages in ``morris/`` and ``sobol/``) gets its own report (:mod:`.sensitivity_report`)."""
     from .maps import map_section, plot_maps  # matplotlib only here
     from .plots import plot_all
 
     folder = Path(folder)
+    if (folder / "morris" / "design.json").exists():
+        from .sensitivity_report import build_sensitivity_report
+
+        return build_sensitivity_report(folder)
     results = load_results(folder)
     written = []
     metrics = JsonlStore(folder / "metrics.jsonl")
     if metrics.path.exists():  # the model's parameters, from the same trials
-        write_params(folder / "params.json", (r["metrics"] for r in metrics.load()))
+        factors = results.spec.factor_names() if results.spec else ()
+        write_params(folder / "params.json", (r["metrics"] for r in metrics.load()), varied_paths(factors))
         results.params = json.loads((folder / "params.json").read_text(encoding="utf-8"))
         written.append(folder / "params.json")
     tested = families(results)
@@ -664,6 +793,10 @@ def build_report(folder: Path) -> list[Path]:
     lines += _section_tests(results, tested)
     if results.kind == "map":
         lines += map_section(results, tested)
+    if results.points:
+        lines += _section_plans(results)
+    if results.kind == "population":
+        lines += _section_mixed(results)
     lines += _section_claims(claims)
     lines += _section_drivers(results)
     lines += _section_contacts(results)

@@ -5,7 +5,9 @@ CSV shows them in) and the sweep's kind (else guessed from what varies); ``timin
 ``runs.json`` and ``params.json`` add the wall-clock figures and the model's parameters when present.
 
 A sweep's **level** is the condition it varies: the team size (``robots``), the door-opening
-probability (``laziness``), or the pair (task length, interruption cost) (``map``). Methods are
+probability (``laziness``), the pair (task length, interruption cost) (``map``), or the point
+(``detour``, ``sensitivity``: the point's index; its factors name it); a ``population`` sweep has
+one level, all its persons pooled (the persons are the mixed model's groups, :mod:`.mixed`). Methods are
 compared **pair by pair** (:meth:`Results.pairs`): two trials pair when they share everything but
 the method (``TrialKey.pair``: same site, same human draws) and both completed (``ok``) with the
 metric known; a trial that failed in one method drops that pair.
@@ -19,8 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
-from .design import METHODS, SweepSpec, TrialKey, format_p
-from .record import TIMING_FIELDS, TRIAL_FIELDS
+from .design import METHODS, POINT_SWEEPS, SweepSpec, TrialKey, format_p
+from .record import PLAN_FIELDS, POINT_FIELD, timing_fields, trial_fields
 from .store import CsvStore, StoreError
 
 METRICS = (
@@ -58,10 +60,15 @@ COUNTS = frozenset(
         "feedback_accepted",
         "replans",
         "world_versions",
+        "constraint_replans",
+        "plans_changed",
+        "deliveries_reordered",
     }
 )  # the others are times (s), but wall_depth_max (m)
 
-Level = int | float | tuple[float, float]  # robots; door-opening probability; (task mean, interruption cost)
+# robots; door-opening probability; (task mean, interruption cost); a point's index (detour, sensitivity)
+Level = int | float | tuple[float, float]
+POOLED = 0  # the one level of a population sweep
 
 
 class ReportError(ValueError):
@@ -75,6 +82,7 @@ class Conditioned(Protocol):
     p: float
     task: float
     cost: float
+    point: int
 
 
 def _number(text: str) -> float | None:
@@ -94,6 +102,8 @@ class TrialResult:
     reason: str
     values: dict[str, float | None]
     human_slowest: bool | None  # the human was the team's slowest agent
+    point: int = -1
+    factors: dict[str, float] = field(default_factory=dict)  # the point's factors (point sweeps)
 
     @property
     def ok(self) -> bool:
@@ -101,7 +111,7 @@ class TrialResult:
 
     @property
     def key(self) -> TrialKey:
-        return TrialKey(self.method, self.robots, self.objects, self.p, self.task, self.cost, self.trial)
+        return TrialKey(self.method, self.robots, self.objects, self.p, self.task, self.cost, self.trial, self.point)
 
 
 @dataclass(frozen=True)
@@ -131,12 +141,32 @@ class Results:
         order = list(self.spec.methods) if self.spec else list(METHODS)
         return [m for m in order if m in present] + sorted(present - set(order))
 
+    @property
+    def points(self) -> bool:
+        return self.kind in POINT_SWEEPS
+
     def level_of(self, t: Conditioned) -> Level:
         if self.kind == "robots":
             return t.robots
         if self.kind == "laziness":
             return t.p
+        if self.kind == "population":
+            return POOLED
+        if self.points:
+            return t.point
         return (t.task, t.cost)
+
+    def varied(self) -> list[str]:
+        """The factors (and key columns) whose value differs between the points, in column order."""
+        names = ["door_probability", "task_mean", "interruption_cost", *(self.spec.factor_names() if self.spec else ())]
+        points = list(self.spec.points) if self.spec else []
+        return [n for n in names if len({p.get(n) for p in points}) > 1]
+
+    def point_factors(self, level: Level) -> dict[str, float]:
+        """The factors of point ``level`` (empty when unknown)."""
+        if self.spec is None or not isinstance(level, int) or not 0 <= level < len(self.spec.points):
+            return {}
+        return dict(self.spec.points[level])
 
     @property
     def levels(self) -> list[Level]:
@@ -144,6 +174,10 @@ class Results:
         seen = {self.level_of(t) for t in self.trials}
         if self.spec is None:
             order: list[Level] = sorted(seen)  # type: ignore[type-var]
+        elif self.kind == "population":
+            order = [POOLED]
+        elif self.points:
+            order = list(range(len(self.spec.points)))
         elif self.kind == "robots":
             order = list(self.spec.robots)
         elif self.kind == "laziness":
@@ -155,24 +189,41 @@ class Results:
     @property
     def level_columns(self) -> tuple[str, ...]:
         """The CSV columns that name a level."""
+        if self.kind == "population":
+            return ("persons",)
+        if self.points:
+            return (POINT_FIELD, *self.varied())
         return {"robots": ("robots",), "laziness": ("door_probability",)}.get(
             self.kind, ("task_mean", "interruption_cost")
         )
 
     def level_cells(self, level: Level) -> list[str]:
         """A level as the text of its :attr:`level_columns`."""
+        if self.kind == "population":
+            return ["all"]
+        if self.points:
+            factors = self.point_factors(level)
+            return [str(level), *(format_p(factors[n]) if n in factors else "" for n in self.varied())]
         if isinstance(level, tuple):
             return [format_p(v) for v in level]
         return [str(int(level))] if self.kind == "robots" else [format_p(level)]
 
     def level_label(self, level: Level) -> str:
-        """A level for people: ``3 robots``, ``p = 0.5``, ``task 600 s, cost 15 s``."""
+        """A level for people: ``3 robots``, ``p = 0.5``, ``task 600 s, cost 15 s``, ``capacity 2, door_share 0.5``."""
+        if self.kind == "population":
+            return "all persons"
+        if self.points:
+            factors = self.point_factors(level)
+            named = ", ".join(f"{n} {format_p(factors[n])}" for n in self.varied() if n in factors)
+            return named or f"point {level}"
         if isinstance(level, tuple):
             return f"task {format_p(level[0])} s, cost {format_p(level[1])} s"
         return f"{int(level)} robots" if self.kind == "robots" else f"p = {format_p(level)}"
 
     @property
     def variable(self) -> str:
+        if self.points:
+            return ", ".join(self.varied()) or "point"
         return {"robots": "robots", "laziness": "door-opening probability"}.get(
             self.kind, "task length × interruption cost"
         )
@@ -213,8 +264,9 @@ class Results:
                     yield level, method, trials
 
 
-def _trial(row: dict[str, str]) -> TrialResult:
+def _trial(row: dict[str, str], factors: tuple[str, ...] = ()) -> TrialResult:
     values = {name: _number(row[name]) for name in METRICS}
+    values.update({name: _number(row[name]) for name in PLAN_FIELDS if name in row})
     human_slowest = None
     if row["status"] == "ok" and row["human_completion_time"] and row["slowest_robot_time"]:
         human_slowest = float(row["human_completion_time"]) >= float(row["slowest_robot_time"])
@@ -230,6 +282,8 @@ def _trial(row: dict[str, str]) -> TrialResult:
         row["reason"],
         values,
         human_slowest,
+        int(row.get(POINT_FIELD) or -1),
+        {name: float(row[name]) for name in factors if row.get(name)},
     )
 
 
@@ -253,20 +307,6 @@ def _json(path: Path, default: Any) -> Any:
 
 def load_results(folder: Path) -> Results:
     folder = Path(folder)
-    store = CsvStore(folder / "trials.csv", TRIAL_FIELDS)
-    if not store.exists():
-        raise ReportError(f"{folder}: no trials.csv (not a results folder, or the sweep has not recorded a trial yet)")
-    try:
-        rows = store.load()
-        timing = CsvStore(folder / "timing.csv", TIMING_FIELDS).load()
-    except StoreError as exc:
-        raise ReportError(str(exc)) from None
-    if not rows:
-        raise ReportError(f"{folder / 'trials.csv'} has no trials yet")
-    try:
-        trials = [_trial(row) for row in rows]
-    except (KeyError, ValueError) as exc:
-        raise ReportError(f"{folder / 'trials.csv'}: a malformed row ({exc})") from None
     spec = None
     sweep = _json(folder / "sweep.json", None)
     if sweep is not None:
@@ -274,6 +314,21 @@ def load_results(folder: Path) -> Results:
             spec = SweepSpec.from_json(sweep)
         except ValueError as exc:
             raise ReportError(f"{folder / 'sweep.json'}: {exc}") from None
+    store = CsvStore(folder / "trials.csv", trial_fields(spec))
+    if not store.exists():
+        raise ReportError(f"{folder}: no trials.csv (not a results folder, or the sweep has not recorded a trial yet)")
+    try:
+        rows = store.load()
+        timing = CsvStore(folder / "timing.csv", timing_fields(spec)).load()
+    except StoreError as exc:
+        raise ReportError(str(exc)) from None
+    if not rows:
+        raise ReportError(f"{folder / 'trials.csv'} has no trials yet")
+    factors = spec.factor_names() if spec is not None else ()
+    try:
+        trials = [_trial(row, factors) for row in rows]
+    except (KeyError, ValueError) as exc:
+        raise ReportError(f"{folder / 'trials.csv'}: a malformed row ({exc})") from None
     runs = _json(folder / "runs.json", [])
     params = _json(folder / "params.json", {})
     return Results(folder, _kind(spec, trials), spec, trials, timing, runs, params)

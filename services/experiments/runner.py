@@ -37,10 +37,10 @@ from pathlib import Path
 from protocol.signals import StopSignals, restore
 
 from .design import SweepSpec, TrialKey
-from .params import write_params
+from .params import varied_paths, write_params
 from .progress import Progress, ProgressLogHandler
 from .provenance import code_fingerprint, dependency_versions
-from .record import DONE, TIMING_FIELDS, TRIAL_FIELDS, key_cells, key_of, timing_row, trial_row
+from .record import DONE, key_cells, key_of, timing_fields, timing_row, trial_fields, trial_row
 from .routers import ROUTER_MODES, Router, RouterError
 from .store import CsvStore, JsonlStore
 from .trial import Trial, TrialConfig, TrialOutcome
@@ -88,8 +88,8 @@ class Sweep:
         self.spec = spec
         self.options = options
         self.out = options.out
-        self.trials = CsvStore(self.out / TRIALS_FILE, TRIAL_FIELDS)
-        self.timing = CsvStore(self.out / TIMING_FILE, TIMING_FIELDS)
+        self.trials = CsvStore(self.out / TRIALS_FILE, trial_fields(spec))
+        self.timing = CsvStore(self.out / TIMING_FILE, timing_fields(spec))
         self.metrics = JsonlStore(self.out / METRICS_FILE)
         self.cancel = threading.Event()
         self._record_lock = threading.Lock()
@@ -364,7 +364,7 @@ class Sweep:
         self.timing.sort(lambda row: order[key_of(row)])
         records = sorted(self.metrics.load(), key=lambda r: order.get(key_of(r["key"]), len(order)))
         self.metrics.rewrite(records)
-        write_params(self.out / PARAMS_FILE, (r["metrics"] for r in records))
+        write_params(self.out / PARAMS_FILE, (r["metrics"] for r in records), varied_paths(self.spec.factor_names()))
         if self.options.report:
             from .report import build_report  # matplotlib and scipy only when a report is made
 

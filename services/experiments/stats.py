@@ -40,7 +40,23 @@ Conventions (so a reader can recompute any number from the CSV):
   report is byte-reproducible), one-sided p's counted as ``(1 + hits) / (1 + resamples)``. With no
   nonzero difference ``p = 1``;
 - **Holm–Bonferroni**: adjusted ``p_(i) = max_{j <= i} min(1, (m - j + 1) p_(j))`` over the sorted
-  p-values of one family; NaN is not a test and stays NaN.
+  p-values of one family; NaN is not a test and stays NaN;
+- **the interval of the deciding test, at its Holm level** (:func:`holm_alphas`): Holm tests the
+  j-th smallest p-value at ``α / (m - j + 1)`` and stops at the first it cannot reject; each test's
+  interval is computed at the level Holm tested it at (``1 - α / (m - j + 1)``), and every test from
+  the stopping step on at the stopping step's level. An interval then excludes 0 exactly when Holm
+  rejects (up to the discreteness of the test): the table's interval and its verdict agree;
+- **Hodges–Lehmann estimate with its Wilcoxon interval** (times, :func:`hodges_lehmann`): the median
+  of the ``N = n(n+1)/2`` Walsh averages ``(d_i + d_j) / 2, i <= j`` (all differences, zeros
+  included), and the interval ``[A_(c+1), A_(N-c)]`` of the sorted Walsh averages, ``c`` the largest
+  count with ``P(T+ <= c) <= α/2`` under the exact null distribution of the signed-rank statistic
+  (exact for distinct nonzero differences; with ties or zeros its coverage is approximate).
+  Unbounded when even ``c = 0`` is too likely (few pairs at a strict level);
+- **the sign-flip interval** (counts, :func:`sign_flip_interval`): the mean difference and the
+  shifts ``δ`` the sign-flip test of ``d - δ`` does not reject at the level (test inversion: the
+  same ``2^n`` flips when ``n <= 16``, else ``FLIP_INTERVAL_RESAMPLES`` flips with the fixed seed),
+  its ends found by bisection to ``1e-4``; unbounded on a side where even the most extreme shift in
+  the data is not rejected.
 
 scipy is imported on first use, so commands that never make a report do not pay for it.
 """
@@ -60,6 +76,8 @@ EXACT_FLIPS_MAX = 16  # nonzero differences whose 2^k sign flips are enumerated 
 PERMUTATION_RESAMPLES = 99_999  # random sign flips beyond that
 PERMUTATION_SEED = 20_240  # fixed: the same CSV gives the same p-values, byte for byte
 DIFF_DECIMALS = 6  # differences rounded here (the CSV has milliseconds) so equal differences tie
+FLIP_INTERVAL_RESAMPLES = 20_000  # random sign flips for the interval beyond EXACT_FLIPS_MAX differences
+INF = float("inf")
 
 
 def _scipy_stats():  # noqa: ANN202 - the module
@@ -259,3 +277,96 @@ def holm(pvalues: Sequence[float]) -> list[float]:
         running = max(running, min(1.0, (m - rank) * p))
         adjusted[i] = running
     return adjusted
+
+
+def holm_alphas(pvalues: Sequence[float], alpha: float) -> list[float]:
+    """The significance level Holm tests each p-value at (module docstring); NaN for NaN."""
+    indexed = sorted((p, i) for i, p in enumerate(pvalues) if not math.isnan(p))
+    m = len(indexed)
+    levels = [NAN] * len(pvalues)
+    stopped: float | None = None
+    for rank, (p, i) in enumerate(indexed):
+        level = alpha / (m - rank)
+        if stopped is None and p > level:
+            stopped = level
+        levels[i] = level if stopped is None else stopped
+    return levels
+
+
+# ---------------------------------------------------------------------------- intervals
+
+
+@dataclass(frozen=True)
+class Interval:
+    """An estimate with the confidence interval of the test that decides the verdict."""
+
+    estimate: float
+    low: float
+    high: float
+    level: float  # confidence level, 1 - the alpha it was computed at
+    kind: str  # what estimate and interval these are (module docstring)
+
+
+def _signed_rank_cdf(n: int) -> np.ndarray:
+    """P(T+ <= t) for t = 0..n(n+1)/2 under H0 (distinct nonzero differences)."""
+    dist = np.zeros(n * (n + 1) // 2 + 1)
+    dist[0] = 1.0
+    for k in range(1, n + 1):  # each rank k is in T+ with probability 1/2
+        shifted = np.zeros_like(dist)
+        shifted[k:] = dist[: dist.size - k]
+        dist = 0.5 * (dist + shifted)
+    return np.cumsum(dist)
+
+
+def hodges_lehmann(d: np.ndarray, alpha: float) -> Interval:
+    """The Hodges–Lehmann estimate of the differences and its Wilcoxon interval at ``1 - alpha``."""
+    kind = "Hodges–Lehmann, Wilcoxon interval"
+    n = int(d.size)
+    if n < 2 or math.isnan(alpha):
+        return Interval(NAN, NAN, NAN, NAN, kind)
+    i, j = np.triu_indices(n)
+    walsh = np.sort((d[i] + d[j]) / 2.0)
+    estimate = float(np.median(walsh))
+    cdf = _signed_rank_cdf(n)
+    below = np.nonzero(cdf <= alpha / 2.0 + 1e-12)[0]
+    if below.size == 0:
+        return Interval(estimate, -INF, INF, 1.0 - alpha, kind)
+    c = int(below[-1])
+    return Interval(estimate, float(walsh[c]), float(walsh[walsh.size - 1 - c]), 1.0 - alpha, kind)
+
+
+def _flips(n: int) -> np.ndarray:
+    """The sign-flip matrix of the interval: every pattern when n <= EXACT_FLIPS_MAX, else seeded draws."""
+    if n <= EXACT_FLIPS_MAX:
+        patterns = (np.arange(2**n)[:, None] >> np.arange(n)) & 1
+        return (1 - 2 * patterns).astype(float)
+    rng = np.random.default_rng(PERMUTATION_SEED)
+    return rng.choice((-1.0, 1.0), size=(FLIP_INTERVAL_RESAMPLES, n))
+
+
+def sign_flip_interval(d: np.ndarray, alpha: float, tolerance: float = 1e-4) -> Interval:
+    """The mean difference and the shifts the sign-flip test does not reject at ``alpha`` (docstring)."""
+    kind = "mean, sign-flip interval"
+    n = int(d.size)
+    if n < 2 or math.isnan(alpha):
+        return Interval(NAN, NAN, NAN, NAN, kind)
+    flips = _flips(n)
+    mean = float(d.mean())
+
+    def p(delta: float) -> float:
+        x = d - delta
+        observed = abs(float(x.sum()))
+        return float(np.mean(np.abs(flips @ x) >= observed - 1e-9))
+
+    def end(outer: float) -> float:
+        """The last shift toward ``outer`` that is not rejected (bisection); ±inf if ``outer`` is not."""
+        if p(outer) > alpha:
+            return -INF if outer < mean else INF
+        inner = mean
+        while abs(outer - inner) > tolerance:
+            middle = (inner + outer) / 2.0
+            inner, outer = (middle, outer) if p(middle) > alpha else (inner, middle)
+        return inner
+
+    spread = float(d.max() - d.min()) or 1.0
+    return Interval(mean, end(float(d.min()) - spread), end(float(d.max()) + spread), 1.0 - alpha, kind)

@@ -8,6 +8,14 @@ trial ends when the sim has written its metrics (or exited), when ``timeout`` wa
 passed, when a service dies, or when the sweep is cancelled; then every process of the trial is
 stopped (SIGTERM, SIGKILL after ``stop_timeout``) and its folder removed, whatever happened.
 
+A trial's site is ``generate_site`` of its seed (the paper's buildings) or, in the ``detour``
+domain, ``generate_detour_site`` (:func:`site_text`), with its point's site factors as generator
+options. Its human model is the sim's default unless the sweep gives a ``--human-config`` text,
+human parameters for every trial (``SweepSpec.human``) or a point's human factors: then a
+``[human]`` file with all of them (:func:`human_text`) goes to the sim. A point sweep's trial also
+keeps the sim's events and the plans it saw, and adds how feedback changed the plans to the metrics
+(``plan_changes``, :mod:`.plan_changes`).
+
 Statuses: ``ok`` (the mission was completed), ``unfinished`` (the sim ended it at its time limit:
 a result of the model, not of the machinery), ``timeout`` (no end within ``timeout`` wall s),
 ``error`` (a service failed; the reason names it). A cancelled trial has no status: it is not
@@ -26,15 +34,19 @@ import signal
 import tempfile
 import threading
 import time
+import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from protocol.launch.catalog import RECORDER, RECORDING, SERVICES, Launch, MissionOptions, ServiceSpec, service_argv
 from protocol.launch.children import Child, describe_exit, stop_all
-from protocol.site import generate_site
+from protocol.site import generate_site, loads_site
+from protocol.site.generate_detour import generate_detour_site
 
-from .design import SweepSpec, TrialKey, format_p
+from .design import DEFAULT_DOOR_SHARE, SweepSpec, TrialKey, format_p
+from .factors import split
+from .plan_changes import plan_changes
 from .provenance import code_fingerprint
 from .routers import Router, child_env
 
@@ -165,6 +177,62 @@ def service_commands(
     return commands
 
 
+def site_text(spec: SweepSpec, key: TrialKey) -> str:
+    """The trial's site (module docstring): the same building for every method and, outside a
+    population, every point of a sweep."""
+    options = dict(split(spec.point(key)).site)
+    share = options.pop("door_share", None)
+    seed = spec.site_seed(key)
+    if spec.domain == "detour":
+        share = DEFAULT_DOOR_SHARE if share is None else share
+        return generate_detour_site(key.robots, key.objects, seed, door_share=share, **options)
+    if share is not None:
+        raise ValueError("door_share is a factor of the detour domain (--domain detour)")
+    return generate_site(key.robots, key.objects, seed, **options)
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return repr(value)  # always with a '.' or an exponent: read back as the same float
+    if isinstance(value, int):
+        return str(value)
+    return json.dumps(str(value))  # a JSON string is a valid TOML basic string
+
+
+def human_text(spec: SweepSpec, key: TrialKey) -> str | None:
+    """The trial's --human-config text, or None for the sim's defaults (module docstring)."""
+    values = {**spec.human, **split(spec.point(key)).human}
+    if not values:
+        return spec.human_config
+    base: dict[str, Any] = {}
+    if spec.human_config is not None:
+        try:
+            data = tomllib.loads(spec.human_config)
+        except tomllib.TOMLDecodeError as exc:
+            raise ValueError(f"--human-config: {exc}") from None
+        base = {k: v for k, v in data.get("human", data).items() if not isinstance(v, dict)}
+    table = {**base, **values}
+    return "[human]\n" + "".join(f"{name} = {_toml_value(value)}\n" for name, value in table.items())
+
+
+def _human_doors(site: str) -> list[str]:
+    return sorted(d.id for d in loads_site(site, "site.toml").doors.values() if d.human_operated)
+
+
+def _read_events(path: Path) -> list[dict[str, Any]]:
+    if not path.exists():
+        return []
+    events = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            events.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue  # a line cut short when the sim was stopped: nothing the measures need
+    return events
+
+
 def _read_metrics(path: Path) -> dict[str, Any] | None:
     """The sim's metrics once the file is complete (it is written in one go, but not atomically)."""
     try:
@@ -284,13 +352,16 @@ class Trial:
 
     def _run_mission(self, folder: Path, watch: Any, started: float) -> tuple[str, str, dict[str, Any] | None]:
         site = folder / "site.toml"
-        site.write_text(
-            generate_site(self.key.robots, self.key.objects, self.spec.site_seed(self.key)), encoding="utf-8"
-        )
+        site_doc = site_text(self.spec, self.key)
+        site.write_text(site_doc, encoding="utf-8")
         human = None
-        if self.spec.human_config is not None:
+        human_doc = human_text(self.spec, self.key)
+        if human_doc is not None:
             human = folder / "human.toml"
-            human.write_text(self.spec.human_config, encoding="utf-8")
+            human.write_text(human_doc, encoding="utf-8")
+        events = self.config.events_dir / f"{self.key.ident()}.jsonl" if self.config.events_dir else None
+        if events is None and self.spec.points:  # the plan measures read the events
+            events = folder / "events.jsonl"
         commands = service_commands(
             self.spec,
             self.key,
@@ -300,7 +371,7 @@ class Trial:
             connect=self.router.endpoint,
             log_level=self.config.log_level,
             human_config=human,
-            events=self.config.events_dir / f"{self.key.ident()}.jsonl" if self.config.events_dir else None,
+            events=events,
             record=self.config.record != "none",
         )
         first = tuple(name for name in (*FIRST, RECORDER.name) if name in commands)
@@ -341,6 +412,10 @@ class Trial:
             time.sleep(POLL)
         mission = float((metrics.get("run") or {}).get("wall_time") or 0.0)
         self.timing["sim_startup"] = max(0.0, time.monotonic() - sim_started - mission)
+        if self.spec.points and events is not None:
+            self.children["sim"].wait(self.config.stop_timeout)  # its events file is complete once it exits
+            changes = plan_changes(watch.plan_records(), _read_events(events), _human_doors(site_doc))
+            metrics["plan_changes"] = changes.as_dict()
         if metrics.get("completed"):
             return "ok", "", metrics
         return (

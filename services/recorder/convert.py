@@ -47,19 +47,19 @@ from protocol.messages import (
 )
 
 from .scene import rgba, stamp_of, yaw_quaternion
-from .topics import WORLD_FRAME, camera_frame, robot_frame
+from .topics import MAP_FRAME, camera_frame, robot_frame
 
 PATH_Z = 0.05  # metres above the floor, so paths are not hidden in it
 PATH_THICKNESS = 0.06
 XRAY_ALPHA = 0.5  # as the AR client's rasteriser draws x-ray primitives (services/ar_client/draw.py)
 
 
-def robot_transform(pose: RobotPose) -> FrameTransforms:
+def robot_transform(pose: RobotPose, at: int) -> FrameTransforms:
     return FrameTransforms(
         transforms=[
             FrameTransform(
-                timestamp=stamp_of(pose.stamp),
-                parent_frame_id=WORLD_FRAME,
+                timestamp=stamp_of(at),
+                parent_frame_id=MAP_FRAME,
                 child_frame_id=robot_frame(pose.robot),
                 translation=Vector3(x=pose.x, y=pose.y, z=0.0),
                 rotation=yaw_quaternion(pose.theta),
@@ -68,15 +68,15 @@ def robot_transform(pose: RobotPose) -> FrameTransforms:
     )
 
 
-def camera_transform(truth: CameraTruth) -> FrameTransforms:
-    """World → camera, the camera in OpenCV axes (x right, y down, z forward), as Foxglove expects."""
+def camera_transform(truth: CameraTruth, at: int) -> FrameTransforms:
+    """Map → camera, the camera in OpenCV axes (x right, y down, z forward), as Foxglove expects."""
     qx, qy, qz, qw = truth.quaternion
     px, py, pz = truth.position
     return FrameTransforms(
         transforms=[
             FrameTransform(
-                timestamp=stamp_of(truth.stamp),
-                parent_frame_id=WORLD_FRAME,
+                timestamp=stamp_of(at),
+                parent_frame_id=MAP_FRAME,
                 child_frame_id=camera_frame(truth.camera),
                 translation=Vector3(x=px, y=py, z=pz),
                 rotation=Quaternion(x=qx, y=qy, z=qz, w=qw),
@@ -85,10 +85,10 @@ def camera_transform(truth: CameraTruth) -> FrameTransforms:
     )
 
 
-def intent_path(intent: Intent, color: tuple[int, int, int]) -> SceneUpdate:
+def intent_path(intent: Intent, color: tuple[int, int, int], at: int) -> SceneUpdate:
     """The robot's motion plan as a polyline in its colour (an empty trajectory deletes the path)."""
     entity_id = f"intent/{intent.robot}"
-    ts = stamp_of(intent.stamp)
+    ts = stamp_of(at)
     if len(intent.trajectory) < 2:
         return SceneUpdate(
             deletions=[SceneEntityDeletion(timestamp=ts, type=SceneEntityDeletionType.MatchingId, id=entity_id)]
@@ -101,19 +101,17 @@ def intent_path(intent: Intent, color: tuple[int, int, int]) -> SceneUpdate:
         points=points,
         color=rgba(color, 0.9),
     )
-    return SceneUpdate(entities=[SceneEntity(timestamp=ts, frame_id=WORLD_FRAME, id=entity_id, lines=[line])])
+    return SceneUpdate(entities=[SceneEntity(timestamp=ts, frame_id=MAP_FRAME, id=entity_id, lines=[line])])
 
 
-def camera_image(frame: CameraFrame) -> CompressedImage:
-    return CompressedImage(
-        timestamp=stamp_of(frame.stamp), frame_id=camera_frame(frame.camera), data=frame.jpeg, format="jpeg"
-    )
+def camera_image(frame: CameraFrame, at: int) -> CompressedImage:
+    return CompressedImage(timestamp=stamp_of(at), frame_id=camera_frame(frame.camera), data=frame.jpeg, format="jpeg")
 
 
-def camera_calibration(frame: CameraFrame) -> CameraCalibration:
+def camera_calibration(frame: CameraFrame, at: int) -> CameraCalibration:
     fx, fy, cx, cy = frame.intrinsics
     return CameraCalibration(
-        timestamp=stamp_of(frame.stamp),
+        timestamp=stamp_of(at),
         frame_id=camera_frame(frame.camera),
         width=frame.width,
         height=frame.height,
@@ -131,9 +129,9 @@ def _color(p: Primitive) -> Color:
     return Color(r=r / 255.0, g=g / 255.0, b=b / 255.0, a=a * XRAY_ALPHA if p.style == "xray" else a)
 
 
-def overlay_annotations(overlay: Overlay, frame_stamp: float) -> ImageAnnotations:
-    """The overlay's primitives as annotations of the frame they were drawn for (its timestamp)."""
-    ts = stamp_of(frame_stamp)
+def overlay_annotations(overlay: Overlay, frame_at: int) -> ImageAnnotations:
+    """The overlay's primitives as annotations of the frame they were drawn for (its log time)."""
+    ts = stamp_of(frame_at)
     points: list[PointsAnnotation] = []
     circles: list[CircleAnnotation] = []
     texts: list[TextAnnotation] = []
@@ -206,5 +204,13 @@ LEVELS = {
 }
 
 
-def text_log(t: float, level: str, name: str, message: str) -> Log:
-    return Log(timestamp=stamp_of(t), level=LEVELS.get(level, LogLevel.Unknown), name=name, message=message)
+def text_log(at: int, level: str, name: str, message: str, file: str = "", line: int = 0) -> Log:
+    """A log line; ``file`` and ``line`` say where it was read (a followed log file), if it was."""
+    return Log(
+        timestamp=stamp_of(at),
+        level=LEVELS.get(level, LogLevel.Unknown),
+        name=name,
+        message=message,
+        file=file,
+        line=line,
+    )

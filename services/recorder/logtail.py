@@ -2,6 +2,8 @@
 
 Lines look like ``[planner] 2026-01-01 12:00:00,000 INFO    arroch.planner: plan 3 ...`` (a child's
 log record) or ``[sim] anything`` (other output). A line cut short by the writer waits for its end.
+Secrets in a line (the tablet page's token, keys: :mod:`protocol.redact`) are redacted here, before
+the line can reach a recording.
 """
 
 from __future__ import annotations
@@ -9,6 +11,8 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 from pathlib import Path
+
+from protocol.redact import Redactor
 
 _LINE = re.compile(
     r"^\[(?P<name>[^\]]{1,64})\] (?:\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d+ (?P<level>[A-Z]+)\s+)?(?P<text>.*)$"
@@ -21,13 +25,14 @@ class LogLine:
     name: str
     level: str
     text: str
+    number: int = 0  # the line's number in its file (1 = the first), 0 if unknown
 
 
-def parse(line: str) -> LogLine:
+def parse(line: str, number: int = 0) -> LogLine:
     match = _LINE.match(line)
     if not match:
-        return LogLine("", "INFO", line)
-    return LogLine(match.group("name"), match.group("level") or "INFO", match.group("text"))
+        return LogLine("", "INFO", line, number)
+    return LogLine(match.group("name"), match.group("level") or "INFO", match.group("text"), number)
 
 
 class LogFollower:
@@ -37,6 +42,8 @@ class LogFollower:
         self.path = path
         self._offset = 0
         self._partial = b""
+        self._lines = 0
+        self._redact = Redactor()
 
     def poll(self) -> list[LogLine]:
         try:
@@ -48,4 +55,9 @@ class LogFollower:
         self._offset += len(chunk)
         data = self._partial + chunk
         *complete, self._partial = data.split(b"\n")
-        return [parse(raw.decode("utf-8", "replace")) for raw in complete if raw.strip()]
+        out = []
+        for raw in complete:
+            self._lines += 1
+            if raw.strip():
+                out.append(parse(self._redact(raw.decode("utf-8", "replace")), self._lines))
+        return out

@@ -1,8 +1,13 @@
-"""The default recording profile: every ARROCH message as it travelled, plus the Foxglove view of it.
+"""The default recording profile: every ARROCH message (as JSON, and its wire bytes), plus the
+Foxglove view of the run.
 
-:class:`FoxgloveProfile` turns each message heard into what a Foxglove user wants to see (see
-:mod:`.topics`), on the site clock: a message is logged at its own ``stamp``, so a lockstep run
-replays faithfully however fast it ran. Not thread-safe: the recorder calls it under one lock.
+:class:`FoxgloveProfile` writes each message heard three ways, none twice: its bytes as they travelled
+in the wire store (:mod:`.wire`, for ``arroch replay``; the file only), the message as JSON on
+``/arroch/<key>`` (with its type's JSON Schema, :mod:`.jsonschema`), and what a Foxglove user wants
+to see of it (:mod:`.topics`: frames, the scene, paths, the camera with its overlay, the log).
+Everything is logged at its log time (:mod:`.timebase`: the run's start on the wall clock plus the
+message's site time), so a lockstep run replays at its site pace however fast it ran. Not
+thread-safe: the recorder calls it under one lock.
 """
 
 from __future__ import annotations
@@ -17,7 +22,6 @@ from protocol.keys import Keys
 from protocol.messages import (
     CameraFrame,
     CameraTruth,
-    ConstraintSet,
     DoorState,
     Event,
     Feedback,
@@ -27,18 +31,20 @@ from protocol.messages import (
     Overlay,
     RobotPose,
     RobotStatus,
-    TeamPlan,
 )
 from protocol.palette import unlisted_robot_color
-from protocol.schema import record_to_wire
 from protocol.site import Site
 
 from . import convert, topics
 from .images import scale_frame, scale_overlay
 from .jsonschema import record_schema
+from .logtail import LogLine
 from .scene import SiteScene, to_foxglove
 from .sink import FoxgloveSink
+from .timebase import CLOCK_METADATA, Timebase
+from .wire import MEDIA_TYPE, WireRecord, WireWriter, without_jpeg
 
+METADATA = "arroch"  # MCAP metadata record: namespace, site, profile, clock, when
 PROGRESS_SCHEMA: dict[str, Any] = {
     "type": "object",
     "title": "Progress",
@@ -50,18 +56,32 @@ PROGRESS_SCHEMA: dict[str, Any] = {
         "open_doors": {"type": "integer"},
     },
 }
-METRICS_SCHEMA: dict[str, Any] = {"type": "object", "title": "Metrics", "description": "the mission_done Event's data"}
 MAX_FRAME_STAMPS = 256  # camera frames remembered for their overlays' timestamps
+_to_json = msgspec.json.Encoder().encode
 
 
 class FoxgloveProfile:
-    def __init__(self, sink: FoxgloveSink, keys: Keys, site: Site, *, image_scale: float = 1.0) -> None:
+    def __init__(
+        self,
+        sink: FoxgloveSink,
+        keys: Keys,
+        site: Site,
+        timebase: Timebase,
+        *,
+        image_scale: float = 1.0,
+        metadata: dict[str, str] | None = None,
+        site_clock: str = "sim",
+    ) -> None:
         if not 0.0 < image_scale <= 1.0:
             raise ValueError(f"--image-scale must be in (0, 1], got {image_scale:g}")
         self.sink = sink
         self.image_scale = image_scale
         self.keys = keys
+        self.time = timebase
+        self.metadata = dict(metadata or {})
+        self.site_clock = site_clock
         self.scene = SiteScene(site)
+        self.wire: WireWriter | None = None
         self.poses: dict[str, RobotPose] = {}
         self.delivered: dict[str, int] = {}
         self.door_openings = 0
@@ -71,86 +91,92 @@ class FoxgloveProfile:
             RobotPose: self._pose,
             RobotStatus: self._status,
             DoorState: self._door,
-            TeamPlan: self._json(topics.PLAN),
             Intent: self._intent,
             Feedback: self._described,
             FeedbackAck: self._described,
-            ConstraintSet: self._json(topics.CONSTRAINTS),
             CameraFrame: self._frame,
             CameraTruth: self._truth,
             Overlay: self._overlay,
             Event: self._event,
         }
 
-    def start(self, t: float) -> None:
+    def start(self, at: int) -> None:
+        self.sink.open_file()
+        if self.sink.writing:
+            self.sink.write_metadata(METADATA, self.metadata)
+            self.wire = WireWriter(self._attach)
         # The fixed channels exist from the start, so a viewer can subscribe before the mission's burst.
         for topic, message_type in ((topics.TF, FrameTransforms), (topics.PATHS, SceneUpdate), (topics.LOG, Log)):
             self.sink.declare(topic, message_type)
-        for topic, schema in (
-            (topics.PLAN, record_schema(TeamPlan)),
-            (topics.CONSTRAINTS, record_schema(ConstraintSet)),
-            (topics.EVENTS, record_schema(Event)),
-            (topics.PROGRESS, PROGRESS_SCHEMA),
-            (topics.METRICS, METRICS_SCHEMA),
-        ):
-            self.sink.declare_json(topic, schema)
-        self._scene(t)
+        self.sink.declare_json(topics.PROGRESS, PROGRESS_SCHEMA)
+        for key, message_type in topics.expected_keys(self.keys, self.scene.site):
+            self.sink.declare_json(topics.message_topic(topics.below(self.keys, key)), record_schema(message_type))
+        self._scene(at)
 
-    def _scene(self, t: float) -> None:
-        self.sink.message(topics.SCENE, to_foxglove(self.scene.entities(), t), t)
+    def _attach(self, name: str, first: int, last: int, data: bytes) -> None:
+        self.sink.attach(name, first, last, data, MEDIA_TYPE)
 
-    def resend(self, topic: str, t: float) -> None:
+    def origin_fixed(self) -> None:
+        """The timebase has its origin now: the file keeps it (readers turn log times back into site time)."""
+        self.sink.write_metadata(CLOCK_METADATA, self.time.metadata(self.site_clock))
+
+    def _scene(self, at: int) -> None:
+        self.sink.message(topics.SCENE, to_foxglove(self.scene.entities(), at), at)
+
+    def resend(self, topic: str, at: int) -> None:
         """A viewer subscribed to ``topic``: the scene, sent whole only at the start, goes out again as it is now."""
         if topic == topics.SCENE:
-            self._scene(t)
+            self._scene(at)
 
-    def handle(self, msg: Message, key: str) -> None:
+    def tick(self) -> None:
+        if self.wire is not None:
+            self.wire.flush_if_old()
+
+    def handle(self, msg: Message, key: str, payload: bytes) -> None:
         if self.image_scale < 1.0:  # frames kept smaller, everything drawn on them alike
             if isinstance(msg, CameraFrame):
                 msg = scale_frame(msg, self.image_scale)
+                payload = encode(msg)
             elif isinstance(msg, Overlay):
                 msg = scale_overlay(msg, self.image_scale)
-        self._raw(msg, key)
+                payload = encode(msg)
+        rest = topics.below(self.keys, key)
+        at = self.time.at(msg.stamp)
+        # A camera frame's JPEG is kept once, in its CompressedImage (the wire store and JSON without it).
+        stored = msgspec.structs.replace(msg, jpeg=b"") if isinstance(msg, CameraFrame) else msg
+        if self.wire is not None:
+            kept, cut = without_jpeg(payload, msg.jpeg) if isinstance(msg, CameraFrame) else (payload, -1)
+            self.wire.add(WireRecord(rest, at, kept, cut))
+        self.sink.json(topics.message_topic(rest), record_schema(type(msg)), _to_json(stored), at)
         handler = self._handlers.get(type(msg))
         if handler is not None:
-            handler(msg)
+            handler(msg, at)
 
-    def log_line(self, t: float, level: str, name: str, text: str) -> None:
-        self.sink.message(topics.LOG, convert.text_log(t, level, name, text), t)
+    def log_line(self, line: LogLine, at: int, file: str = "") -> None:
+        self.sink.message(topics.LOG, convert.text_log(at, line.level, line.name, line.text, file, line.number), at)
 
     # ------------------------------------------------------------------ per message type
 
-    def _raw(self, msg: Message, key: str) -> None:
-        # A camera frame's JPEG is kept once, in its CompressedImage; replay puts it back.
-        stored = msgspec.structs.replace(msg, jpeg=b"") if isinstance(msg, CameraFrame) else msg
-        self.sink.raw(topics.raw_topic(self.keys, key), msg.TYPE, record_schema(type(msg)), encode(stored), msg.stamp)
-
-    def _json(self, topic: str):
-        def log(msg: Message) -> None:
-            self.sink.json(topic, record_schema(type(msg)), record_to_wire(msg), msg.stamp)
-
-        return log
-
-    def _pose(self, msg: RobotPose) -> None:
+    def _pose(self, msg: RobotPose, at: int) -> None:
         self.poses[msg.robot] = msg
-        self.sink.message(topics.TF, convert.robot_transform(msg), msg.stamp)
+        self.sink.message(topics.TF, convert.robot_transform(msg, at), at)
 
-    def _status(self, msg: RobotStatus) -> None:
+    def _status(self, msg: RobotStatus, at: int) -> None:
         if self.delivered.get(msg.robot) != len(msg.delivered):
             self.delivered[msg.robot] = len(msg.delivered)
-            self._progress(msg.stamp)
+            self._progress(at)
 
-    def _door(self, msg: DoorState) -> None:
+    def _door(self, msg: DoorState, at: int) -> None:
         changed = self.scene.door_changed(msg.door, msg.open)
         if changed is None:
             return
-        self.sink.message(topics.SCENE, to_foxglove([changed], msg.stamp), msg.stamp)
+        self.sink.message(topics.SCENE, to_foxglove([changed], at), at)
         if msg.open:
             self.door_openings += 1
             self.human_door_openings += msg.by == "human"
-        self._progress(msg.stamp)
+        self._progress(at)
 
-    def _progress(self, t: float) -> None:
+    def _progress(self, at: int) -> None:
         self.sink.json(
             topics.PROGRESS,
             PROGRESS_SCHEMA,
@@ -161,45 +187,48 @@ class FoxgloveProfile:
                 "human_door_openings": self.human_door_openings,
                 "open_doors": sum(1 for state in self.scene.doors.values() if state),
             },
-            t,
+            at,
         )
 
-    def _intent(self, msg: Intent) -> None:
+    def _intent(self, msg: Intent, at: int) -> None:
         color = self.scene.colors.get(msg.robot) or unlisted_robot_color(msg.robot)
-        self.sink.message(topics.PATHS, convert.intent_path(msg, color), msg.stamp)
+        self.sink.message(topics.PATHS, convert.intent_path(msg, color, at), at)
 
-    def _described(self, msg: Feedback | FeedbackAck | Event) -> None:
+    def _described(self, msg: Feedback | FeedbackAck | Event, at: int) -> None:
         level, text = convert.describe(msg)
-        self.log_line(msg.stamp, level, msg.src, text)
+        self.sink.message(topics.LOG, convert.text_log(at, level, msg.src, text), at)
 
-    def _frame(self, msg: CameraFrame) -> None:
+    def _frame(self, msg: CameraFrame, at: int) -> None:
         self.frame_stamps[(msg.camera, msg.seq)] = msg.stamp
         if len(self.frame_stamps) > MAX_FRAME_STAMPS:
             del self.frame_stamps[next(iter(self.frame_stamps))]
-        self.sink.message(topics.camera_image(msg.camera), convert.camera_image(msg), msg.stamp)
-        self.sink.message(topics.camera_calibration(msg.camera), convert.camera_calibration(msg), msg.stamp)
+        self.sink.message(topics.camera_image(msg.camera), convert.camera_image(msg, at), at)
+        self.sink.message(topics.camera_calibration(msg.camera), convert.camera_calibration(msg, at), at)
 
-    def _truth(self, msg: CameraTruth) -> None:
-        self.sink.message(topics.TF, convert.camera_transform(msg), msg.stamp)
+    def _truth(self, msg: CameraTruth, at: int) -> None:
+        self.sink.message(topics.TF, convert.camera_transform(msg, at), at)
 
-    def _overlay(self, msg: Overlay) -> None:
+    def _overlay(self, msg: Overlay, at: int) -> None:
         # Drawn for a frame: shown with that frame (its timestamp), logged when it was made.
         frame_stamp = self.frame_stamps.get((msg.camera, msg.frame_seq), msg.stamp)
-        self.sink.message(topics.camera_overlay(msg.camera), convert.overlay_annotations(msg, frame_stamp), msg.stamp)
+        annotations = convert.overlay_annotations(msg, self.time.at(frame_stamp))
+        self.sink.message(topics.camera_overlay(msg.camera), annotations, at)
 
-    def _event(self, msg: Event) -> None:
-        self.sink.json(topics.EVENTS, record_schema(Event), record_to_wire(msg), msg.stamp)
-        self._described(msg)
+    def _event(self, msg: Event, at: int) -> None:
+        self._described(msg, at)
         update = None
         if msg.kind == "loaded" and msg.object and msg.robot:
             update = self.scene.object_loaded(msg.object, msg.robot)
         elif msg.kind == "delivered" and msg.object:
             pose = self.poses.get(msg.robot)
             update = self.scene.object_delivered(msg.object, (pose.x, pose.y)) if pose else None
-        elif msg.kind == "mission_done" and isinstance(msg.data, dict):
-            self.sink.json(topics.METRICS, METRICS_SCHEMA, msg.data, msg.stamp)
         if update is not None:
-            self.sink.message(topics.SCENE, to_foxglove([update], msg.stamp), msg.stamp)
+            self.sink.message(topics.SCENE, to_foxglove([update], at), at)
 
     def close(self) -> None:
+        if self.wire is not None:
+            self.wire.flush()
         self.sink.close()
+
+    def abort(self) -> None:
+        self.sink.abort()

@@ -1,21 +1,28 @@
-"""Reading recordings back: the ARROCH messages of a file in time order (camera frames with their JPEG
-put back from the image channel), its metadata, and its channels' counts and time spans."""
+"""Reading recordings back: the ARROCH messages of a file in time order, each with the bytes it
+travelled as (from the wire store, :mod:`.wire`; camera frames with their JPEG put back from the
+image channel), the file's metadata, and its channels' counts and time spans.
+
+Times given and returned here are site seconds: a log time less the file's site-time origin
+(:mod:`.timebase`).
+"""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO
 
-import msgspec
-from mcap.reader import make_reader
+from mcap.reader import McapReader, make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
-from protocol.codec import decode, encode
-from protocol.messages import CameraFrame, Message
+from protocol.codec import decode
+from protocol.messages import Message
 
-from .topics import RAW_ENCODING, RAW_PREFIX, camera_image
+from .profile import METADATA
+from .timebase import CLOCK_METADATA, ORIGIN_KEY, ns
+from .topics import message_topic
+from .wire import WireRecord, read_batches, with_jpeg
 
 
 @dataclass(frozen=True)
@@ -24,17 +31,17 @@ class ChannelStats:
     schema: str
     encoding: str
     messages: int
-    first: float  # site-clock seconds of its first message
+    first: float  # site seconds of its first message (negative: written before site time 0)
     last: float
 
 
 @dataclass(frozen=True)
 class Recorded:
-    """One recorded ARROCH message: where it went (relative to the namespace), when, and its payload."""
+    """One recorded ARROCH message: where it went (``/arroch/<key below the namespace>``), when, its bytes."""
 
-    topic: str  # /arroch/<key below the namespace>
-    time: float  # site-clock seconds
-    payload: bytes
+    topic: str
+    time: float  # site seconds
+    payload: bytes  # as it travelled
     message: Message
 
 
@@ -49,27 +56,40 @@ def _open(path: Path) -> BinaryIO:
         raise RecordingError(f"{path}: cannot open: {exc.strerror}") from None
 
 
-def metadata(path: Path) -> dict[str, str]:
-    with _open(path) as f:
-        try:
-            for record in make_reader(f).iter_metadata():
-                if record.name == "arroch":
-                    return dict(record.metadata)
-        except Exception as exc:
-            raise RecordingError(f"{path}: not a readable MCAP file ({exc})") from None
+def _metadata(reader: McapReader, name: str) -> dict[str, str]:
+    for record in reader.iter_metadata():
+        if record.name == name:
+            return dict(record.metadata)
     return {}
 
 
+def _origin(reader: McapReader) -> int:
+    return int(_metadata(reader, CLOCK_METADATA).get(ORIGIN_KEY, 0))
+
+
+def metadata(path: Path) -> dict[str, str]:
+    """The ``arroch`` metadata record (namespace, site, profile, clock), and the site-time origin."""
+    with _open(path) as f:
+        try:
+            reader = make_reader(f)
+            found = _metadata(reader, METADATA)
+            found.update(_metadata(reader, CLOCK_METADATA))
+            return found
+        except Exception as exc:
+            raise RecordingError(f"{path}: not a readable MCAP file ({exc})") from None
+
+
 def channel_stats(path: Path) -> list[ChannelStats]:
-    """Every channel with its message count and time span, from the file's summary (or a full read)."""
+    """Every channel with its message count and time span in site seconds."""
     with _open(path) as f:
         try:
             reader = make_reader(f)
             summary = reader.get_summary()
+            origin = _origin(reader)
             spans: dict[int, list[int]] = {}
             counts: dict[int, int] = {}
             # Per-channel spans are not in the summary: one pass over the message headers.
-            for _schema, channel, message in reader.iter_messages():
+            for _schema, channel, message in reader.iter_messages(log_time_order=False):
                 span = spans.setdefault(channel.id, [message.log_time, message.log_time])
                 span[0] = min(span[0], message.log_time)
                 span[1] = max(span[1], message.log_time)
@@ -81,70 +101,90 @@ def channel_stats(path: Path) -> list[ChannelStats]:
     schemas = summary.schemas if summary else {}
     for cid, channel in channels.items():
         schema = schemas.get(channel.schema_id)
-        first, last = spans.get(cid, [0, 0])
+        first, last = spans.get(cid, [origin, origin])
         out.append(
             ChannelStats(
                 channel.topic,
                 schema.name if schema else "",
                 channel.message_encoding,
                 counts.get(cid, 0),
-                first / 1e9,
-                last / 1e9,
+                (first - origin) / 1e9,
+                (last - origin) / 1e9,
             )
         )
     return sorted(out, key=lambda c: c.topic)
 
 
-def messages(path: Path, *, start: float | None = None, end: float | None = None) -> Iterator[Recorded]:
-    """The recorded ARROCH messages in log-time order; camera frames come with their JPEG again.
+def _images(reader: McapReader, start: int | None, end: int | None) -> Iterator[tuple[str, int, bytes]]:
+    """(camera, log time, JPEG) of every ``/camera/<cid>/image`` message, in log-time order."""
+    factory = DecoderFactory()
+    decoders: dict[int, Any] = {}
+    topics = [c.topic for c in (reader.get_summary().channels.values()) if _camera_of(c.topic)]
+    for schema, channel, message in reader.iter_messages(topics=topics, start_time=start, end_time=end):
+        decoder = decoders.get(channel.id)
+        if decoder is None:
+            decoder = decoders[channel.id] = factory.decoder_for(channel.message_encoding, schema)
+        yield _camera_of(channel.topic), message.log_time, bytes(decoder(message.data).data)
 
-    A frame's JPEG is stored once, in its ``/camera/<cid>/image`` message of the same time (the raw
-    frame is kept without it); the two are paired here, whichever of them the file gives first.
-    """
+
+def _camera_of(topic: str) -> str:
+    parts = topic.split("/")
+    return parts[2] if len(parts) == 4 and parts[1] == "camera" and parts[3] == "image" else ""
+
+
+def _records(reader: McapReader, path: Path) -> list[WireRecord]:
+    records = list(read_batches((a.name, a.media_type, a.data) for a in reader.iter_attachments()))
+    if not records and any(c.message_encoding == "msgpack" for c in reader.get_summary().channels.values()):
+        raise RecordingError(
+            f"{path}: recorded by an older arroch (its messages are msgpack channels, with no wire store): "
+            "read or replay it with the version that recorded it"
+        )
+    records.sort(key=lambda r: r.at)  # stable: messages of one log time stay in the order they came
+    return records
+
+
+def messages(path: Path, *, start: float | None = None, end: float | None = None) -> Iterator[Recorded]:
+    """The recorded ARROCH messages in log-time order (``start``/``end``: site seconds), each with the
+    bytes it travelled as. A camera frame whose image is missing (a file cut short) is left out."""
     with _open(path) as f:
-        reader = make_reader(f)
-        factory = DecoderFactory()
-        decoders: dict[int, Callable[[bytes], Any]] = {}  # schema id -> protobuf decoder
-        images: dict[tuple[str, int], bytes] = {}  # (camera, log time) -> JPEG waiting for its frame
-        frames: dict[tuple[str, int], tuple[str, CameraFrame]] = {}  # frames waiting for their JPEG
-        kwargs = {
-            "start_time": None if start is None else int(start * 1e9),
-            "end_time": None if end is None else int(end * 1e9),
-        }
         try:
-            for schema, channel, message in reader.iter_messages(log_time_order=True, **kwargs):
-                topic = channel.topic
-                if channel.message_encoding == RAW_ENCODING and topic.startswith(RAW_PREFIX):
-                    msg = decode(message.data)
-                    if isinstance(msg, CameraFrame) and not msg.jpeg:
-                        slot = (msg.camera, message.log_time)
-                        if slot in images:
-                            yield _frame_with(topic, message.log_time, msg, images.pop(slot))
-                        else:
-                            frames[slot] = (topic, msg)
+            reader = make_reader(f)
+            if reader.get_summary() is None:
+                raise RecordingError(f"{path}: not a finished recording (no summary: its recorder was killed?)")
+            origin = _origin(reader)
+            lo = None if start is None else origin + ns(start)
+            hi = None if end is None else origin + ns(end)
+            images = _images(reader, lo, hi)
+            waiting: dict[tuple[str, int], bytes] = {}  # images read ahead, by (camera, log time)
+            for record in _records(reader, path):
+                if (lo is not None and record.at < lo) or (hi is not None and record.at > hi):
+                    continue
+                payload = record.payload
+                if record.cut >= 0:
+                    jpeg = _image_for(record, images, waiting)
+                    if jpeg is None:
                         continue
-                    yield Recorded(topic, message.log_time / 1e9, bytes(message.data), msg)
-                elif topic.startswith("/camera/") and topic.endswith("/image"):
-                    camera = topic.split("/")[2]
-                    if topic != camera_image(camera):
-                        continue
-                    decoder = decoders.get(channel.schema_id)
-                    if decoder is None:
-                        decoder = decoders[channel.schema_id] = factory.decoder_for(channel.message_encoding, schema)
-                    jpeg = decoder(message.data).data
-                    slot = (camera, message.log_time)
-                    if slot in frames:
-                        raw_topic, frame = frames.pop(slot)
-                        yield _frame_with(raw_topic, message.log_time, frame, jpeg)
-                    else:
-                        images.clear()  # only the newest image can still meet its frame
-                        images[slot] = jpeg
+                    payload = with_jpeg(record, jpeg)
+                yield Recorded(message_topic(record.key), (record.at - origin) / 1e9, payload, decode(payload))
         except RecordingError:
             raise
         except Exception as exc:
             raise RecordingError(f"{path}: cannot read the recording ({exc})") from None
 
 
-def _frame_with(topic: str, log_time: int, frame: CameraFrame, jpeg: bytes) -> Recorded:
-    whole = msgspec.structs.replace(frame, jpeg=bytes(jpeg))
-    return Recorded(topic, log_time / 1e9, encode(whole), whole)
+def _image_for(
+    record: WireRecord, images: Iterator[tuple[str, int, bytes]], waiting: dict[tuple[str, int], bytes]
+) -> bytes | None:
+    """The JPEG logged with a frame (same camera, same log time): images are read in step with the records."""
+    camera = record.key.split("/")[1]
+    for old in [slot for slot in waiting if slot[1] < record.at]:
+        del waiting[old]  # their frames are behind us
+    while (camera, record.at) not in waiting:
+        image = next(images, None)
+        if image is None:
+            return None
+        if image[1] >= record.at:
+            waiting[(image[0], image[1])] = image[2]
+        if image[1] > record.at:
+            break
+    return waiting.pop((camera, record.at), None)

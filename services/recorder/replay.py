@@ -28,10 +28,11 @@ from typing import TextIO
 from protocol.messages import CameraFrame, Overlay
 from protocol.runner import add_common_arguments, zenoh_options
 from protocol.service import Service
-from protocol.transport import ZenohOptions
+from protocol.transport import NoRouter, ZenohOptions, through_local_router
 
 from .reading import Recorded, RecordingError, messages, metadata
-from .topics import RAW_PREFIX, key_of
+from .service import without_shared_memory
+from .topics import MESSAGE_PREFIX, key_of
 
 log = logging.getLogger("arroch.replay")
 PROGRESS_EVERY = 5.0  # wall seconds between two progress lines
@@ -68,7 +69,7 @@ class Pacer:
 
 def selected(topic: str, only: list[str], skip: list[str]) -> bool:
     """Patterns match the key below the namespace (``robot/*/pose``, ``camera/tablet/frame``, ``clock``)."""
-    rest = topic[len(RAW_PREFIX) :]
+    rest = topic[len(MESSAGE_PREFIX) :]
     if only and not any(fnmatch.fnmatchcase(rest, p) for p in only):
         return False
     return not any(fnmatch.fnmatchcase(rest, p) for p in skip)
@@ -146,8 +147,14 @@ def replay_main(args: argparse.Namespace) -> int:
         return 2
     rate = None if args.fast else (args.rate or 1.0)
     pacer = Pacer(rate, args.step_size if args.step else None)
+    try:
+        # A replay into a router of its own would reach no one: say what to start instead.
+        options, _ = through_local_router(without_shared_memory(zenoh_options(args)), become=False)
+    except NoRouter as exc:
+        log.error("%s", exc)
+        return 1
     replayer = Replayer(
-        namespace, zenoh_options(args), hold_camera=args.hold_timeout if args.hold_camera else None, settle=args.settle
+        namespace, options, hold_camera=args.hold_timeout if args.hold_camera else None, settle=args.settle
     )
     replayer.install_signal_handlers()
     try:

@@ -1,32 +1,38 @@
-"""The ``ros2`` recording profile: the run as ROS 2 messages (CDR) in a rosbag2 folder with MCAP storage,
-which ``ros2 bag play`` and RViz 2 take as they are.
+"""The ``ros2`` recording profile: the run as ROS 2 messages in a rosbag2 folder (MCAP storage) of one
+distribution (``--ros-distro humble|jazzy``, :mod:`.rosbag`), which that distribution's ``ros2 bag
+play`` and RViz 2 take as they are. The same code converts a recorded ``run.mcap`` offline
+(``arroch runs export RUN --ros2 OUT``, :mod:`.export`).
+
+Topics, frames and marker namespaces are those of ``arroch ros2 bridge`` (its default
+``--ros-namespace /arroch``; :mod:`protocol.ros2.markers`), so an RViz 2 set-up for the live bridge
+shows a bag too:
 
 | topic | type |
 |---|---|
-| ``/tf`` | ``tf2_msgs/msg/TFMessage``: world → ``robot/<rid>``, world → ``camera/<cid>`` |
-| ``/robot/<rid>/pose`` | ``geometry_msgs/msg/PoseStamped`` |
-| ``/robot/<rid>/path`` | ``nav_msgs/msg/Path``: the robot's intent (motion plan), stamped per point |
-| ``/camera/<cid>/image/compressed`` | ``sensor_msgs/msg/CompressedImage`` |
-| ``/camera/<cid>/camera_info`` | ``sensor_msgs/msg/CameraInfo`` |
-| ``/site`` | ``visualization_msgs/msg/MarkerArray``: the scene of :mod:`.scene`, doors updated as they change |
-| ``/rosout`` | ``rcl_interfaces/msg/Log``: events, feedback, acks |
+| ``/clock`` | ``rosgraph_msgs/msg/Clock``: the site clock, at every ``Clock`` message |
+| ``/tf`` | ``tf2_msgs/msg/TFMessage``: ``map`` → ``<rid>/base_link``, ``map`` → ``<cid>/camera_optical_frame`` |
+| ``/arroch/<rid>/pose`` | ``geometry_msgs/msg/PoseStamped`` (``map``) |
+| ``/arroch/<rid>/path`` | ``nav_msgs/msg/Path``: the robot's intent (motion plan), stamped per point |
+| ``/arroch/site`` | ``visualization_msgs/msg/MarkerArray``: the bridge's markers, again at every change (latched) |
+| ``/arroch/camera/<cid>/image/compressed`` | ``sensor_msgs/msg/CompressedImage`` |
+| ``/arroch/camera/<cid>/camera_info`` | ``sensor_msgs/msg/CameraInfo`` |
+| ``/rosout`` | ``rcl_interfaces/msg/Log``: events, feedback, acks, the services' log lines |
 
-Message definitions are rosbags' ROS 2 Humble type store; the bag's timestamps are the site clock.
+Every stamp, and every message's time in the bag, is the wall clock of the run's start plus site time
+(:mod:`.timebase`), as in ``run.mcap``.
 """
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from rosbags.rosbag2 import StoragePlugin, Writer
-from rosbags.typesys import Stores, get_typestore
 
 from protocol.messages import (
     CameraFrame,
     CameraTruth,
+    Clock,
     DoorState,
     Event,
     Feedback,
@@ -34,182 +40,133 @@ from protocol.messages import (
     Intent,
     Message,
     RobotPose,
+    RobotStatus,
 )
+from protocol.ros2 import types as ros
+from protocol.ros2.markers import MAP_FRAME, SiteState, robot_frame, site_markers
 from protocol.site import Site
 
-from . import convert, topics
-from .scene import Entity, SiteScene
-from .sink import ns
+from . import convert
+from .logtail import LogLine
+from .rosbag import BagWriter, Distro, qos
+from .timebase import ORIGIN_KEY, Timebase
+from .topics import camera_frame
 
-STORE = get_typestore(Stores.ROS2_HUMBLE)
-T = STORE.types
+ROS_NAMESPACE = "/arroch"  # the bridge's default --ros-namespace
+SITE = f"{ROS_NAMESPACE}/site"
 LOG_LEVELS = {"DEBUG": 10, "INFO": 20, "WARNING": 30, "ERROR": 40, "CRITICAL": 50}
+# QoS as the publishers' would be: tf2's broadcaster, rcl's /rosout, latched markers (RViz joining late).
+QOS = {"/tf": qos(depth=100), "/rosout": qos(depth=1000), "/clock": qos(depth=1), SITE: qos(depth=1, latched=True)}
 
 
-def ros_time(t: float) -> Any:
-    n = ns(t)
-    return T["builtin_interfaces/msg/Time"](sec=n // 1_000_000_000, nanosec=n % 1_000_000_000)
+def ros_time(at: int) -> Any:
+    """A log time (ns) as ``builtin_interfaces/Time``, exactly."""
+    return ros.t("builtin_interfaces/msg/Time")(sec=at // 1_000_000_000, nanosec=at % 1_000_000_000)
 
 
-def header(t: float, frame: str) -> Any:
-    return T["std_msgs/msg/Header"](stamp=ros_time(t), frame_id=frame)
+def header(at: int, frame: str) -> Any:
+    return ros.t("std_msgs/msg/Header")(stamp=ros_time(at), frame_id=frame)
 
 
-def quaternion(x: float, y: float, z: float, w: float) -> Any:
-    return T["geometry_msgs/msg/Quaternion"](x=x, y=y, z=z, w=w)
-
-
-def yaw_q(yaw: float) -> Any:
-    return quaternion(0.0, 0.0, math.sin(yaw / 2), math.cos(yaw / 2))
-
-
-def pose(x: float, y: float, z: float, q: Any) -> Any:
-    return T["geometry_msgs/msg/Pose"](position=T["geometry_msgs/msg/Point"](x=x, y=y, z=z), orientation=q)
-
-
-def transform(t: float, child: str, xyz: tuple[float, float, float], q: Any) -> Any:
-    vec = T["geometry_msgs/msg/Vector3"](x=xyz[0], y=xyz[1], z=xyz[2])
-    return T["geometry_msgs/msg/TransformStamped"](
-        header=header(t, topics.WORLD_FRAME),
+def transform(at: int, child: str, xyz: tuple[float, float, float], rotation: Any) -> Any:
+    return ros.t("geometry_msgs/msg/TransformStamped")(
+        header=header(at, MAP_FRAME),
         child_frame_id=child,
-        transform=T["geometry_msgs/msg/Transform"](translation=vec, rotation=q),
+        transform=ros.t("geometry_msgs/msg/Transform")(translation=ros.vector3(*xyz), rotation=rotation),
     )
 
 
-def markers(entities: list[Entity], t: float, ids: dict[str, int]) -> Any:
-    """Scene entities as markers: namespace = entity id, one marker per shape (ADD replaces)."""
-    Marker = T["visualization_msgs/msg/Marker"]
-    kinds = {"cube": Marker.CUBE, "cylinder": Marker.CYLINDER, "text": Marker.TEXT_VIEW_FACING}
-    out = []
-    for entity in entities:
-        for k, shape in enumerate(entity.shapes):
-            key = f"{entity.id}#{k}"
-            ids.setdefault(key, len(ids))
-            r, g, b, a = shape.color
-            out.append(
-                Marker(
-                    header=header(t, entity.frame),
-                    ns=entity.id,
-                    id=ids[key],
-                    type=kinds[shape.kind],
-                    action=Marker.ADD,
-                    pose=pose(*shape.center, yaw_q(shape.yaw)),
-                    scale=T["geometry_msgs/msg/Vector3"](x=shape.size[0], y=shape.size[1], z=shape.size[2]),
-                    color=T["std_msgs/msg/ColorRGBA"](r=r, g=g, b=b, a=a),
-                    lifetime=T["builtin_interfaces/msg/Duration"](sec=0, nanosec=0),
-                    frame_locked=entity.locked,
-                    points=[],
-                    colors=[],
-                    texture_resource="",
-                    texture=T["sensor_msgs/msg/CompressedImage"](
-                        header=header(t, ""), format="", data=np.zeros(0, dtype=np.uint8)
-                    ),
-                    uv_coordinates=[],
-                    text=shape.text,
-                    mesh_resource="",
-                    mesh_file=T["visualization_msgs/msg/MeshFile"](filename="", data=np.zeros(0, dtype=np.uint8)),
-                    mesh_use_embedded_materials=False,
-                )
-            )
-    return T["visualization_msgs/msg/MarkerArray"](markers=out)
-
-
 class Ros2Profile:
-    def __init__(self, folder: Path, site: Site) -> None:
-        if folder.exists():
-            raise ValueError(f"{folder}: a ROS 2 bag folder must not exist yet")
-        folder.parent.mkdir(parents=True, exist_ok=True)
+    def __init__(self, folder: Path, site: Site, timebase: Timebase, distro: Distro, namespace: str) -> None:
+        self.bag = BagWriter(folder, distro, {"namespace": namespace, "site": site.name})
         self.path = folder
-        self.writer = Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP)
-        self.writer.open()
-        self.scene = SiteScene(site)
-        self._connections: dict[str, Any] = {}
-        self._marker_ids: dict[str, int] = {}
+        self.site = site
+        self.time = timebase
+        self.namespace = namespace
+        self.state = SiteState()
+        self.poses: dict[str, tuple[float, float]] = {}
         self._handlers = {
+            Clock: self._clock,
             RobotPose: self._pose,
+            RobotStatus: self._status,
             CameraTruth: self._truth,
             Intent: self._intent,
             CameraFrame: self._frame,
             DoorState: self._door,
-            Event: self._described,
+            Event: self._event,
             Feedback: self._described,
             FeedbackAck: self._described,
         }
 
-    def _write(self, topic: str, msgtype: str, msg: Any, t: float) -> None:
-        connection = self._connections.get(topic)
-        if connection is None:
-            connection = self._connections[topic] = self.writer.add_connection(topic, msgtype, typestore=STORE)
-        self.writer.write(connection, ns(t), bytes(STORE.serialize_cdr(msg, msgtype)))
+    def _write(self, topic: str, msgtype: str, msg: Any, at: int) -> None:
+        self.bag.write(topic, msgtype, msg, at, QOS.get(topic))
 
-    def start(self, t: float) -> None:
-        self._write(
-            topics.SCENE, "visualization_msgs/msg/MarkerArray", markers(self.scene.entities(), t, self._marker_ids), t
-        )
+    def start(self, at: int) -> None:
+        self.bag.open()
+        self._markers(at)
 
-    def handle(self, msg: Message, key: str) -> None:
+    def origin_fixed(self) -> None:
+        self.bag.custom_data[ORIGIN_KEY] = str(self.time.origin_ns or 0)
+
+    def resend(self, topic: str, at: int) -> None:
+        """Nothing to send again: a bag has no viewers."""
+
+    def tick(self) -> None:
+        """Nothing to do between messages."""
+
+    def handle(self, msg: Message, key: str, payload: bytes) -> None:
         handler = self._handlers.get(type(msg))
         if handler is not None:
-            handler(msg)
+            handler(msg, self.time.at(msg.stamp))
 
-    def log_line(self, t: float, level: str, name: str, text: str) -> None:
-        self._rosout(t, LOG_LEVELS.get(level, 20), name, text)
+    def log_line(self, line: LogLine, at: int, file: str = "") -> None:
+        self._rosout(at, LOG_LEVELS.get(line.level, 20), line.name, line.text, file, line.number)
 
     def close(self) -> None:
-        self.writer.close()
+        self.bag.close()
+
+    def abort(self) -> None:
+        self.bag.abort()
 
     # ------------------------------------------------------------------ per message type
 
-    def _pose(self, msg: RobotPose) -> None:
-        q = yaw_q(msg.theta)
-        self._write(
-            topics.TF,
-            "tf2_msgs/msg/TFMessage",
-            T["tf2_msgs/msg/TFMessage"](
-                transforms=[transform(msg.stamp, topics.robot_frame(msg.robot), (msg.x, msg.y, 0.0), q)]
-            ),
-            msg.stamp,
-        )
-        self._write(
-            f"/robot/{msg.robot}/pose",
-            "geometry_msgs/msg/PoseStamped",
-            T["geometry_msgs/msg/PoseStamped"](
-                header=header(msg.stamp, topics.WORLD_FRAME), pose=pose(msg.x, msg.y, 0.0, q)
-            ),
-            msg.stamp,
-        )
+    def _clock(self, msg: Clock, at: int) -> None:
+        clock = ros_time(self.time.at(msg.time))
+        self._write("/clock", "rosgraph_msgs/msg/Clock", ros.t("rosgraph_msgs/msg/Clock")(clock=clock), at)
 
-    def _truth(self, msg: CameraTruth) -> None:
-        tf = transform(msg.stamp, topics.camera_frame(msg.camera), tuple(msg.position), quaternion(*msg.quaternion))
-        self._write(topics.TF, "tf2_msgs/msg/TFMessage", T["tf2_msgs/msg/TFMessage"](transforms=[tf]), msg.stamp)
+    def _pose(self, msg: RobotPose, at: int) -> None:
+        self.poses[msg.robot] = (msg.x, msg.y)
+        tf = transform(at, robot_frame(msg.robot), (msg.x, msg.y, 0.0), ros.quaternion(msg.theta))
+        self._write("/tf", ros.TF_MESSAGE, ros.t(ros.TF_MESSAGE)(transforms=[tf]), at)
+        pose = ros.pose(msg.x, msg.y, msg.theta)
+        stamped = ros.t("geometry_msgs/msg/PoseStamped")(header=header(at, MAP_FRAME), pose=pose)
+        self._write(f"{ROS_NAMESPACE}/{msg.robot}/pose", "geometry_msgs/msg/PoseStamped", stamped, at)
 
-    def _intent(self, msg: Intent) -> None:
+    def _truth(self, msg: CameraTruth, at: int) -> None:
+        qx, qy, qz, qw = msg.quaternion
+        rotation = ros.t("geometry_msgs/msg/Quaternion")(x=qx, y=qy, z=qz, w=qw)
+        tf = transform(at, camera_frame(msg.camera), tuple(msg.position), rotation)
+        self._write("/tf", ros.TF_MESSAGE, ros.t(ros.TF_MESSAGE)(transforms=[tf]), at)
+
+    def _intent(self, msg: Intent, at: int) -> None:
+        PoseStamped = ros.t("geometry_msgs/msg/PoseStamped")
         poses = [
-            T["geometry_msgs/msg/PoseStamped"](
-                header=header(row[0], topics.WORLD_FRAME), pose=pose(row[1], row[2], 0.0, yaw_q(row[3]))
-            )
-            for row in msg.trajectory
+            PoseStamped(header=header(self.time.at(t), MAP_FRAME), pose=ros.pose(x, y, theta))
+            for t, x, y, theta in msg.trajectory
         ]
-        self._write(
-            f"/robot/{msg.robot}/path",
-            "nav_msgs/msg/Path",
-            T["nav_msgs/msg/Path"](header=header(msg.stamp, topics.WORLD_FRAME), poses=poses),
-            msg.stamp,
-        )
+        path = ros.t(ros.PATH)(header=header(at, MAP_FRAME), poses=poses)
+        self._write(f"{ROS_NAMESPACE}/{msg.robot}/path", ros.PATH, path, at)
 
-    def _frame(self, msg: CameraFrame) -> None:
-        frame = topics.camera_frame(msg.camera)
-        self._write(
-            f"/camera/{msg.camera}/image/compressed",
-            "sensor_msgs/msg/CompressedImage",
-            T["sensor_msgs/msg/CompressedImage"](
-                header=header(msg.stamp, frame), format="jpeg", data=np.frombuffer(msg.jpeg, dtype=np.uint8)
-            ),
-            msg.stamp,
+    def _frame(self, msg: CameraFrame, at: int) -> None:
+        frame = camera_frame(msg.camera)
+        base = f"{ROS_NAMESPACE}/camera/{msg.camera}"
+        image = ros.t("sensor_msgs/msg/CompressedImage")(
+            header=header(at, frame), format="jpeg", data=np.frombuffer(msg.jpeg, dtype=np.uint8)
         )
+        self._write(f"{base}/image/compressed", "sensor_msgs/msg/CompressedImage", image, at)
         fx, fy, cx, cy = msg.intrinsics
-        info = T["sensor_msgs/msg/CameraInfo"](
-            header=header(msg.stamp, frame),
+        info = ros.t("sensor_msgs/msg/CameraInfo")(
+            header=header(at, frame),
             height=msg.height,
             width=msg.width,
             distortion_model="plumb_bob",
@@ -219,30 +176,35 @@ class Ros2Profile:
             p=np.array([fx, 0, cx, 0, 0, fy, cy, 0, 0, 0, 1, 0], dtype=np.float64),
             binning_x=0,
             binning_y=0,
-            roi=T["sensor_msgs/msg/RegionOfInterest"](x_offset=0, y_offset=0, height=0, width=0, do_rectify=False),
+            roi=ros.t("sensor_msgs/msg/RegionOfInterest")(x_offset=0, y_offset=0, height=0, width=0, do_rectify=False),
         )
-        self._write(f"/camera/{msg.camera}/camera_info", "sensor_msgs/msg/CameraInfo", info, msg.stamp)
+        self._write(f"{base}/camera_info", "sensor_msgs/msg/CameraInfo", info, at)
 
-    def _door(self, msg: DoorState) -> None:
-        changed = self.scene.door_changed(msg.door, msg.open)
-        if changed is not None:
-            self._write(
-                topics.SCENE,
-                "visualization_msgs/msg/MarkerArray",
-                markers([changed], msg.stamp, self._marker_ids),
-                msg.stamp,
-            )
+    def _markers(self, at: int) -> None:
+        self._write(SITE, ros.MARKER_ARRAY, site_markers(self.site, self.state, at / 1e9), at)
 
-    def _described(self, msg: Feedback | FeedbackAck | Event) -> None:
+    def _door(self, msg: DoorState, at: int) -> None:
+        if self.state.door(msg.door, msg.open):
+            self._markers(at)
+
+    def _status(self, msg: RobotStatus, at: int) -> None:
+        if self.state.carrying(msg.robot, list(msg.carrying), self.poses.get(msg.robot, (0.0, 0.0))):
+            self._markers(at)
+
+    def _event(self, msg: Event, at: int) -> None:
+        self._described(msg, at)
+        if msg.kind == "delivered" and msg.object:
+            pose = msg.data.get("pose") if isinstance(msg.data, dict) else None
+            where = (float(pose[0]), float(pose[1])) if isinstance(pose, list) and len(pose) >= 2 else None
+            if self.state.delivered_at(msg.object, where or self.poses.get(msg.robot)):
+                self._markers(at)
+
+    def _described(self, msg: Feedback | FeedbackAck | Event, at: int) -> None:
         level, text = convert.describe(msg)
-        self._rosout(msg.stamp, LOG_LEVELS[level], msg.src, text)
+        self._rosout(at, LOG_LEVELS[level], msg.src, text)
 
-    def _rosout(self, t: float, level: int, name: str, text: str) -> None:
-        self._write(
-            "/rosout",
-            "rcl_interfaces/msg/Log",
-            T["rcl_interfaces/msg/Log"](
-                stamp=ros_time(t), level=level, name=name, msg=text, file="", function="", line=0
-            ),
-            t,
+    def _rosout(self, at: int, level: int, name: str, text: str, file: str = "", line: int = 0) -> None:
+        log = ros.t("rcl_interfaces/msg/Log")(
+            stamp=ros_time(at), level=level, name=name, msg=text, file=file, function="", line=line
         )
+        self._write("/rosout", "rcl_interfaces/msg/Log", log, at)

@@ -7,10 +7,12 @@ import argparse
 import json
 import logging
 import sys
+from datetime import datetime
 from pathlib import Path
 from typing import Any, TextIO
 
-from .reading import RecordingError, channel_stats
+from .reading import RecordingError, channel_stats, metadata
+from .timebase import ORIGIN_KEY
 from .timeline import build_timeline, draw_timeline
 
 log = logging.getLogger("arroch.runs")
@@ -81,9 +83,14 @@ def metrics_rows(m: dict[str, Any]) -> list[tuple[str, str, str]]:
     return rows
 
 
+def recording_of(run: Path) -> Path:
+    """A run folder's recording, or the recording itself."""
+    return run if run.suffix == ".mcap" else run / RECORDING
+
+
 def show(run: Path, out: TextIO | None = None, png: Path | None = None) -> int:
     out = out or sys.stdout  # looked up now, not at import: a caller may have redirected it
-    recording = run if run.suffix == ".mcap" else run / RECORDING
+    recording = recording_of(run)
     folder = recording.parent
     print(f"run {folder}", file=out)
     info_file = folder / "run.json"
@@ -113,7 +120,11 @@ def show(run: Path, out: TextIO | None = None, png: Path | None = None) -> int:
     size = recording.stat().st_size
     total = sum(c.messages for c in stats)
     print(f"\nrecording {recording} ({size / 1e6:.2f} MB, {total} messages, {len(stats)} channels)", file=out)
-    rows = [("topic", "schema", "messages", "from (s)", "to (s)")]
+    origin = int(metadata(recording).get(ORIGIN_KEY, 0))
+    if origin:
+        start = datetime.fromtimestamp(origin / 1e9).astimezone().isoformat(timespec="milliseconds")
+        print(f"  site time 0 on the wall clock: {start} (log times are this plus site time)", file=out)
+    rows = [("topic", "schema", "messages", "from (site s)", "to (site s)")]
     rows += [(c.topic, c.schema, str(c.messages), f"{c.first:.1f}", f"{c.last:.1f}") for c in stats]
     widths = [max(len(r[i]) for r in rows) for i in range(5)]
     for r in rows:

@@ -1,6 +1,7 @@
 """The site as a 3D scene: walls, door leaves in their live state, rooms, tag landmarks, objects and
 robot bodies, described once (:class:`Entity` of :class:`Shape`) and drawn as Foxglove
-``SceneUpdate`` entities here or as ROS 2 markers (:mod:`.ros2`).
+``SceneUpdate`` entities. (ROS 2 bags draw the site with the bridge's markers instead,
+:mod:`protocol.ros2.markers`, so a bag and the live bridge look the same in RViz 2.)
 
 The scene is sent whole once, then only the entities that change: a door opening or closing, an
 object loaded (it then rides in its robot's frame) or delivered (left where the robot stood).
@@ -27,7 +28,7 @@ from foxglove.messages import (
 from protocol.palette import robot_colors
 from protocol.site import Site
 
-from .topics import WORLD_FRAME, robot_frame
+from .topics import MAP_FRAME, robot_frame
 
 RGBA = tuple[float, float, float, float]
 WALL: RGBA = (0.62, 0.62, 0.66, 1.0)
@@ -61,10 +62,9 @@ class Entity:
     locked: bool = False  # follows its frame as it moves (robots, carried objects)
 
 
-def stamp_of(t: float) -> Timestamp:
-    """A site-clock time as a Foxglove timestamp (never negative)."""
-    ns = max(int(round(t * 1e9)), 0)
-    return Timestamp(sec=ns // 1_000_000_000, nsec=ns % 1_000_000_000)
+def stamp_of(at: int) -> Timestamp:
+    """A log time (Unix nanoseconds, :mod:`.timebase`) as a Foxglove timestamp."""
+    return Timestamp(sec=at // 1_000_000_000, nsec=at % 1_000_000_000)
 
 
 def yaw_quaternion(yaw: float) -> Quaternion:
@@ -111,13 +111,13 @@ class SiteScene:
             )
             for w in site.walls
         )
-        out = [Entity("walls", WORLD_FRAME, walls)]
+        out = [Entity("walls", MAP_FRAME, walls)]
         for room in site.rooms.values():
             x0, y0, x1, y1 = room.rect
             out.append(
                 Entity(
                     f"room/{room.id}",
-                    WORLD_FRAME,
+                    MAP_FRAME,
                     (
                         _box((x0 + x1) / 2, (y0 + y1) / 2, 0.005, x1 - x0, y1 - y0, 0.01, FLOOR),
                         _label((x0 + x1) / 2, (y0 + y1) / 2, 0.05, room.id, 0.4),
@@ -130,7 +130,7 @@ class SiteScene:
             out.append(
                 Entity(
                     f"tag/{tag.tag}",
-                    WORLD_FRAME,
+                    MAP_FRAME,
                     (
                         _box(x + 0.01 * nx, y + 0.01 * ny, z, 0.02, tag.size, tag.size, TAG, tag.yaw),
                         _label(x + 0.15 * nx, y + 0.15 * ny, z + tag.size, f"tag {tag.tag}", 0.15),
@@ -168,7 +168,7 @@ class SiteScene:
         text = f"{did}: {'?' if state is None else 'open' if state else 'closed'}"
         return Entity(
             f"door/{did}",
-            WORLD_FRAME,
+            MAP_FRAME,
             (
                 _box(cx, cy, height / 2 + 0.01, leaf.length, leaf.thickness, height, color, yaw),
                 _label(leaf.hinge[0], leaf.hinge[1], height + 0.2, text, 0.2),
@@ -180,7 +180,7 @@ class SiteScene:
         if oid in self.carried:
             frame, (x, y, z) = robot_frame(self.carried[oid]), (0.0, 0.0, ROBOT_HEIGHT + OBJECT_SIZE / 2)
         else:
-            frame = WORLD_FRAME
+            frame = MAP_FRAME
             x, y = self.dropped.get(oid, obj.position)
             z = OBJECT_SIZE / 2
         return Entity(
@@ -190,7 +190,7 @@ class SiteScene:
                 _box(x, y, z, OBJECT_SIZE, OBJECT_SIZE, OBJECT_SIZE, OBJECT),
                 _label(x, y, z + 0.3, f"{oid} → {obj.deliver_to}", 0.15),
             ),
-            locked=frame != WORLD_FRAME,
+            locked=frame != MAP_FRAME,
         )
 
     # ------------------------------------------------------------------ changes (None: nothing changed)
@@ -224,8 +224,8 @@ def _pose(shape: Shape) -> Pose:
     return Pose(position=Vector3(x=x, y=y, z=z), orientation=yaw_quaternion(shape.yaw))
 
 
-def to_foxglove(entities: list[Entity], t: float) -> SceneUpdate:
-    ts = stamp_of(t)
+def to_foxglove(entities: list[Entity], at: int) -> SceneUpdate:
+    ts = stamp_of(at)
     out = []
     for e in entities:
         size = lambda s: Vector3(x=s.size[0], y=s.size[1], z=s.size[2])  # noqa: E731

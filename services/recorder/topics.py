@@ -1,8 +1,13 @@
-"""Which Zenoh keys a recorder hears, and the MCAP topics it writes.
+"""Which Zenoh keys a recorder hears, and the MCAP topics and frames it writes.
 
-Every ARROCH message is kept as it travels (msgpack) on ``/arroch/<key below the namespace>``: that is
-what ``arroch replay`` publishes again. Beside these, the viewer channels (Foxglove schemas, JSON with
-JSON Schemas) show the run in Foxglove; their topics are the constants below.
+Every ARROCH message is kept twice over, for two readers: as JSON (with its type's JSON Schema) on
+``/arroch/<key below the namespace>``, what Foxglove shows and plots; and as the bytes it travelled
+as, in the file's wire store (:mod:`.wire`), what ``arroch replay`` publishes again. Beside these,
+the viewer channels (Foxglove schemas) show the run; their topics are the constants below.
+
+Frames are those of ``arroch ros2 bridge`` (:mod:`protocol.ros2.markers`): ``map``, each robot's
+``<rid>/base_link``, and the tablet camera's ``<cid>/camera_optical_frame`` (OpenCV axes, REP 103's
+optical frame), so a Foxglove recording, a ROS 2 bag and the live bridge line up.
 """
 
 from __future__ import annotations
@@ -17,30 +22,31 @@ from protocol.messages import (
     Event,
     Feedback,
     FeedbackAck,
+    HumanState,
     Intent,
     Message,
     Overlay,
+    ParticipantAction,
+    QuestionnaireAnswers,
     RobotCommand,
     RobotPose,
     RobotStatus,
+    StudyControl,
     TeamPlan,
 )
+from protocol.ros2.markers import MAP_FRAME, robot_frame
+from protocol.site import Site
 
-RAW_PREFIX = "/arroch/"
-RAW_ENCODING = "msgpack"
-RAW_SCHEMA_PREFIX = "arroch."
+__all__ = ["MAP_FRAME", "robot_frame"]
+
+MESSAGE_PREFIX = "/arroch/"
 
 # Viewer channels.
 SCENE = "/site"  # foxglove.SceneUpdate: walls, doors (live state), rooms, tags, objects, robot bodies
-TF = "/tf"  # foxglove.FrameTransforms: world -> robot/<rid>, world -> camera/<cid>
+TF = "/tf"  # foxglove.FrameTransforms: map -> <rid>/base_link, map -> <cid>/camera_optical_frame
 PATHS = "/paths"  # foxglove.SceneUpdate: each robot's intent (motion plan polyline), in its colour
-PLAN = "/plan"  # JSON: TeamPlan
-CONSTRAINTS = "/constraints"  # JSON: ConstraintSet
-EVENTS = "/events"  # JSON: Event
 PROGRESS = "/progress"  # JSON: deliveries and door openings so far (plot panel)
-METRICS = "/metrics"  # JSON: the mission_done Event's metrics
 LOG = "/log"  # foxglove.Log: feedback, acks, events, the services' log lines
-WORLD_FRAME = "world"
 
 
 def camera_image(camera: str) -> str:
@@ -55,12 +61,8 @@ def camera_overlay(camera: str) -> str:
     return f"/camera/{camera}/overlay"  # foxglove.ImageAnnotations
 
 
-def robot_frame(robot: str) -> str:
-    return f"robot/{robot}"
-
-
 def camera_frame(camera: str) -> str:
-    return f"camera/{camera}"
+    return f"{camera}/camera_optical_frame"
 
 
 def recorded_keys(keys: Keys) -> list[tuple[str, type[Message]]]:
@@ -71,6 +73,7 @@ def recorded_keys(keys: Keys) -> list[tuple[str, type[Message]]]:
         (keys.robot_status(), RobotStatus),
         (keys.robot_command(), RobotCommand),
         (keys.door_state(), DoorState),
+        (keys.door_sensor(), DoorState),
         (keys.plan(), TeamPlan),
         (keys.intent(), Intent),
         (keys.feedback(), Feedback),
@@ -80,19 +83,42 @@ def recorded_keys(keys: Keys) -> list[tuple[str, type[Message]]]:
         (keys.camera_truth(), CameraTruth),
         (keys.overlay(), Overlay),
         (keys.event(), Event),
+        (keys.human_state(), HumanState),
+        (keys.participant_action(), ParticipantAction),
+        (keys.questionnaire(), QuestionnaireAnswers),
+        (keys.study_control(), StudyControl),
     ]
 
 
-def raw_topic(keys: Keys, key: str) -> str:
-    """``arroch/office/robot/r0/pose`` → ``/arroch/robot/r0/pose`` (the namespace is the file's metadata)."""
+def expected_keys(keys: Keys, site: Site) -> list[tuple[str, type[Message]]]:
+    """The keys of :func:`recorded_keys` a run on ``site`` will use, wildcards filled with its robots and
+    doors (a camera's or a sender's keys cannot be known beforehand)."""
+    fill = {"robot": sorted(site.robots), "intent": sorted(site.robots), "door": sorted(site.doors)}
+    out = []
+    for key, msg_type in recorded_keys(keys):
+        rest = below(keys, key)
+        if "*" not in rest:
+            out.append((key, msg_type))
+        elif rest.split("/")[0] in fill:
+            out += [(key_of(keys, message_topic(rest.replace("*", i))), msg_type) for i in fill[rest.split("/")[0]]]
+    return out
+
+
+def below(keys: Keys, key: str) -> str:
+    """``arroch/office/robot/r0/pose`` → ``robot/r0/pose`` (the namespace is the file's metadata)."""
     prefix = keys.prefix + "/"
     if not key.startswith(prefix):
         raise ValueError(f"key {key!r} is not under {prefix!r}")
-    return RAW_PREFIX + key[len(prefix) :]
+    return key[len(prefix) :]
+
+
+def message_topic(rest: str) -> str:
+    """The JSON channel of the messages on a key (given below the namespace): ``/arroch/robot/r0/pose``."""
+    return MESSAGE_PREFIX + rest
 
 
 def key_of(keys: Keys, topic: str) -> str:
-    """The inverse of :func:`raw_topic` for a namespace (possibly another than the recorded one)."""
-    if not topic.startswith(RAW_PREFIX):
+    """The inverse of :func:`message_topic` in a namespace (possibly another than the recorded one)."""
+    if not topic.startswith(MESSAGE_PREFIX):
         raise ValueError(f"topic {topic!r} is not a recorded ARROCH message")
-    return f"{keys.prefix}/{topic[len(RAW_PREFIX) :]}"
+    return f"{keys.prefix}/{topic[len(MESSAGE_PREFIX) :]}"

@@ -27,13 +27,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from protocol.messages import RobotCommand
+from protocol.messages import RobotCommand, TeamPlan
 from protocol.pursuit import ControllerConfig
 from protocol.site.model import Site
 
 from .crossings import ClosedDoorWatch
 from .doors import DoorChange, DoorConfig, Doors
-from .human import Declare, HumanConfig, HumanModel, OpenDoor, TaskDone
+from .human import Declare, HumanConfig, HumanModel, OpenDoor, TaskDone, planned_arrivals
 from .metrics import MetricsRecorder
 from .objects import Objects
 from .overlaps import OverlapWatch
@@ -168,6 +168,8 @@ class Engine:
             self.human = HumanModel(self.human_config, method, self.streams, site.human.position, door_points)
         if door_sensors:
             self.doors.follow_sensors(d.id for d in site.doors.values() if d.human_operated)
+        # Per door of hers, each robot's planned arrival in the plan the robots follow (what the AR view shows her).
+        self.planned: dict[str, dict[str, float]] = {}
         self.ticks = 0
         self.world_version = 0
         self.done = False
@@ -263,7 +265,7 @@ class Engine:
             if door in waiting:
                 waiting[door][rid] = since
         door_open = {d: self.doors[d].open_or_opening for d in self.human_doors}
-        for action in self.human.step(now, dt, waiting, door_open):
+        for action in self.human.step(now, dt, waiting, door_open, planned=self.planned):
             self._human_action(action, t1)
         self._check_end(t1)
 
@@ -357,6 +359,10 @@ class Engine:
         )
 
     # ------------------------------------------------------------------ outputs
+
+    def plan_seen(self, plan: TeamPlan) -> None:
+        """The plan the robots now follow: the human model reads their planned arrivals at her doors."""
+        self.planned = planned_arrivals(plan.robots, self.human_doors)
 
     def take_events(self) -> list[SimEvent]:
         events, self._events = self._events, []
@@ -495,6 +501,7 @@ class Engine:
             "time_away": round(h.counters.time_away, 6),
             "focus": h.focus_report(),
             "focus_started": h.counters.focus_started,
+            "anticipated": h.counters.anticipated,
         }
         if isinstance(h, ParticipantHuman):
             human["participant"] = True  # so analysis tells a person's trial from the model's

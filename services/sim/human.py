@@ -31,10 +31,31 @@ interval does depends on the reading (``focus_reading``):
 - ``strict`` (the earlier reading, kept to compare): during any focus interval she opens no door,
   whatever the method; declaring changes nothing she does.
 
+Three further parameters, each off by default so that the paper's model (and every sweep run
+before them) is unchanged:
+
+- ``focus_responsiveness`` (1 by default): during a focus interval she did not declare, each of her
+  chances (per waiting robot and decision, or no-comm's per minute) is multiplied by it. 1 is the
+  faithful reading above; 0 keeps her at her task through an undeclared interval as strict does
+  (walks already under way go on). Between the two: how much an unannounced focus holds her back.
+- ``anticipation`` (s, 0 = off): she uses what the AR view shows of the robots' *plans*. In the
+  methods that show intentions (``arroch``, ``no-feedback``), a robot whose planned arrival at her
+  door (``planned`` in :meth:`HumanModel.step`: the start of its next ``opendoor`` step there, from
+  the plan the robots follow, see :func:`planned_arrivals`) is at most ``anticipation`` seconds
+  ahead is one chance per decision interval, like a waiting robot, that she leaves for the door
+  now, before it waits. In ``no-comm`` she sees no plan and never anticipates.
+- ``focus_fraction`` (0 = off): her focus intervals take this share of her task time, split equally
+  between ``focus_count`` intervals, so the share stays fixed when her task length changes. (Off,
+  their lengths are whole minutes drawn from ``focus_min_minutes``..``focus_max_minutes``, and a
+  short task holds fewer of them.) She declares a2(N) with N the whole minutes that cover the
+  interval (the tablet takes whole minutes).
+
 The model is pure: it reads the time, the robots waiting at her doors and whether each door is
 open, and returns what she does. Every random number comes from a stream keyed by what it is for
 (:mod:`.streams`): her task time, her focus intervals, the declaration at each interval, the k-th
-decision about each robot at each door, the no-comm decision of each minute. So for one seed she
+decision about each robot at each door, the no-comm decision of each minute, the k-th anticipation
+draw about each robot's planned arrival at each door (its own stream: an anticipation never moves
+a draw the model made before it existed). So for one seed she
 draws the same in every method and every condition, and methods are compared on the same draws.
 """
 
@@ -42,6 +63,7 @@ from __future__ import annotations
 
 import math
 import tomllib
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -63,6 +85,7 @@ Positive = Annotated[float, Meta(gt=0.0)]
 NonNegative = Annotated[float, Meta(ge=0.0)]
 Count = Annotated[int, Meta(ge=0)]
 Minutes = Annotated[int, Meta(ge=1)]
+FocusShare = Annotated[float, Meta(ge=0.0, le=0.9)]  # at most 0.9: the intervals must fit in her task
 
 
 @dataclass(frozen=True)
@@ -93,6 +116,12 @@ class HumanConfig:
     )
     feedback_timeout: Positive = 2.0  # s to wait for the restrictor's ack of one attempt (wall time)
     feedback_retries: Count = 3  # further attempts after the first goes unanswered
+    # The three below are off by default (the module docstring): the paper's model is unchanged.
+    # s ahead: a robot's planned arrival at her door this close is a chance to leave for it (AR methods; chosen)
+    anticipation: NonNegative = 0.0
+    # x her chances during an undeclared focus interval: 1 faithful (default), 0 she stays (chosen, swept)
+    focus_responsiveness: Probability = 1.0
+    focus_fraction: FocusShare = 0.0  # share of her task in focus intervals; 0: whole-minute lengths drawn
 
     def __post_init__(self) -> None:
         try:
@@ -159,7 +188,9 @@ class FocusInterval:
 
     @property
     def minutes(self) -> int:
-        return int(round((self.end - self.start) / 60.0))
+        """The whole minutes that cover the interval (a2(N) takes whole minutes); a whole-minute
+        interval's own length (the tolerance absorbs the float error of ``end - start``)."""
+        return max(1, math.ceil((self.end - self.start) / 60.0 - 1e-6))
 
 
 @dataclass
@@ -173,6 +204,8 @@ class HumanCounters:
     door_trips: int = 0  # walks toward a door begun
     door_openings: int = 0  # times she opened a door (a1 completed)
     turned_back: int = 0  # walks abandoned because a focus interval she declared (strict: any) began
+    anticipations: int = 0  # draws made for a robot's planned arrival (anticipation)
+    anticipated: int = 0  # draws that sent her to the door before the robot waited there
     focus_started: int = 0
     declarations: int = 0  # a2(N) taken (one per focus interval, whatever the number of doors)
     interruptions: int = 0  # walks to a door begun during a focus interval (faithful reading)
@@ -221,6 +254,8 @@ class HumanModel:
         self._focus_next = 0  # index of the next focus interval to start
         self._next_check: dict[tuple[str, str], float] = {}  # (door, robot) -> next decision time
         self._draws: dict[tuple[str, str], int] = {}  # (door, robot) -> decisions drawn about it so far
+        self._next_foresee: dict[tuple[str, str], float] = {}  # (door, robot) -> next anticipation decision time
+        self._foreseen: dict[tuple[str, str], int] = {}  # (door, robot) -> anticipation draws so far
         self._minute = 0  # no-comm: index of the next once-a-minute decision
         self.opened_at: list[float] = []  # times she opened a door (for tests and metrics)
 
@@ -234,9 +269,13 @@ class HumanModel:
         """
         cfg = self.config
         rng = self.streams.generator("focus")
-        lengths = [
-            60.0 * int(rng.integers(cfg.focus_min_minutes, cfg.focus_max_minutes + 1)) for _ in range(cfg.focus_count)
-        ]
+        if cfg.focus_fraction > 0:  # a fixed share of her task, in equal intervals (no length is drawn)
+            lengths = [cfg.focus_fraction * duration / cfg.focus_count] * cfg.focus_count
+        else:
+            lengths = [
+                60.0 * int(rng.integers(cfg.focus_min_minutes, cfg.focus_max_minutes + 1))
+                for _ in range(cfg.focus_count)
+            ]
         while lengths and sum(lengths) > 0.9 * duration:
             lengths.pop()
         free = duration - sum(lengths)
@@ -312,12 +351,16 @@ class HumanModel:
         dt: float,
         waiting: dict[str, dict[str, float]],
         door_open: dict[str, bool],
+        planned: Mapping[str, Mapping[str, float]] | None = None,
     ) -> list[HumanAction]:
         """Advance from ``now`` to ``now + dt``.
 
         ``waiting[door]`` maps each robot waiting at that door to the time it started waiting;
-        ``door_open[door]`` says whether the door is open (or opening). Decisions fall at the end
-        of the step; walking and working are accounted exactly within it.
+        ``door_open[door]`` says whether the door is open (or opening); ``planned[door]`` maps each
+        robot the plan sends to that door to its planned arrival there (site clock, s;
+        :func:`planned_arrivals`), what the AR view shows of the plans (used only with
+        ``anticipation``). Decisions fall at the end of the step; walking and working are accounted
+        exactly within it.
         """
         actions: list[HumanAction] = []
         t1 = now + dt
@@ -328,11 +371,21 @@ class HumanModel:
             self._decide_blind(t1, draw)
         else:
             self._decide_seen(t1, waiting, door_open, draw)
+            if self.config.anticipation > 0 and planned:
+                self._foresee(t1, planned, waiting, door_open, draw)
         # Forget robots no longer waiting, so a robot that comes back is seen afresh.
         live = {(d, r) for d, robots in waiting.items() for r in robots}
         for key in [k for k in self._next_check if k not in live]:
             del self._next_check[key]
         return actions
+
+    def _chance(self, p: float, t: float) -> float:
+        """``p`` as it stands at ``t``: scaled by ``focus_responsiveness`` in an undeclared focus
+        interval (a declared one draws nothing at all). ``p * 1.0`` is ``p`` exactly, so the
+        default changes no decision."""
+        if self.done or self.focus_at(t) is None:
+            return p
+        return p * self.config.focus_responsiveness
 
     def _advance(self, now: float, dt: float, actions: list[HumanAction]) -> None:
         """Spend ``dt`` seconds on the current activity, moving on to the next when one ends."""
@@ -410,7 +463,8 @@ class HumanModel:
                         k = self._draws.get(key, 0)
                         self._draws[key] = k + 1
                         self.counters.ar_decisions += 1
-                        if self.streams.uniform("seen", door, robot, k) < self.config.door_probability:
+                        chance = self._chance(self.config.door_probability, t1)
+                        if self.streams.uniform("seen", door, robot, k) < chance:
                             self.counters.ar_triggers += 1
                             self._go(door, t1)
                 self._next_check[key] = due
@@ -420,11 +474,49 @@ class HumanModel:
             self._minute += 1
             if draw and self.available and self.door_points:
                 self.counters.no_comm_decisions += 1
-                if self.streams.uniform("blind", self._minute) < self.config.no_comm_probability:
+                if self.streams.uniform("blind", self._minute) < self._chance(self.config.no_comm_probability, t1):
                     self.counters.no_comm_triggers += 1
                     doors = sorted(self.door_points)
                     door = doors[int(self.streams.uniform("blind-door", self._minute) * len(doors))]
                     self._go(door, t1)
+
+    def _foresee(
+        self,
+        t1: float,
+        planned: Mapping[str, Mapping[str, float]],
+        waiting: dict[str, dict[str, float]],
+        door_open: dict[str, bool],
+        draw: bool,
+    ) -> None:
+        """Anticipation: each robot whose planned arrival at her door is within the horizon, and that
+        does not wait there yet, is one chance per decision interval that she leaves now."""
+        horizon = self.config.anticipation
+        seen: set[tuple[str, str]] = set()
+        for door in sorted(planned):
+            if door not in self.door_points:
+                continue
+            for robot in sorted(planned[door]):
+                arrival = planned[door][robot]
+                if robot in waiting.get(door, {}) or not 0.0 <= arrival - t1 <= horizon:
+                    continue
+                key = (door, robot)
+                seen.add(key)
+                due = self._next_foresee.get(key, max(arrival - horizon, 0.0))
+                while due <= t1:
+                    due += self.config.decision_interval
+                    if draw and self.available and not door_open.get(door, False):
+                        k = self._foreseen.get(key, 0)
+                        self._foreseen[key] = k + 1
+                        self.counters.anticipations += 1
+                        if self.streams.uniform("anticipate", door, robot, k) < self._chance(
+                            self.config.door_probability, t1
+                        ):
+                            self.counters.anticipated += 1
+                            self._go(door, t1)
+                self._next_foresee[key] = due
+        # A robot out of her horizon (arrived, replanned, gone) is foreseen afresh next time.
+        for key in [k for k in self._next_foresee if k not in seen]:
+            del self._next_foresee[key]
 
     def _go(self, door: str, t: float) -> None:
         self.counters.door_trips += 1
@@ -439,3 +531,18 @@ class HumanModel:
             {"start": f.start, "end": f.end, "minutes": f.minutes, "declared": declared}
             for f, declared in zip(self.focus, self.declared, strict=True)
         ]
+
+
+def planned_arrivals(plans: Mapping[str, Sequence[Any]], doors: Iterable[str]) -> dict[str, dict[str, float]]:
+    """What the AR view shows her of the plans: per door of hers, each robot's planned arrival there.
+
+    ``plans`` maps each robot to its plan's steps (a TeamPlan's ``robots``: steps with ``action``,
+    ``args`` and ``start`` on the site clock); a robot's arrival at a door is the start of its first
+    ``opendoor`` step at that door (where the plan has it wait for her)."""
+    wanted = set(doors)
+    out: dict[str, dict[str, float]] = {d: {} for d in sorted(wanted)}
+    for robot, steps in sorted(plans.items()):
+        for step in steps:
+            if step.action == "opendoor" and step.args and step.args[0] in wanted:
+                out[step.args[0]].setdefault(robot, float(step.start))
+    return out

@@ -257,6 +257,7 @@ class SimService(Service):
     def _on_plan(self, plan: TeamPlan, key: str) -> None:
         if self.gate.on_plan(plan):
             self.count("plans")
+            self.engine.plan_seen(plan)
         else:
             self.count("plans_stale")
 

@@ -1,6 +1,7 @@
 """The supervisor's one output: every child's lines prefixed with its name, merged, plus progress.
 
-Lines go to the terminal (or whatever stdout is) and to the run's log file. On a terminal the
+Lines go to the terminal (or whatever stdout is) and to the run's log file, which gets them with
+their secrets redacted (:mod:`protocol.redact`: the tablet page's token, keys). On a terminal the
 progress is a bar kept on the last line: a log line first erases it, then the bar is redrawn
 below. Elsewhere (a pipe, a CI log) progress is an ordinary ``[up] progress ...`` line.
 """
@@ -12,6 +13,8 @@ import shutil
 import threading
 from typing import TextIO
 
+from protocol.redact import Redactor
+
 _ERASE = "\r\x1b[K"
 
 
@@ -22,6 +25,7 @@ class Output:
         self.log_file: TextIO | None = None
         self._lock = threading.Lock()
         self._status = ""  # the bar currently drawn ("" when none)
+        self._redactors: dict[str, Redactor] = {}  # per child: a key block spans several of its lines
 
     def attach_log(self, log_file: TextIO) -> None:
         with self._lock:
@@ -38,7 +42,8 @@ class Output:
                 self.stream.write(self._status)
             self.stream.flush()
             if self.log_file is not None:
-                self.log_file.write(out + "\n")
+                redact = self._redactors.setdefault(name, Redactor())
+                self.log_file.write(f"[{name}] {redact(text)}\n")
                 self.log_file.flush()
 
     def progress(self, text: str) -> None:

@@ -78,21 +78,69 @@ def test_confirmed_when_every_level_survives_holm(tmp_path: Path) -> None:
     assert [t.primary_p_holm for t in doors] == pytest.approx([4 / 256, 4 / 256])
 
 
-def test_equal_openings_are_equivalent_not_confirmed(tmp_path: Path) -> None:
+def test_equal_openings_make_the_claim_equivalent(tmp_path: Path) -> None:
     # The same openings in every pair: no difference (permutation p = 1), and within ±0.5 beyond doubt (TOST p = 0).
     folder = _sweep(tmp_path, 8, {("arroch", 2): -40, ("no-comm", 2): 0, ("arroch", 3): -40, ("no-comm", 3): 0})
     claim = _claims(folder)["Fewest door openings"]
-    assert claim.verdict == "not confirmed"
+    assert claim.verdict == "equivalent"
     assert {t.verdict for t in claim.tests} == {"equivalent within ±0.5"}
     assert "0 of 2 (level, baseline) comparisons" in claim.detail
 
 
-def test_a_baseline_significantly_faster_is_reported_as_higher(tmp_path: Path) -> None:
+def test_one_significant_comparison_against_the_claim_contradicts_it(tmp_path: Path) -> None:
+    # One level supports the claim, the other goes against it, both Holm-significant: contradicted, not "partly".
     folder = _sweep(tmp_path, 8, {("arroch", 2): -40, ("no-comm", 2): 0, ("arroch", 3): +40, ("no-comm", 3): 0})
     claim = _claims(folder)["Lowest team completion time"]
-    assert claim.verdict == "partly confirmed"
+    assert claim.verdict == "contradicted"
     assert [t.verdict for t in claim.tests] == ["lower (significant)", "higher (significant)"]
     assert "3 robots: vs no-comm: higher (significant)" in claim.detail
+    assert "Against it: 1 significantly higher." in claim.detail
+
+
+def test_some_support_and_nothing_against_is_partly(tmp_path: Path) -> None:
+    # Level 2 significantly lower; level 3 differences of both signs (not significant, and too spread for TOST).
+    rows = []
+    for i in range(8):
+        base = 600.0 + 7.0 * i
+        rows += [row("arroch", 2, i, team=base - 40 - i, doors=5), row("no-comm", 2, i, team=base, doors=5)]
+        swing = (60.0 + i) * (1 if i % 2 else -1)
+        rows += [row("arroch", 3, i, team=base + swing, doors=5), row("no-comm", 3, i, team=base, doors=5)]
+    folder = tmp_path / "partly"
+    write_trials(folder, rows)
+    claim = _claims(folder)["Lowest team completion time"]
+    assert [t.outcome for t in claim.tests] == ["lower (significant)", "not significant"]
+    assert claim.verdict == "partly"
+
+
+def test_nothing_significant_either_way_is_not_confirmed(tmp_path: Path) -> None:
+    rows = []
+    for i in range(8):
+        swing = (60.0 + i) * (1 if i % 2 else -1)
+        rows += [row("arroch", 2, i, team=600 + swing, doors=5), row("no-comm", 2, i, team=600.0, doors=5)]
+    folder = tmp_path / "nothing"
+    write_trials(folder, rows)
+    claim = _claims(folder)["Lowest team completion time"]
+    assert [t.outcome for t in claim.tests] == ["not significant"]
+    assert claim.verdict == "not confirmed"
+
+
+def test_a_significant_difference_inside_the_margin_says_both(tmp_path: Path) -> None:
+    # ARROCH 1-8 s slower in every pair (two taps): significantly higher, and within ±30 s by TOST. The claim is
+    # contradicted, and the detail says the contradiction is inside the margin.
+    rows = []
+    for i in range(8):
+        rows += [
+            row("arroch", 2, i, team=601.0 + i + 7 * i, doors=5),
+            row("no-comm", 2, i, team=600.0 + 7 * i, doors=5),
+        ]
+    folder = tmp_path / "taps"
+    write_trials(folder, rows)
+    claim = _claims(folder)["Lowest team completion time"]
+    (test,) = claim.tests
+    assert test.outcome == "higher (significant)" and test.within_margin
+    assert test.verdict == "higher (significant), within ±30 s (TOST)"
+    assert claim.verdict == "contradicted"
+    assert "1 of them within the equivalence margin (TOST)" in claim.detail
 
 
 def test_laziness_crossover(tmp_path: Path) -> None:
@@ -129,7 +177,7 @@ def test_laziness_crossover(tmp_path: Path) -> None:
         kind="laziness",
     )
     claim = _claims(no)["Laziness crossover"]
-    assert claim.verdict == "partly confirmed"
+    assert claim.verdict == "contradicted"  # ARROCH significantly faster where no-comm should be
     assert "no-comm not significantly faster" in claim.detail
 
 

@@ -94,3 +94,48 @@ def test_spec_round_trip_and_differences() -> None:
     s = spec(human_config="[human]\ntask_mean = 100.0\n")
     assert SweepSpec.from_json(s.to_json()) == s
     assert spec(trials=4).differences(s) == ["trials: 3 vs 4", "human_config: '[human]\\ntask_mean = 100.0\\n' vs None"]
+
+
+def test_the_earlier_sweeps_json_is_unchanged_by_the_point_sweeps_fields() -> None:
+    data = spec().to_json()
+    assert not {"human", "points", "domain"} & set(data)  # the same sweep.json as before these fields existed
+    assert SweepSpec.from_json(data) == spec()
+    assert all(k.point == -1 and "-x" not in k.ident() for k in spec().keys())
+
+
+def test_a_detour_sweep_crosses_its_points_with_the_methods_on_shared_draws() -> None:
+    points = ({"capacity": 1, "door_share": 0.5}, {"capacity": 3, "door_share": 0.5})
+    s = spec(kind="detour", robots=(2,), points=points, domain="detour", trials=2)
+    assert s.trial_count() == 3 * 2 * 2 == len(set(s.keys()))
+    assert s.factor_names() == ("capacity", "door_share")
+    by_point = {k.point for k in s.keys()}
+    assert by_point == {0, 1} and s.point(s.keys()[-1]) == points[1]
+    same = [k for k in s.keys() if k.trial == 1]
+    assert len({s.sim_seed(k) for k in same}) == 1 and len({s.site_seed(k) for k in same}) == 1
+    assert SweepSpec.from_json(s.to_json()) == s
+    assert spec(kind="detour", robots=(2,), points=points, domain="detour").differences(s) == ["trials: 2 vs 3"]
+
+
+def test_a_points_key_factors_become_its_trials_key() -> None:
+    s = spec(kind="sensitivity", robots=(2,), points=({"task_mean": 150.0, "interruption_cost": 60.0, "capacity": 2},))
+    (first, *_) = s.keys()
+    assert (first.task, first.cost, first.p) == (150.0, 60.0, 0.5)
+    assert s.factor_names() == ("capacity",)  # the key has columns for the others
+
+
+@pytest.mark.parametrize(
+    "changes, message",
+    [
+        ({"kind": "detour"}, "needs points"),
+        ({"points": ({"capacity": 2},)}, "takes no points"),
+        ({"kind": "detour", "robots": (2,), "points": ({"teleport": 1.0},)}, "unknown factor"),
+        ({"kind": "detour", "robots": (2,), "points": ({"capacity": 1.5},)}, "whole number"),
+        ({"kind": "detour", "robots": (2,), "points": ({"door_share": 1.5},)}, "outside"),
+        ({"kind": "detour", "robots": (2,), "points": ({"door_share": 1 / 3},)}, "six significant digits"),
+        ({"kind": "detour", "points": ({"capacity": 2},)}, "one team size"),
+        ({"domain": "moon"}, "domain"),
+    ],
+)
+def test_bad_point_sweeps_are_refused_by_name(changes: dict[str, object], message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        spec(**changes)

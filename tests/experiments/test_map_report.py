@@ -66,7 +66,9 @@ def test_tests_per_cell(map_folder: Path) -> None:
     assert float(costly["mean_diff"]) == pytest.approx(-24.5)  # -(20 + 21 + ... + 29) / 10
     assert float(costly["wilcoxon_p"]) == pytest.approx(2 / 1024, rel=1e-5)  # six significant digits in the CSV
     assert float(costly["primary_p_holm"]) == pytest.approx(8 * 2 / 1024, rel=1e-5)
-    assert costly["verdict"] == "lower (significant)"
+    assert costly["verdict"] == "lower (significant), within ±30 s (TOST)"  # -24.5 s: significant, inside ±30 s
+    assert costly["interval_kind"] == "Hodges–Lehmann, Wilcoxon interval"
+    assert float(costly["estimate"]) == pytest.approx(-24.5)  # the Walsh averages of -20..-29: symmetric
     free = team[("600", "0", "no-feedback")]
     assert (free["mean_diff"], free["paired_t"], free["d_z"], free["wilcoxon_p"]) == ("0.000", "", "", "1")
     assert free["verdict"] == "equivalent within ±30 s"
@@ -84,5 +86,5 @@ def test_report_reads_the_map_in_numbers(map_folder: Path) -> None:
     assert "**Team completion time, ARROCH − No-comm** (Δ in s): significantly lower in 4 of 4 cells" in report
     assert "**Door openings, ARROCH − No-feedback** (Δ in openings): significantly lower in 0 of 4 cells" in report
     assert "| 600 | 60 | 10/10 | -24.5 [" in report
-    assert "### Lowest team completion time: **partly confirmed**" in report
+    assert "### Lowest team completion time: **partly**" in report  # 6 of 8 lower, 2 equivalent, none higher
     assert "| task_mean | interruption_cost | method |" in report  # the summary's level columns

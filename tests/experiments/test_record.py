@@ -99,3 +99,60 @@ def test_dependency_versions_name_python_and_what_is_installed() -> None:
     assert versions["opencv-python-headless"].startswith("5.")
     assert "arroch" not in versions  # its own extras name no package of their own
     assert dependency_versions("no-such-distribution") == {"python": versions["python"]}
+
+
+def test_a_point_sweeps_rows_carry_the_point_its_factors_and_the_plan_changes() -> None:
+    from services.experiments.record import PLAN_FIELDS, trial_fields
+
+    spec = SweepSpec(
+        kind="detour",
+        methods=("arroch",),
+        robots=(2,),
+        objects=3,
+        ps=(0.5,),
+        trials=1,
+        seed=0,
+        points=({"capacity": 2, "door_share": 0.5},),
+        domain="detour",
+    )
+    (key,) = spec.keys()
+    changes = {"constraint_replans": 2, "plans_changed": 1, "deliveries_reordered": 1, "door_wait_time": 12.25}
+    row = trial_row(spec, TrialOutcome(key, "ok", "", {**METRICS, "plan_changes": changes}))
+    assert tuple(row) == trial_fields(spec) and set(PLAN_FIELDS) < set(row)
+    assert (row["point"], row["capacity"], row["door_share"]) == ("0", "2", "0.5")
+    assert (row["constraint_replans"], row["plans_changed"], row["deliveries_reordered"]) == ("2", "1", "1")
+    assert row["door_wait_time"] == "12.250"
+    assert key_of(row) == key
+    assert trial_fields(SPEC) == TRIAL_FIELDS  # the earlier sweeps keep their columns
+
+
+def test_a_trials_human_file_merges_the_sweeps_the_points_and_the_config(tmp_path) -> None:  # noqa: ANN001
+    import tomllib
+
+    from protocol.site import loads_site
+    from services.experiments.trial import human_text, site_text
+
+    assert human_text(SPEC, KEY) is None  # nothing asked: the sim's defaults, no file
+    config = "[human]\ntask_std = 30.0\nfocus_count = 3\n\n[calibration.declare_time]\nestimate = 2.0\n"
+    spec = SweepSpec(
+        kind="sensitivity",
+        methods=("arroch",),
+        robots=(2,),
+        objects=3,
+        ps=(0.5,),
+        trials=1,
+        seed=0,
+        human_config=config,
+        human={"anticipation": 20.0, "focus_count": 1},
+        points=({"focus_count": 4, "capacity": 3, "declare_time": 2.5},),
+        domain="detour",
+    )
+    (key,) = spec.keys()
+    human = tomllib.loads(human_text(spec, key) or "")["human"]
+    assert human == {"task_std": 30.0, "focus_count": 4, "anticipation": 20.0, "declare_time": 2.5}
+    site = loads_site(site_text(spec, key), "s.toml")
+    assert site.params.robot_capacity == 3
+    assert sum(o.deliver_to == "storage" for o in site.objects.values()) == 3  # the detour default: half of 6
+    paper = SweepSpec(kind="robots", methods=("arroch",), robots=(2,), objects=3, ps=(0.5,), trials=1, seed=0)
+    (first, *_) = paper.keys()
+    assert all(o.deliver_to == "storage" for o in loads_site(site_text(paper, first), "p.toml").objects.values())

@@ -78,7 +78,7 @@ def test_summary_and_tests_match_hand_computed_values(fixed: Path) -> None:
     assert (team["robots"], team["n_pairs"], team["n_nonzero"]) == ("2", "5", "4")
     assert float(team["mean_arroch"]) == pytest.approx(620.0)  # the pairs' mean, trial 5 left out
     assert float(team["mean_diff"]) == pytest.approx(-15.0)
-    assert float(team["ci_low"]) == pytest.approx(-15 - T_975[4] * 5, abs=1e-3)
+    assert float(team["t_ci_low"]) == pytest.approx(-15 - T_975[4] * 5, abs=1e-3)
     assert float(team["sd_diff"]) == pytest.approx(math.sqrt(125), abs=1e-3)
     assert float(team["paired_t"]) == pytest.approx(-3.0)
     assert float(team["paired_t_p"]) == pytest.approx(t_two_sided(-3.0, 4), abs=1e-5)

@@ -1,9 +1,11 @@
-"""One recorded mission shared by all the recorder tests: the default lockstep demo mission (planner,
-restrictor, sim with the tablet camera, AR client) under ``arroch up``, which records it to
-``run.mcap``, and a second recorder beside it writing the ROS 2 profile."""
+"""One recorded mission shared by all the recorder tests: the demo's lockstep mission (planner,
+restrictor, sim with the tablet camera, AR client, the tablet page) under ``arroch up``, which
+records it to ``run.mcap`` and, with ``--record-profile ros2 --ros-distro humble``, to a Humble bag
+beside it. The tablet page prints its URL with the run's access token, which must reach no file."""
 
 from __future__ import annotations
 
+import re
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -15,13 +17,21 @@ from protocol.transport import free_tcp_port
 from tests.procs import Proc, arroch
 
 MISSION_TIMEOUT = 150.0  # wall s; the mission takes 12-35 s on two cores
+_TOKEN = re.compile(r"^\[tablet\]\s+https://\S+\?token=([A-Za-z0-9_\-]+)")  # as services/demo.py reads it
 
 
 @dataclass(frozen=True)
 class Mission:
     run: Path  # runs/<time>/
-    ros2: Path  # the ros2 profile's bag folder
     output: str  # the supervisor's output
+    token: str  # the tablet page's access token, as printed on the terminal
+    started: float  # wall time (Unix s) just before `arroch up` was started
+    finished: float  # and once it had exited
+
+    @property
+    def ros2(self) -> Path:
+        """The Humble bag ``--record-profile ros2`` wrote beside the recording."""
+        return self.run / "run_ros2"
 
     @property
     def recording(self) -> Path:
@@ -31,13 +41,13 @@ class Mission:
 @pytest.fixture(scope="session")  # one mission for every recorder test (only they use it)
 def mission(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Mission]:
     base = tmp_path_factory.mktemp("mission")
-    ros2 = base / "ros2"
     namespace = f"rec{free_tcp_port()}"
+    started = time.time()
     proc = Proc(
         arroch(
             "up",
             "--services",
-            "planner,restrictor,sim,ar",
+            "planner,restrictor,sim,ar,tablet",
             "--camera",
             "tablet",
             "--mode",
@@ -53,9 +63,10 @@ def mission(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Mission]:
             "line",
             "--namespace",
             namespace,
-            "--child",
-            f"ros2rec={{python}} -m services.cli record --profile ros2 --out {ros2} --namespace {{namespace}} "
-            "--log-level WARNING",
+            "--record-profile",
+            "ros2",
+            "--ros-distro",
+            "humble",
         ),
         name="up",
     )
@@ -68,4 +79,5 @@ def mission(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Mission]:
     finally:
         proc.stop()
     (run,) = [p for p in (base / "runs").iterdir() if p.is_dir()]
-    yield Mission(run, ros2, proc.output)
+    (token,) = {m.group(1) for line in proc.output.splitlines() if (m := _TOKEN.match(line))}
+    yield Mission(run, proc.output, token, started, time.time())

@@ -4,13 +4,14 @@ pixels (within 1 px) as the AR client of the recorded run did."""
 from __future__ import annotations
 
 import queue
+import re
 import subprocess
 import time
 
 import numpy as np
 import pytest
 
-from protocol.messages import Overlay
+from protocol.messages import Event, Overlay
 from services.recorder.reading import messages
 from services.recorder.replay import Pacer, selected
 from tests.procs import ROOT, arroch
@@ -98,7 +99,7 @@ def test_replay_of_a_missing_file_says_so(tmp_path):
 
 
 def test_a_fast_replay_recorded_again_gives_back_every_message_byte_for_byte(
-    mission, spawn, router, namespace, tmp_path
+    mission, spawn, router, namespace, client, tmp_path
 ):
     again = tmp_path / "again.mcap"
     recorder = spawn(
@@ -124,7 +125,15 @@ def test_a_fast_replay_recorded_again_gives_back_every_message_byte_for_byte(
         timeout=120,
     )
     assert result.returncode == 0, result.stderr
-    time.sleep(1.0)
+    published = int(re.search(r"replay: (\d+) messages published", result.stderr).group(1))
+    # On a busy machine the recorder may still be working through what reached it: wait for all of it.
+    deadline = time.monotonic() + 30
+    recorded = 0
+    while recorded < published and time.monotonic() < deadline:
+        replies = client.query(client.keys.stats("recorder", "*"), Event, timeout=2.0)
+        recorded = replies[0].data.get("recorded", 0) if replies else 0
+        time.sleep(0.2)
+    assert recorded == published
     assert recorder.stop() == 0  # SIGTERM: the file is closed whole
     original = sorted((r.topic, r.time, r.payload) for r in messages(mission.recording))
     copied = sorted((r.topic, r.time, r.payload) for r in messages(again))

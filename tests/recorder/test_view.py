@@ -25,6 +25,7 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 SUBPROTOCOL = "foxglove.sdk.v1"  # foxglove-sdk's name for the Foxglove WebSocket protocol
 MESSAGE_DATA = 0x01  # binary opcode: subscription id (u32), log time (u64), payload
+EVENTS, PLAN = "/arroch/event", "/arroch/plan"  # the messages as JSON
 
 
 async def watch(url: str, replay_argv: list[str]) -> tuple[dict[str, list], dict[str, dict], int]:
@@ -40,7 +41,7 @@ async def watch(url: str, replay_argv: list[str]) -> tuple[dict[str, list], dict
         deadline = loop.time() + 120
         while loop.time() < deadline:
             if replay is not None and replay.returncode is not None:
-                if any(isinstance(e, dict) and e.get("kind") == "mission_done" for e in received.get("/events", [])):
+                if any(isinstance(e, dict) and e.get("kind") == "mission_done" for e in received.get(EVENTS, [])):
                     break  # the last event of the run is there: the rest went before it
                 deadline = min(deadline, loop.time() + 10.0)  # what the viewer still has on its way
             try:
@@ -114,16 +115,15 @@ def test_the_live_view_serves_decodable_channels_to_a_websocket_client(mission, 
     scene_ids = {e.id for msg in received["/site"] for e in msg.entities}
     assert {"walls", "door/d_storage", "robot/r0"} <= scene_ids  # sent again when the client subscribed
     frames = {t.child_frame_id for msg in received["/tf"] for t in msg.transforms}
-    assert {"robot/r0", "robot/r1", "robot/r2", "camera/tablet"} <= frames
-    plans = next(c.messages for c in channel_stats(mission.recording) if c.topic == "/plan")
-    assert (
-        all("plan_id" in plan for plan in received["/plan"]) and len(received["/plan"]) == plans
-    )  # every plan of the run
+    assert {"r0/base_link", "r1/base_link", "r2/base_link", "tablet/camera_optical_frame"} <= frames
+    assert {c["encoding"] for c in channels.values()} == {"json", "protobuf"}  # all a viewer decodes
+    plans = next(c.messages for c in channel_stats(mission.recording) if c.topic == PLAN)
+    assert all("plan_id" in plan for plan in received[PLAN]) and len(received[PLAN]) == plans  # every plan
     assert any(len(msg.entities) and len(msg.entities[0].lines) for msg in received["/paths"])
     images = received["/camera/tablet/image"]
     assert images and all(img.format == "jpeg" and img.data[:2] == b"\xff\xd8" for img in images)
     assert received["/camera/tablet/calibration"][0].width > 0
-    assert any(event["kind"] == "mission_done" for event in received["/events"])
+    assert any(event["kind"] == "mission_done" for event in received[EVENTS])
     assert received["/progress"][-1]["delivered"] == 9
 
     # Garbage on a recorded key is dropped and counted; the recorder goes on.

@@ -277,3 +277,116 @@ def test_config_file_is_read_and_checked(tmp_path):
         HumanConfig(door_probability=1.5)
     with pytest.raises(FileNotFoundError):
         HumanConfig.from_toml(tmp_path / "missing.toml")
+
+
+# ---------------------------------------------------------------------------- anticipation, responsiveness, focus share
+
+
+def run_planned(h: HumanModel, *, until: float, dt: float, planned: dict[str, float], waiting=None):
+    """Step ``h`` with ``planned`` (robot -> planned arrival at door d) shown on her AR view."""
+    actions, t = [], 0.0
+    while t < until - 1e-9:
+        for a in h.step(t, dt, {"d": dict(waiting or {})}, {"d": False}, planned={"d": dict(planned)}):
+            actions.append((t + dt, a))
+        t += dt
+    return actions
+
+
+@pytest.mark.parametrize("method", ["arroch", "no-feedback"])
+def test_with_ar_she_leaves_for_a_planned_arrival_within_her_horizon(method):
+    # Sure to go (p = 1): her first trip starts when the robot's arrival at 200 s comes within 30 s, not before,
+    # and she is at the door (3 s walk) before the robot.
+    for seed in range(20):
+        h = model(method, seed, focus_count=0, door_probability=1.0, anticipation=30.0)
+        actions = run_planned(h, until=200.0, dt=0.5, planned={"r0": 200.0})
+        opened = [t for t, a in actions if isinstance(a, OpenDoor)]
+        assert opened and opened[0] == pytest.approx(170.0 + 3.0)
+        assert h.counters.anticipated >= 1 and h.counters.ar_decisions == 0
+
+
+def test_in_no_comm_she_cannot_see_a_plan_and_never_anticipates():
+    for seed in range(20):
+        h = model("no-comm", seed, focus_count=0, no_comm_probability=0.0, door_probability=1.0, anticipation=60.0)
+        actions = run_planned(h, until=400.0, dt=0.5, planned={"r0": 200.0})
+        assert not [a for _, a in actions if isinstance(a, OpenDoor)]
+        assert h.counters.anticipations == 0
+
+
+def test_each_anticipation_decision_goes_with_the_door_probability():
+    p, decisions, went = 0.3, 0, 0
+    for seed in range(3000):
+        h = model("no-feedback", seed, focus_count=0, door_probability=p, anticipation=30.0)
+        run_planned(h, until=171.0, dt=1.0, planned={"r0": 200.0})  # one decision: at 170 s
+        decisions += h.counters.anticipations
+        went += h.counters.anticipated
+    assert decisions == 3000
+    assert within(went / decisions, p, decisions)
+
+
+def test_anticipation_is_off_by_default_and_moves_no_other_draw():
+    # Default (anticipation 0): a plan on her view changes nothing. On, with no arrival within reach: nothing either.
+    for seed in range(30):
+        base = model("arroch", seed, door_probability=0.5)
+        shown = model("arroch", seed, door_probability=0.5)
+        reach = model("arroch", seed, door_probability=0.5, anticipation=20.0)
+        run(base, until=900.0, dt=1.0, waiting={"r0": 0.0, "r1": 50.0})
+        run_planned(shown, until=900.0, dt=1.0, planned={"r2": 5000.0}, waiting={"r0": 0.0, "r1": 50.0})
+        run_planned(reach, until=900.0, dt=1.0, planned={"r2": 5000.0}, waiting={"r0": 0.0, "r1": 50.0})
+        assert base.opened_at == shown.opened_at == reach.opened_at
+        assert base.counters == shown.counters == reach.counters
+
+
+def test_a_waiting_robot_is_not_anticipated_and_a_declared_focus_stops_anticipation():
+    h = model("no-feedback", 3, focus_count=0, door_probability=0.0, anticipation=60.0)
+    run_planned(h, until=100.0, dt=1.0, planned={"r0": 50.0}, waiting={"r0": 0.0})
+    assert h.counters.anticipations == 0 and h.counters.ar_decisions > 0
+    for seed in range(200):
+        h = model("arroch", seed, door_probability=1.0, anticipation=60.0)
+        if not h.declared or not h.declared[0]:
+            continue
+        f = h.focus[0]
+        run_planned(h, until=f.end - 1.0, dt=1.0, planned={"r0": f.end - 10.0})
+        assert not [t for t in h.opened_at if f.start <= t < f.end]
+
+
+@pytest.mark.parametrize("responsiveness", [0.0, 0.5])
+def test_focus_responsiveness_scales_her_chances_during_an_undeclared_focus_only(responsiveness):
+    p = 0.4
+    tally = {True: [0, 0], False: [0, 0]}  # in focus? -> [decisions, triggers]
+    for seed in range(300):
+        h = model("no-feedback", seed, door_probability=p, focus_responsiveness=responsiveness)
+        for t in np.arange(0.0, 900.0, 10.0):  # one waiting robot each step, seen afresh: one decision when at her desk
+            decided, went = h.counters.ar_decisions, h.counters.ar_triggers
+            h.step(float(t), 10.0, {"d": {f"r{int(t)}": float(t) + 10.0}}, {"d": False})
+            if h.counters.ar_decisions > decided:
+                cell = tally[h.in_focus(float(t) + 10.0)]
+                cell[0] += 1
+                cell[1] += h.counters.ar_triggers - went
+    (n_in, k_in), (n_out, k_out) = tally[True], tally[False]
+    assert n_in > 1000 and n_out > 1000
+    assert within(k_out / n_out, p, n_out)
+    assert within(k_in / n_in, responsiveness * p, n_in) if responsiveness else k_in == 0
+
+
+def test_a_fixed_focus_share_scales_with_her_task_and_is_declared_in_covering_minutes():
+    for task in (150.0, 600.0, 900.0):
+        for seed in range(50):
+            h = model("arroch", seed, task_mean=task, focus_fraction=0.4, focus_count=2)
+            total = sum(f.end - f.start for f in h.focus)
+            assert total == pytest.approx(0.4 * h.task_duration)
+            assert all(a.end <= b.start for a, b in pairwise(h.focus))
+            assert all(0.0 <= f.start and f.end <= h.task_duration for f in h.focus)
+            assert all(f.minutes == math.ceil((f.end - f.start) / 60.0) for f in h.focus)
+
+
+def test_planned_arrivals_are_each_robots_first_wait_at_her_door():
+    from types import SimpleNamespace as S
+
+    from services.sim.human import planned_arrivals
+
+    plans = {
+        "r0": [S(action="approach", args=["d"], start=10.0), S(action="opendoor", args=["d"], start=42.0)],
+        "r1": [S(action="opendoor", args=["x"], start=5.0), S(action="opendoor", args=["d"], start=90.0)],
+        "r2": [S(action="opendoor", args=["d"], start=70.0), S(action="opendoor", args=["d"], start=300.0)],
+    }
+    assert planned_arrivals(plans, ["d"]) == {"d": {"r0": 42.0, "r1": 90.0, "r2": 70.0}}

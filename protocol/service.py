@@ -410,11 +410,14 @@ class Service:
         *,
         latest: bool = False,
         ordered: bool = False,
+        history: bool = False,
     ) -> None:
         """Like :meth:`subscribe`, for payloads that are not ARROCH messages (e.g. ROS 2 CDR):
         ``decode_payload(bytes)`` runs on arrival, and whatever it raises counts the payload as a bad
         message (dropped, logged at most once a minute); its result goes to ``handler(value, key)``
-        on the worker. ``latest`` and ``ordered`` mean what they mean for :meth:`subscribe`."""
+        on the worker. ``latest`` and ``ordered`` mean what they mean for :meth:`subscribe`.
+        ``history``: an advanced subscriber that also gets what transient-local (cached) publishers
+        published before it was declared, including publishers that appear later."""
         sub = _Subscription(key, object, handler, latest)  # type: ignore[arg-type]
         refuse = self._refuser(key)
 
@@ -427,9 +430,17 @@ class Service:
                 return
             self._enqueue(sub, str(sample.key_expr), value)
 
-        self._declared.append(
-            self.session.declare_subscriber(key, on_zenoh_thread(on_sample) if ordered else on_sample)
-        )
+        callback = on_zenoh_thread(on_sample) if ordered else on_sample
+        if history:
+            import zenoh.ext
+
+            self._declared.append(
+                zenoh.ext.declare_advanced_subscriber(
+                    self.session, key, callback, history=zenoh.ext.HistoryConfig(detect_late_publishers=True)
+                )
+            )
+            return
+        self._declared.append(self.session.declare_subscriber(key, callback))
 
     def hold(self, entity: Any) -> Any:
         """Undeclare ``entity`` (a token, publisher, subscriber... declared on :attr:`session`) when

@@ -7,9 +7,10 @@ Layout (rmw_zenoh_cpp ``attachment_helpers.cpp``, written with ``zenoh::ext::Ser
 
 from __future__ import annotations
 
-import hashlib
 import struct
 from dataclasses import dataclass
+
+import xxhash
 
 GID_SIZE = 16
 _HEAD = struct.Struct("<qq")
@@ -35,7 +36,7 @@ class Attachment:
 
 
 def gid_of(token: str) -> bytes:
-    """A 16-byte GID for the entity announced by ``token``. rmw_zenoh derives its GIDs from the
-    token with XXH3-128; we use BLAKE2b-128 (no XXH3 in the standard library): unique and stable
-    per entity, but not the value a ROS 2 node would compute for the same token."""
-    return hashlib.blake2b(token.encode(), digest_size=GID_SIZE).digest()
+    """The 16-byte GID of the entity announced by ``token``, as rmw_zenoh_cpp computes it
+    (``Entity::gid``): XXH3-128 of the token, its 128-bit value stored low byte first; so a ROS 2
+    graph cache finds in our samples' attachments the GIDs it computed from our tokens."""
+    return xxhash.xxh3_128_digest(token.encode())[::-1]

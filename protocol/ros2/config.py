@@ -9,10 +9,18 @@ bridge_namespace = ""           # ros2dds only: the bridge's `namespace` setting
 [ros2.robots.r0]
 # key_format = "ros2dds"        # this robot only (a mixed fleet); likewise domain
 namespace = "/r0"               # ROS namespace of the robot's topics (default "/<robot id>")
-cmd_vel = "cmd_vel"             # geometry_msgs/Twist in
+cmd_vel = "cmd_vel"             # velocity commands in
+cmd_vel_type = "twist"          # geometry_msgs/Twist, or "twist_stamped" (Jazzy's diff_drive_controller)
 pose_topic = "odom"             # where its pose comes from
 pose_type = "odometry"          # nav_msgs/Odometry (odom frame), or "pose":
                                 # geometry_msgs/PoseWithCovarianceStamped (map frame, e.g. amcl_pose)
+pose_durability = "volatile"    # or "transient_local" (amcl_pose: its last pose is asked for on start)
+# odom_topic = "odom"           # with pose_type "pose": odometry carries the pose between two
+                                # (sparse) localisation updates
+# scan_topic = "scan"           # sensor_msgs/LaserScan: the safety field (off when not set)
+scan_timeout = 0.5              # s of site time without a scan before the base is stopped
+obstacle_patience = 15.0        # s held by an obstacle before the action fails (the planner replans)
+# type_hash = "TypeHashNotSupported"  # Humble's rmw_zenoh (no RIHS01 hashes in its keys)
 map_to_odom = [1.0, 2.0, 0.0]   # fixed map->odom transform (x, y, yaw rad); default: the robot's
                                 # start pose in the site file (odometry starts at zero where it boots)
 # tf_topic = "/tf"              # instead: take map->odom from tf2_msgs/TFMessage on this topic
@@ -43,7 +51,9 @@ from pathlib import Path
 from typing import Any
 
 from .keys import KEY_FORMATS, TopicNaming, full_topic
-from .types import POSE_TYPES
+from .types import CMD_VEL_TYPES, HASH_NOT_SUPPORTED, POSE_TYPES
+
+DURABILITIES = ("volatile", "transient_local")
 
 
 class RosConfigError(ValueError):
@@ -68,10 +78,21 @@ class RobotLink:
     control_period: float = 0.05
     key_format: str | None = None  # None: the [ros2] table's
     domain: int | None = None
+    cmd_vel_type: str = "twist"
+    pose_durability: str = "volatile"
+    odom_topic: str = ""  # with pose_type "pose": odometry between localisation updates ("" none)
+    scan_topic: str = ""  # "" : no safety field
+    scan_timeout: float = 0.5
+    obstacle_patience: float = 15.0
+    type_hash: str = ""  # "" : RIHS01 (Jazzy and later); "TypeHashNotSupported": Humble
 
     @property
     def pose_typename(self) -> str:
         return POSE_TYPES[self.pose_type]
+
+    @property
+    def cmd_vel_typename(self) -> str:
+        return CMD_VEL_TYPES[self.cmd_vel_type]
 
     def topic(self, name: str) -> str:
         return full_topic(self.namespace, name)
@@ -103,7 +124,8 @@ class Ros2Config:
         link = self.robots.get(robot) if robot else None
         key_format = (link.key_format if link else None) or self.key_format
         domain = link.domain if link is not None and link.domain is not None else self.domain
-        return TopicNaming(key_format, domain, self.bridge_namespace)
+        humble = link is not None and link.type_hash == HASH_NOT_SUPPORTED
+        return TopicNaming(key_format, domain, self.bridge_namespace, hashless=humble)
 
     def link(self, robot: str) -> RobotLink:
         return self.robots.get(robot) or RobotLink(robot, f"/{robot}")
@@ -126,8 +148,29 @@ class Ros2Config:
         return changed
 
 
-_FLOATS = ("max_speed", "max_turn_rate", "pose_timeout", "control_period")
-_STRINGS = ("namespace", "cmd_vel", "pose_topic", "pose_type", "tf_topic", "map_frame", "odom_frame", "base_frame")
+_FLOATS = ("max_speed", "max_turn_rate", "pose_timeout", "control_period", "scan_timeout", "obstacle_patience")
+_STRINGS = (
+    "namespace",
+    "cmd_vel",
+    "pose_topic",
+    "pose_type",
+    "tf_topic",
+    "map_frame",
+    "odom_frame",
+    "base_frame",
+    "cmd_vel_type",
+    "pose_durability",
+    "odom_topic",
+    "scan_topic",
+    "type_hash",
+)
+# Keys whose string value is one of a few words, and those words.
+_CHOICES = {
+    "pose_type": tuple(POSE_TYPES),
+    "cmd_vel_type": tuple(CMD_VEL_TYPES),
+    "pose_durability": DURABILITIES,
+    "type_hash": ("", HASH_NOT_SUPPORTED),
+}
 
 
 def load_ros2_config(path: str | Path | None) -> Ros2Config:
@@ -247,10 +290,14 @@ def _parse_link(rid: str, entry: Any, fail: Any) -> RobotLink:
         if not _is_domain(entry["domain"]):
             raise fail("domain", f"expected an integer 0..232, got {entry['domain']!r}")
         values["domain"] = entry["domain"]
-    if values.get("pose_type", "odometry") not in POSE_TYPES:
-        raise fail("pose_type", f"expected one of {', '.join(POSE_TYPES)}, got {values['pose_type']!r}")
+    for key, words in _CHOICES.items():
+        if key in values and values[key] not in words:
+            raise fail(key, f"expected one of {', '.join(repr(w) for w in words)}, got {values[key]!r}")
+    if values.get("odom_topic") and values.get("pose_type", "odometry") != "pose":
+        raise fail("odom_topic", 'odometry between localisation updates goes with pose_type = "pose"')
     link = RobotLink(rid, **values)
-    for key in ("cmd_vel", "pose_topic") + (("tf_topic",) if link.tf_topic else ()):
+    optional = tuple(key for key in ("tf_topic", "odom_topic", "scan_topic") if getattr(link, key))
+    for key in ("cmd_vel", "pose_topic") + optional:
         try:
             link.topic(getattr(link, key))
         except ValueError as exc:

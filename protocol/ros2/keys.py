@@ -15,15 +15,35 @@
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 
-from .types import dds_type_name, type_hash
+from .types import HASH_NOT_SUPPORTED, dds_type_name, type_hash
 
 KEY_FORMATS = ("rmw_zenoh", "ros2dds")
 ADMIN_SPACE = "@ros2_lv"
-# Reliable (1), volatile (2), keep-last (1) of depth 10, the rest left to the defaults: every field
-# written out, so the token reads the same whatever rmw_zenoh's default profile is.
-QOS_RELIABLE = "1:2:1,10:,:,:,,"
-QOS_BEST_EFFORT = "2:2:1,1:,:,:,,"
+
+
+@dataclass(frozen=True)
+class Qos:
+    """The QoS of an endpoint as far as its token tells it (always keep-last)."""
+
+    reliable: bool = True
+    depth: int = 10
+    transient_local: bool = False
+
+    def chunk(self) -> str:
+        """The token's QoS chunk as rmw_zenoh_cpp's ``qos_to_keyexpr`` writes it: eleven values
+        ``rel:dur:hist,depth:dl_s,dl_ns:ls_s,ls_ns:liv,lease_s,lease_ns``, each left empty when it
+        equals rmw_zenoh's default (reliable, volatile, keep-last, depth 42, infinite deadline and
+        lifespan, automatic liveliness with an infinite lease)."""
+        reliability = "" if self.reliable else "2"  # RMW_QOS_POLICY_RELIABILITY_BEST_EFFORT
+        durability = "1" if self.transient_local else ""  # RMW_QOS_POLICY_DURABILITY_TRANSIENT_LOCAL
+        depth = "" if self.depth == 42 else str(self.depth)
+        return f"{reliability}:{durability}:,{depth}:,:,:,,"
+
+
+QOS_RELIABLE = Qos().chunk()  # "::,10:,:,:,,"
+QOS_BEST_EFFORT = Qos(reliable=False, depth=1).chunk()  # "2::,1:,:,:,,"
 _TOPIC = re.compile(r"^/?[A-Za-z][A-Za-z0-9_]*(/[A-Za-z][A-Za-z0-9_]*)*$")
 
 
@@ -48,7 +68,9 @@ def mangle(name: str) -> str:
 class TopicNaming:
     """Keys and liveliness tokens of ROS 2 topics for one key format, domain and bridge namespace."""
 
-    def __init__(self, key_format: str = "rmw_zenoh", domain: int = 0, bridge_namespace: str = "") -> None:
+    def __init__(
+        self, key_format: str = "rmw_zenoh", domain: int = 0, bridge_namespace: str = "", *, hashless: bool = False
+    ) -> None:
         if key_format not in KEY_FORMATS:
             raise ValueError(f"key format {key_format!r}: expected one of {', '.join(KEY_FORMATS)}")
         if not 0 <= domain <= 232:
@@ -56,6 +78,10 @@ class TopicNaming:
         self.key_format = key_format
         self.domain = domain
         self.bridge_namespace = bridge_namespace.strip("/")
+        self.hashless = hashless  # Humble's rmw_zenoh: TypeHashNotSupported instead of RIHS01 hashes
+
+    def type_hash(self, typename: str) -> str:
+        return HASH_NOT_SUPPORTED if self.hashless else type_hash(typename)
 
     @property
     def rmw_zenoh(self) -> bool:
@@ -65,7 +91,7 @@ class TopicNaming:
         """Where samples of ``topic`` (fully qualified) of ``typename`` are put."""
         name = topic.strip("/")
         if self.rmw_zenoh:
-            return f"{self.domain}/{name}/{dds_type_name(typename)}/{type_hash(typename)}"
+            return f"{self.domain}/{name}/{dds_type_name(typename)}/{self.type_hash(typename)}"
         return f"{self.bridge_namespace}/{name}" if self.bridge_namespace else name
 
     def subscription_key(self, topic: str, typename: str) -> str:
@@ -91,12 +117,11 @@ class TopicNaming:
         topic: str,
         typename: str,
         *,
-        reliable: bool = True,
+        qos: Qos = Qos(),
     ) -> str:
         """The token announcing a publisher (``kind="MP"``) or subscription (``"MS"``) of ``topic``."""
         if kind not in ("MP", "MS"):
             raise ValueError(f"endpoint kind {kind!r}: expected MP or MS")
-        qos = QOS_RELIABLE if reliable else QOS_BEST_EFFORT
         return "/".join(
             (
                 ADMIN_SPACE,
@@ -110,7 +135,7 @@ class TopicNaming:
                 node,
                 mangle(topic),
                 dds_type_name(typename),
-                type_hash(typename),
-                qos,
+                self.type_hash(typename),
+                qos.chunk(),
             )
         )

@@ -28,8 +28,24 @@ PATH = "nav_msgs/msg/Path"
 MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
 STRING = "std_msgs/msg/String"
 BOOL = "std_msgs/msg/Bool"  # a real door's sensor: open or shut
+TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"  # Jazzy's diff_drive_controller takes only this
+LASER_SCAN = "sensor_msgs/msg/LaserScan"  # the safety field's input
 
-USED_TYPES = (TWIST, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE, PATH, MARKER_ARRAY, STRING, BOOL)
+USED_TYPES = (
+    TWIST,
+    ODOMETRY,
+    POSE_COV_STAMPED,
+    TF_MESSAGE,
+    PATH,
+    MARKER_ARRAY,
+    STRING,
+    BOOL,
+    TWIST_STAMPED,
+    LASER_SCAN,
+)
+CMD_VEL_TYPES = {"twist": TWIST, "twist_stamped": TWIST_STAMPED}
+# What Humble's rmw_zenoh writes in keys and tokens where Jazzy and later write the RIHS01 hash.
+HASH_NOT_SUPPORTED = "TypeHashNotSupported"
 
 # RIHS01 hashes as ROS 2 reports them, each with where the value was seen (public sources found by
 # code search; no ROS 2 installation on the development machine, see docs/ros2.md):
@@ -47,6 +63,9 @@ USED_TYPES = (TWIST, ODOMETRY, POSE_COV_STAMPED, TF_MESSAGE, PATH, MARKER_ARRAY,
 #   that talks to rmw_zenoh (`.../MS/%/%/rovi/%rovi%arm/std_msgs::msg::dds_::Bool_/RIHS01_feb9...`);
 #   tests/ros2/test_wire.py also recomputes it (and String's) from the .msg definition by ROS 2's
 #   rule (rosidl_generator_type_description: SHA-256 of the type description's JSON).
+# - TwistStamped: `ros2 topic info /cmd_vel -v` output in a ROS 2 tutorial (publisher
+#   `ros_gz_bridge`), and rmw_zenoh keys of zenoh-pico/C teleoperation examples driving Jazzy bases.
+# - LaserScan: the message tables of Rust and Elixir clients that talk to rmw_zenoh nodes.
 PUBLISHED_HASHES: dict[str, str] = {
     TWIST: "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a",
     ODOMETRY: "RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0",
@@ -56,6 +75,8 @@ PUBLISHED_HASHES: dict[str, str] = {
     MARKER_ARRAY: "RIHS01_86cb8800b6fb05b5eff1abd7a56f62a5641d3ae9a1c29e78e67e704f1d067dcf",
     STRING: "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18",
     BOOL: "RIHS01_feb91e995ff9ebd09c0cb3d2aed18b11077585839fb5db80193b62d74528f6c9",
+    TWIST_STAMPED: "RIHS01_5f0fcd4f81d5d06ad9b4c4c63e3ea51b82d6ae4d0558f1d475229b1121db6f64",
+    LASER_SCAN: "RIHS01_64c191398013af96509d518dac71d5164f9382553fce5c1f8cca5be7924bd828",
 }
 
 
@@ -135,6 +156,34 @@ def twist(v: float, omega: float) -> Any:
     return t(TWIST)(linear=vector3(v), angular=vector3(0.0, 0.0, omega))
 
 
+def twist_stamped(at: float, frame: str, v: float, omega: float) -> Any:
+    """``geometry_msgs/TwistStamped``: the Twist with a stamp (``at``, the receiver's clock: a
+    diff_drive_controller drops commands older than its ``cmd_vel_timeout``) and the base's frame."""
+    return t(TWIST_STAMPED)(header=header(at, frame), twist=twist(v, omega))
+
+
+def cmd_vel(typename: str, v: float, omega: float, at: float, frame: str) -> Any:
+    """The velocity command in the base's ``cmd_vel`` type (Twist, or TwistStamped stamped ``at``)."""
+    return twist_stamped(at, frame, v, omega) if typename == TWIST_STAMPED else twist(v, omega)
+
+
+def laser_scan(at: float, frame: str, angle_min: float, angle_increment: float, ranges: Any, range_max: float) -> Any:
+    """``sensor_msgs/LaserScan`` of ``ranges`` (m; ``inf``: no return within ``range_max``)."""
+    values = np.asarray(ranges, dtype=np.float32)
+    return t(LASER_SCAN)(
+        header=header(at, frame),
+        angle_min=float(angle_min),
+        angle_max=float(angle_min + angle_increment * max(len(values) - 1, 0)),
+        angle_increment=float(angle_increment),
+        time_increment=0.0,
+        scan_time=0.0,
+        range_min=0.05,
+        range_max=float(range_max),
+        ranges=values,
+        intensities=np.zeros(0, dtype=np.float32),
+    )
+
+
 def odometry(at: float, frame: str, child_frame: str, x: float, y: float, yaw: float, v: float, omega: float) -> Any:
     """``nav_msgs/Odometry`` of a planar base (covariances zero: the simulated base knows its pose)."""
     zeros = np.zeros(36, dtype=np.float64)
@@ -210,6 +259,12 @@ def pose_2d(msg: Any, typename: str) -> Pose2D:
             stamp=seconds(msg.header.stamp),
         )
     raise ValueError(f"no planar pose in a {typename}")
+
+
+def twist_of(msg: Any, typename: str) -> tuple[float, float]:
+    """(v, omega) of a Twist or TwistStamped."""
+    tw = msg.twist if typename == TWIST_STAMPED else msg
+    return float(tw.linear.x), float(tw.angular.z)
 
 
 POSE_TYPES = {"odometry": ODOMETRY, "pose": POSE_COV_STAMPED}

@@ -108,6 +108,11 @@ class Driver:
             return f"unload: robot does not carry {target!r}"
         return command_problem(self.site, pose[0], pose[1], cmd, self.config.start_tolerance)
 
+    def note(self, detail: str) -> None:
+        """Say why the robot is not moving though it drives (the safety field: an obstacle ahead)."""
+        if self.phase == "drive":
+            self._set(detail=detail)
+
     def refuse(self, reason: str) -> None:
         self.phase = "failed"
         self._follower = None

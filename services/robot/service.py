@@ -5,12 +5,15 @@ ARROCH side: ``robot/<rid>/command`` (RobotCommand) in; ``robot/<rid>/pose`` (Ro
 closed door stops the robot); the planner's liveliness token watched (a planner that dies stops it).
 ROS 2 side: the robot's pose in (``nav_msgs/Odometry`` in the odom frame, moved into the map frame
 by a fixed map→odom transform or one from ``tf``; or ``geometry_msgs/PoseWithCovarianceStamped`` in
-the map frame); ``geometry_msgs/Twist`` out on its ``cmd_vel``, one per pose received.
+the map frame, possibly transient-local and sparse, with odometry carrying the pose between two of
+them); ``geometry_msgs/Twist`` or ``TwistStamped`` out on its ``cmd_vel``, one per pose received;
+``sensor_msgs/LaserScan`` in (the safety field, :mod:`protocol.safety_field`), when configured.
 
 Safety: zero velocity goes out when the command ends or is refused, at a closed door, when no pose
-came for ``pose_timeout`` site seconds (checked every 20 ms of wall time), when the planner's
-liveliness token goes away (until a planner is back), and three times on SIGINT/SIGTERM before the
-session closes. docs/ros2.md has the details; the watchdog's figures are in tests/ros2/test_safety.py.
+came for ``pose_timeout`` site seconds (checked every 20 ms of wall time), when the scan is stale
+or shows an obstacle in the stop zone (at once, on the scan), when the planner's liveliness token
+goes away (until a planner is back), and three times on SIGINT/SIGTERM before the session closes.
+docs/ros2.md has the details; the figures are in tests/ros2/test_safety.py and test_field.py.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import zenoh
 
 from protocol.messages import DoorState, RobotCommand, RobotPose
@@ -31,6 +35,7 @@ from protocol.ros2 import types as ros
 from protocol.ros2.config import RobotLink
 from protocol.ros2.keys import TopicNaming
 from protocol.ros2.node import RosNode
+from protocol.safety_field import FieldConfig, Verdict, limit, scan_points
 from protocol.service import Service
 from protocol.site.model import Site
 from protocol.transport import ZenohOptions
@@ -98,15 +103,38 @@ class RobotService(Service):
         self._planner_lock = threading.Lock()
         self._holding = ""  # why the base is held at zero velocity ("" = not held)
         self._cmd_vel: Any = None
+        self._cmd_vel_type = link.cmd_vel_typename
+        # Sparse localisation (pose_type "pose" with odom_topic): the last fix in the map and the
+        # odometry pose when it came; odometry moves the robot from there until the next fix.
+        self._fix: tuple[tuple[float, float, float], tuple[float, float, float] | None] | None = None
+        self._odom_last: tuple[float, float, float] | None = None
+        # The safety field: the last scan's points (robot frame) and when it came.
+        self.field = FieldConfig()
+        self._scan = np.zeros((0, 2))
+        self._scan_at = -math.inf
+        self._blocked_since: float | None = None  # site time the field started holding a driving robot
+        self._stopped_by_field = False  # it waits for the way to clear at cruising speed before going on
+        self._speed = 0.0  # m/s the robot goes at (odometry's, else the last command's)
+        self._bad_logged: set[str] = set()
 
     # ------------------------------------------------------------------ set-up
 
     def setup(self) -> None:
         link, keys = self.link, self.keys
         node = RosNode(self, self.naming, f"arroch_robot_{self.robot}", link.namespace)
-        self._cmd_vel = node.publisher(link.cmd_vel, ros.TWIST)
+        self._cmd_vel = node.publisher(link.cmd_vel, self._cmd_vel_type)
         # Latest: a robot at rest with a simulator running ahead must not queue up poses.
-        pose_key = node.subscribe(link.pose_topic, link.pose_typename, self._on_pose, latest=True)
+        pose_key = node.subscribe(
+            link.pose_topic,
+            link.pose_typename,
+            self._on_pose,
+            latest=True,
+            transient_local=link.pose_durability == "transient_local",
+        )
+        if link.odom_topic:
+            node.subscribe(link.odom_topic, ros.ODOMETRY, self._on_odometry, latest=True)
+        if link.scan_topic:
+            node.subscribe(link.scan_topic, ros.LASER_SCAN, self._on_scan, latest=True)
         if link.tf_topic:
             node.subscribe(link.tf_topic, ros.TF_MESSAGE, self._on_tf)
         self.subscribe(keys.door_state(), DoorState, self._on_door, ordered=True)
@@ -138,29 +166,83 @@ class RobotService(Service):
 
     # ------------------------------------------------------------------ inputs
 
+    def _bad(self, counter: str, what: str) -> None:
+        """Count a dropped input; log the first of each kind (the rest are in the counters)."""
+        self.count(counter)
+        if counter not in self._bad_logged:
+            self._bad_logged.add(counter)
+            self.log.warning("robot %s: dropped %s (counted as %s)", self.robot, what, counter)
+
+    def _pose_of(self, msg: Any, typename: str) -> ros.Pose2D | None:
+        p = ros.pose_2d(msg, typename)
+        fields = {"x": p.x, "y": p.y, "yaw": p.theta, "linear.x": p.v, "angular.z": p.omega}
+        bad = [name for name, value in fields.items() if not math.isfinite(value)]
+        if bad:
+            # A NaN must never reach the controller.
+            self._bad("poses_not_finite", f"a {typename} whose {', '.join(bad)} is not finite")
+            return None
+        return p
+
     def _on_pose(self, msg: Any, key: str) -> None:
-        p = ros.pose_2d(msg, self.link.pose_typename)
-        if not all(math.isfinite(value) for value in (p.x, p.y, p.theta, p.v, p.omega)):
-            self.count("poses_not_finite")  # dropped: a NaN must never reach the controller
+        p = self._pose_of(msg, self.link.pose_typename)
+        if p is None:
             return
         if self.link.pose_type == "odometry":
             if self.map_to_odom is None:
                 self.count("poses_without_map_to_odom")
                 return
-            ox, oy, oth = self.map_to_odom
-            c, s = math.cos(oth), math.sin(oth)
-            pose = (ox + c * p.x - s * p.y, oy + s * p.x + c * p.y, wrap(oth + p.theta))
-            velocity = (p.v, p.omega)
-        else:
-            pose = (p.x, p.y, wrap(p.theta))
-            velocity = self._velocity
+            self._moved(_compose(self.map_to_odom, (p.x, p.y, p.theta)), (p.v, p.omega))
+            return
+        pose = (p.x, p.y, wrap(p.theta))
+        if self.link.odom_topic:
+            self._fix = (pose, self._odom_last)
+            self.count("localisation_fixes")
+        self._moved(pose, self._velocity)
+
+    def _on_odometry(self, msg: Any, key: str) -> None:
+        """Sparse localisation: odometry moves the robot from the last fix until the next one."""
+        p = self._pose_of(msg, ros.ODOMETRY)
+        if p is None:
+            return
+        odom = (p.x, p.y, p.theta)
+        self._odom_last = odom
+        if self._fix is None:
+            return  # no fix in the map yet: odometry alone cannot say where the robot is
+        fix, odom_at_fix = self._fix
+        if odom_at_fix is None:
+            self._fix = (fix, odom)  # the first odometry after the fix stands for the fix's instant
+            odom_at_fix = odom
+        self._moved(_compose(fix, _between(odom_at_fix, odom)), (p.v, p.omega))
+
+    def _moved(self, pose: tuple[float, float, float], velocity: tuple[float, float]) -> None:
+        """A new pose of the robot (map frame), going at ``velocity`` (odometry's, else the last
+        command's): answer it with the velocity to send."""
         self.pose = pose
+        self._speed = velocity[0]
         self._pose_at = self.clock.now()
         self.count("poses")
         v, omega = self._control()
         self._send(v, omega)
         self._publish_pose(velocity)
         self._publish_status()
+
+    def _on_scan(self, msg: Any, key: str) -> None:
+        try:
+            points = scan_points(msg.angle_min, msg.angle_increment, msg.range_min, msg.range_max, msg.ranges)
+        except ValueError as exc:
+            self._bad("scans_bad", f"a LaserScan: {exc}")
+            return
+        self._scan, self._scan_at = points, self.clock.now()
+        self.count("scans")
+        v, omega = self._velocity
+        if v != 0.0 or omega != 0.0:
+            # Someone stepping in front of the robot stops it now, not at the next pose.
+            verdict = limit(points, v, omega, max(abs(v), abs(self._speed)), self.site.params.robot_radius, self.field)
+            if verdict.stop:
+                self._stopped_by_field = True
+                self._send(0.0, 0.0)
+                self._note_field(verdict, self._scan_at)
+                self._publish_status()
 
     def _on_tf(self, msg: Any, key: str) -> None:
         for tr in msg.transforms:
@@ -207,6 +289,8 @@ class RobotService(Service):
         # Staleness matters while the driver would move the robot; at rest it is sending zero anyway.
         if self.pose is not None and self.driver.phase == "drive" and now - self._pose_at > self.link.pose_timeout:
             return f"pose stale ({now - self._pose_at:.2f} s old)"
+        if self.link.scan_topic and self.driver.phase == "drive" and now - self._scan_at > self.link.scan_timeout:
+            return "no scan" if self._scan_at == -math.inf else f"scan stale ({now - self._scan_at:.2f} s old)"
         if self.options.hold_without_planner:
             with self._planner_lock:
                 if self._planner_seen and not self._planners:
@@ -219,7 +303,40 @@ class RobotService(Service):
         self._note_hold(reason)
         if reason or self.pose is None:
             return 0.0, 0.0
-        return self.driver.control(self.pose, now, lambda door: self._doors_open.get(door, False))
+        v, omega = self.driver.control(self.pose, now, lambda door: self._doors_open.get(door, False))
+        if not self.link.scan_topic or self.driver.phase != "drive":
+            return v, omega
+        verdict = limit(
+            self._scan,
+            v,
+            omega,
+            max(abs(self._speed), abs(self._velocity[0])),
+            self.site.params.robot_radius,
+            self.field,
+        )
+        self._note_field(verdict if (v or omega) and (verdict.v, verdict.omega) == (0.0, 0.0) else None, now)
+        return verdict.v, verdict.omega
+
+    def _note_field(self, verdict: Verdict | None, now: float) -> None:
+        """Track how long the field has held the robot (``verdict`` None: it is not holding it);
+        past ``obstacle_patience`` the action fails, and the planner replans around the obstacle."""
+        if verdict is None:
+            if self._blocked_since is not None:
+                self._blocked_since = None
+                self.driver.note("")
+                self.log.info("robot %s: the way is clear again", self.robot)
+            return
+        if self._blocked_since is None:
+            self._blocked_since = now
+            self.count("field_stops")
+            self.log.info("robot %s: obstacle %.2f m ahead: stopped", self.robot, verdict.clearance)
+        self.driver.note(f"obstacle {max(verdict.clearance, 0.0):.2f} m ahead")
+        if now - self._blocked_since > self.link.obstacle_patience and self.driver.phase == "drive":
+            self.driver.refuse(
+                f"blocked: an obstacle {max(verdict.clearance, 0.0):.2f} m ahead for {self.link.obstacle_patience:g} s"
+            )
+            self.count("field_give_ups")
+            self._blocked_since = None
 
     def _watchdog(self) -> None:
         reason = self._hold_reason(self.clock.now())
@@ -241,7 +358,9 @@ class RobotService(Service):
 
     def _send(self, v: float, omega: float) -> None:
         self._velocity = (v, omega)
-        self._cmd_vel.publish(ros.twist(v, omega))
+        # A TwistStamped carries the robot computer's clock (Unix time): diff_drive_controller drops
+        # commands older than its cmd_vel_timeout by that clock.
+        self._cmd_vel.publish(ros.cmd_vel(self._cmd_vel_type, v, omega, time.time(), self.link.base_frame))
 
     def _publish_pose(self, velocity: tuple[float, float]) -> None:
         if self.pose is None:
@@ -262,3 +381,16 @@ class RobotService(Service):
             return
         self.driver.changed = False
         self.publish(self.keys.robot_status(self.robot), self.driver.status(getattr(self.clock, "world_version", 0)))
+
+
+def _compose(a: tuple[float, float, float], b: tuple[float, float, float]) -> tuple[float, float, float]:
+    """Pose ``b`` given in the frame whose pose is ``a``, in ``a``'s parent frame."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], wrap(a[2] + b[2])
+
+
+def _between(a: tuple[float, float, float], b: tuple[float, float, float]) -> tuple[float, float, float]:
+    """Pose ``b`` in the frame of pose ``a`` (both in one frame): how far the robot moved from a to b."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    return c * dx + s * dy, -s * dx + c * dy, wrap(b[2] - a[2])

@@ -75,6 +75,7 @@ from protocol.validation import check_fields
 
 from .streams import Streams
 
+HUMAN_RADIUS = 0.18  # m, her torso: the camera's body and what a laser scan sees of her
 METHODS = ("arroch", "no-feedback", "no-comm")
 FOCUS_READINGS = ("faithful", "strict")  # see the module docstring
 

@@ -10,10 +10,12 @@ within ``auto_open_distance`` of a door its current command's trajectory goes th
 
 - ``--robots none``: its position is the last ``RobotPose`` its driver published.
 - ``--ros2-bases``: the simulator plays the ROS 2 mobile base. It subscribes to the robot's
-  ``cmd_vel`` (``geometry_msgs/Twist``, CDR) and integrates the last command each tick (the
-  unicycle's exact arc, as the simulator's own robots move; a command older than
-  :data:`CMD_VEL_TIMEOUT` site seconds counts as zero, the usual base watchdog), and publishes
-  ``nav_msgs/Odometry`` in the odom frame (whose origin is the robot's start pose) every tick. In
+  ``cmd_vel`` (``geometry_msgs/Twist`` or ``TwistStamped``, as the robot's ``cmd_vel_type``) and
+  integrates the last command each tick (the unicycle's exact arc, as the simulator's own robots
+  move; a command older than :data:`CMD_VEL_TIMEOUT` site seconds counts as zero, the usual base
+  watchdog), and publishes ``nav_msgs/Odometry`` in the odom frame (whose origin is the robot's
+  start pose) every tick, and, for a robot with a ``scan_topic``, a ``sensor_msgs/LaserScan`` of
+  the walls, door leaves, other robots and the human (:mod:`.scan`) just before it. In
   lockstep, while the driver says the robot executes an action, each tick waits for the Twist that
   answers the last odometry, so the driver controls the robot at every tick as the simulator's
   own executor would, whatever the machine's load.
@@ -34,7 +36,9 @@ from protocol.ros2 import types as ros
 from protocol.ros2.config import Ros2Config
 from protocol.ros2.node import RosNode, RosPublisher
 
+from .human import HUMAN_RADIUS
 from .robots import Outcome, Robot
+from .scan import Scanner
 
 log = logging.getLogger("arroch.sim")
 
@@ -56,6 +60,8 @@ class RosBase:
     origin: tuple[float, float, float]  # odom frame in the map (the start pose)
     odom_frame: str
     base_frame: str
+    cmd_vel_type: str = ros.TWIST
+    scan: RosPublisher | None = None  # its laser scanner's LaserScan (None: it has none)
     v: float = 0.0
     omega: float = 0.0
     twist_at: float = -math.inf  # site time the last Twist arrived
@@ -153,9 +159,9 @@ class ExternalRobot:
         self.pose = pose
 
     def on_twist(self, msg: Any, now: float) -> bool:
-        """Obey a Twist; False (ignored) for one that is not finite."""
+        """Obey a Twist (or TwistStamped); False (ignored) for one that is not finite."""
         assert self.base is not None
-        v, omega = float(msg.linear.x), float(msg.angular.z)
+        v, omega = ros.twist_of(msg, self.base.cmd_vel_type)
         if not (math.isfinite(v) and math.isfinite(omega)):
             return False
         self.base.v, self.base.omega = v, omega
@@ -219,6 +225,7 @@ class ExternalRobots:
         self.robots = {rid: ExternalRobot(engine, rid) for rid in robots}
         for rid in robots:
             engine.external[rid] = self.robots[rid]
+        self.scanner: Scanner | None = None
 
     def setup(self, service: Any) -> None:
         keys = service.keys
@@ -232,12 +239,21 @@ class ExternalRobots:
             link = self.ros2.link(rid)
             node = RosNode(service, self.ros2.naming(rid), f"arroch_sim_base_{rid}", link.namespace)
             start = self.engine.site.robots[rid].start
+            scan = None
+            if link.scan_topic:
+                scan = node.publisher(link.scan_topic, ros.LASER_SCAN)
+                self.scanner = self.scanner or Scanner(self.engine.site)
             ext.base = RosBase(
-                node.publisher(link.pose_topic, ros.ODOMETRY), tuple(start), link.odom_frame, link.base_frame
+                node.publisher(link.pose_topic, ros.ODOMETRY),
+                tuple(start),
+                link.odom_frame,
+                link.base_frame,
+                link.cmd_vel_typename,
+                scan,
             )
             node.subscribe(
                 link.cmd_vel,
-                ros.TWIST,
+                link.cmd_vel_typename,
                 lambda msg, key, ext=ext: ext.on_twist(msg, self.engine.time) or service.count("twists_not_finite"),
             )
         if self.ros2 is not None:
@@ -249,7 +265,31 @@ class ExternalRobots:
         now = self.engine.time
         for rid, ext in self.robots.items():
             if ext.base is not None and ext.driver_state not in EXECUTING:
+                self.publish_scan(rid, now)
                 ext.base.publish_odometry(now, self.engine.robots[rid])
+
+    def publish_scan(self, rid: str, now: float) -> None:
+        """The robot's LaserScan now (before its odometry: the driver answers that with the scan in hand)."""
+        base = self.robots[rid].base
+        if base is None or base.scan is None or self.scanner is None:
+            return
+        engine = self.engine
+        robot = engine.robots[rid]
+        radius = engine.site.params.robot_radius
+        discs = [(r.x, r.y, radius) for r in engine.robots.values() if r.id != rid]
+        hx, hy, _ = engine.human_pose()
+        discs.append((hx, hy, HUMAN_RADIUS))
+        ranges = self.scanner.ranges((robot.x, robot.y, robot.theta), discs, engine.doors)
+        base.scan.publish(
+            ros.laser_scan(
+                now,
+                base.base_frame,
+                self.scanner.angle_min,
+                self.scanner.angle_increment,
+                ranges,
+                self.scanner.config.range_max,
+            )
+        )
 
     def after_tick(self) -> None:
         """Publish each base's odometry (the robots' new poses); in lockstep, wait for the answers
@@ -257,6 +297,7 @@ class ExternalRobots:
         now = self.engine.time
         for rid, ext in self.robots.items():
             if ext.base is not None:
+                self.publish_scan(rid, now)
                 ext.base.publish_odometry(now, self.engine.robots[rid])
                 ext.base.awaiting = self.lockstep and ext.driver_state in EXECUTING and not ext.base.silent
                 ext.base.awaiting_since = time.monotonic()

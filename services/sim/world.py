@@ -47,6 +47,7 @@ from protocol.site import Site
 from protocol.site.model import Landmark
 
 from .camera import CameraSpec
+from .human import HUMAN_RADIUS
 from .objects import CARRY_HEIGHT, FLOOR_HEIGHT
 
 log = logging.getLogger(__name__)
@@ -62,7 +63,6 @@ LEAF_FLOOR_GAP = 0.01
 OBJECT_HALF = FLOOR_HEIGHT  # an object's centre stands FLOOR_HEIGHT above the floor: a 0.2 m cube
 ROBOT_HEIGHT = CARRY_HEIGHT - OBJECT_HALF  # a carried object sits on the robot's top
 HUMAN_HEIGHT = 1.7
-HUMAN_RADIUS = 0.18  # torso
 HUMAN_HIDE_RADIUS = 0.5  # a camera this close to her axis is her own tablet: hide her from it
 TAG_QUIET_MODULES = 2  # white modules around the black square (the official image has 1)
 TAG_MODULE_PX = 16  # texture pixels per module: crisp module edges under nearest sampling

@@ -2,8 +2,11 @@
 
 :class:`FakeBase` runs in the test process: it publishes the site ``clock`` (realtime, so site
 time = wall seconds since it started) and the robot's ``nav_msgs/Odometry`` at 20 Hz, records
-every ``geometry_msgs/Twist`` the driver sends with the site time it arrived, and moves the robot
-by them (a unicycle, as a base would). Odometry can be paused to make the pose go stale.
+every ``geometry_msgs/Twist`` (or ``TwistStamped``, as the robot's ``cmd_vel_type``) the driver
+sends with the site time it arrived, and moves the robot by them (a unicycle, as a base would).
+Odometry can be paused to make the pose go stale. With a ``scan_topic`` it is also the robot's
+laser scanner: a ``sensor_msgs/LaserScan`` (the simulator's :class:`services.sim.scan.Scanner`:
+the site's walls, and a person the test places) just before each odometry message.
 """
 
 from __future__ import annotations
@@ -18,6 +21,9 @@ from protocol.pursuit import integrate
 from protocol.ros2 import types as ros
 from protocol.ros2.config import Ros2Config
 from protocol.ros2.node import RosNode
+from protocol.site import load_site
+from services.sim.human import HUMAN_RADIUS
+from services.sim.scan import Scanner
 from tests.conftest import TestClient
 
 PERIOD = 0.05  # s between odometry messages (and clock messages)
@@ -28,6 +34,8 @@ class TwistSeen:
     site_time: float
     v: float
     omega: float
+    stamp: float = 0.0  # TwistStamped: its header's stamp (s)
+    frame: str = ""
 
     @property
     def zero(self) -> bool:
@@ -56,9 +64,13 @@ class FakeBase:
         self._lock = threading.Lock()
         self._stop = threading.Event()
         link = config.link(robot)
+        self.link = link
+        self.person: tuple[float, float] | None = None  # where a person stands (map frame)
         node = RosNode(client, config.naming(robot), f"fake_base_{robot}", link.namespace)
-        self._odom = node.publisher(link.pose_topic, ros.ODOMETRY)
-        key = config.naming(robot).subscription_key(link.topic(link.cmd_vel), ros.TWIST)
+        self._odom = node.publisher(link.odom_topic or link.pose_topic, ros.ODOMETRY)
+        self._scan = node.publisher(link.scan_topic, ros.LASER_SCAN) if link.scan_topic else None
+        self._scanner = Scanner(load_site()) if link.scan_topic else None
+        key = config.naming(robot).subscription_key(link.topic(link.cmd_vel), link.cmd_vel_typename)
         client.hold(client.session.declare_subscriber(key, self._on_twist))
         self.t0 = time.monotonic()
         self._thread = threading.Thread(target=self._run, name="fake-base", daemon=True)
@@ -69,10 +81,28 @@ class FakeBase:
         return time.monotonic() - self.t0
 
     def _on_twist(self, sample) -> None:  # noqa: ANN001
-        msg = ros.deserialize(sample.payload.to_bytes(), ros.TWIST)
+        typename = self.link.cmd_vel_typename
+        msg = ros.deserialize(sample.payload.to_bytes(), typename)
+        v, omega = ros.twist_of(msg, typename)
+        stamp, frame = (
+            (ros.seconds(msg.header.stamp), msg.header.frame_id) if typename == ros.TWIST_STAMPED else (0, "")
+        )
         with self._lock:
-            self.v, self.omega = msg.linear.x, msg.angular.z
-            self.twists.append(TwistSeen(self.now(), msg.linear.x, msg.angular.z))
+            self.v, self.omega = v, omega
+            self.twists.append(TwistSeen(self.now(), v, omega, stamp, frame))
+
+    def publish_scan(self) -> None:
+        """The scan from where the robot is now (walls, and the person if one stands in the site)."""
+        if self._scan is None or self._scanner is None:
+            return
+        person = [(*self.person, HUMAN_RADIUS)] if self.person else []
+        ranges = self._scanner.ranges(self.map_pose(), person)
+        scanner = self._scanner
+        self._scan.publish(
+            ros.laser_scan(
+                self.now(), "base_link", scanner.angle_min, scanner.angle_increment, ranges, scanner.config.range_max
+            )
+        )
 
     def _run(self) -> None:
         seq = 0
@@ -87,6 +117,7 @@ class FakeBase:
                 self.x, self.y, self.theta = integrate(self.x, self.y, self.theta, self.v, self.omega, PERIOD)
                 x, y, theta, v, omega = self.x, self.y, self.theta, self.v, self.omega
             if self.odometry_on:
+                self.publish_scan()
                 self._odom.publish(ros.odometry(now, "odom", "base_link", x, y, theta, v, omega))
                 self.odometry_sent.append(now)
 
@@ -105,6 +136,9 @@ class FakeBase:
     def wait_moving(self, timeout: float = 15.0) -> float:
         """Site time of the first non-zero Twist (the driver drives the base)."""
         return self._wait(lambda tw: not tw.zero, 0.0, timeout, "a non-zero Twist").site_time
+
+    def wait_moving_after(self, t: float, timeout: float = 5.0) -> TwistSeen:
+        return self._wait(lambda tw: not tw.zero, t, timeout, "a non-zero Twist")
 
     def first_zero_after(self, t: float, timeout: float = 5.0) -> TwistSeen:
         return self._wait(lambda tw: tw.zero, t, timeout, "a zero Twist")

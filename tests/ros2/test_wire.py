@@ -15,7 +15,7 @@ from rosbags.serde import SerdeError
 from protocol.ros2 import types as ros
 from protocol.ros2.attachment import Attachment, gid_of
 from protocol.ros2.config import RosConfigError, load_ros2_config, parse_ros2_config
-from protocol.ros2.keys import TopicNaming, full_topic
+from protocol.ros2.keys import Qos, TopicNaming, full_topic
 
 
 @pytest.mark.parametrize("typename", ros.USED_TYPES)
@@ -64,12 +64,49 @@ def test_rmw_zenoh_keys_and_tokens():
     )
     assert naming.subscription_key("/r0/odom", ros.ODOMETRY) == "3/r0/odom/nav_msgs::msg::dds_::Odometry_/*"
     assert naming.node_token("abcd", 0, "/", "talker") == "@ros2_lv/3/abcd/0/0/NN/%/%/talker"
-    token = naming.endpoint_token("abcd", 0, 10, "MP", "/", "talker", "/chatter", ros.STRING)
-    # The shape of rmw_zenoh's design document's example for the talker demo.
+    token = naming.endpoint_token("abcd", 0, 10, "MS", "/", "listener", "/chatter", ros.STRING)
+    # rmw_zenoh's design document's example for the listener demo (reliable, volatile, keep-last 10:
+    # only the depth differs from rmw_zenoh's defaults, so only the depth is written).
     type_hash = ros.PUBLISHED_HASHES[ros.STRING]
     assert token == (
-        f"@ros2_lv/3/abcd/0/10/MP/%/%/talker/%chatter/std_msgs::msg::dds_::String_/{type_hash}/1:2:1,10:,:,:,,"
+        f"@ros2_lv/3/abcd/0/10/MS/%/%/listener/%chatter/std_msgs::msg::dds_::String_/{type_hash}/::,10:,:,:,,"
     )
+
+
+def test_qos_chunks_list_only_what_differs_from_rmw_zenohs_defaults():
+    assert Qos(depth=7).chunk() == "::,7:,:,:,,"  # the design document's talker
+    assert Qos(depth=42).chunk() == "::,:,:,:,,"  # every value the default
+    assert Qos(reliable=False, depth=1).chunk() == "2::,1:,:,:,,"  # best effort (an embedded client's cmd_vel)
+    assert Qos(depth=1, transient_local=True).chunk() == ":1:,1:,:,:,,"  # amcl_pose
+    # Eleven values in six ':'-separated groups, as rmw_zenoh's parser splits them.
+    groups = Qos(depth=1, transient_local=True).chunk().split(":")
+    assert [len(g.split(",")) for g in groups] == [1, 1, 2, 2, 2, 3]
+
+
+def test_humble_keys_and_tokens_carry_no_type_hash():
+    """Humble's rmw_zenoh writes TypeHashNotSupported where Jazzy writes the RIHS01 hash: a robot
+    configured with type_hash = "TypeHashNotSupported" is spoken to in those keys."""
+    config = parse_ros2_config({"robots": {"r0": {"type_hash": "TypeHashNotSupported"}}})
+    humble, jazzy = config.naming("r0"), config.naming("r1")
+    assert (
+        humble.data_key("/r0/cmd_vel", ros.TWIST)
+        == "0/r0/cmd_vel/geometry_msgs::msg::dds_::Twist_/TypeHashNotSupported"
+    )
+    assert jazzy.data_key("/r1/cmd_vel", ros.TWIST).endswith(ros.PUBLISHED_HASHES[ros.TWIST])
+    token = humble.endpoint_token("abcd", 0, 1, "MP", "/r0", "n", "/r0/cmd_vel", ros.TWIST)
+    assert "/geometry_msgs::msg::dds_::Twist_/TypeHashNotSupported/" in token
+    # Subscriptions take any hash: a Humble publisher is heard by a Jazzy-configured robot too.
+    assert jazzy.subscription_key("/r1/odom", ros.ODOMETRY).endswith("/*")
+    with pytest.raises(RosConfigError, match="type_hash"):
+        parse_ros2_config({"robots": {"r0": {"type_hash": "RIHS01_x"}}})
+
+
+def test_gid_is_xxh3_128_of_the_token():
+    """rmw_zenoh_cpp's Entity::gid: XXH3-128 of the token, the 128-bit value's bytes low first.
+    XXH3-128 of the empty input is 99aa06d3014798d86001c324468d497f (xxHash's reference)."""
+    assert gid_of("") == bytes.fromhex("99aa06d3014798d86001c324468d497f")[::-1]
+    token = "@ros2_lv/0/x/0/1/MP/%/%/n/%t/std_msgs::msg::dds_::String_/h/::,10:,:,:,,"
+    assert gid_of(token) != gid_of(token + "x") and len(gid_of(token)) == 16
 
 
 def test_ros2dds_keys_are_the_topic_names():
@@ -125,6 +162,31 @@ def test_config_file(tmp_path):
     assert mixed.with_overrides(domain=2).naming("r1").domain == 2  # the command line wins
 
 
+def test_real_base_keys_in_the_config(tmp_path):
+    f = tmp_path / "robots.toml"
+    f.write_text(
+        '[ros2.robots.r0]\ncmd_vel_type = "twist_stamped"\npose_type = "pose"\npose_topic = "amcl_pose"\n'
+        'pose_durability = "transient_local"\nodom_topic = "odom"\nscan_topic = "scan"\nscan_timeout = 0.3\n'
+        'obstacle_patience = 20\ntype_hash = "TypeHashNotSupported"\n'
+    )
+    link = load_ros2_config(f).link("r0")
+    assert link.cmd_vel_typename == ros.TWIST_STAMPED and link.pose_durability == "transient_local"
+    assert (link.topic(link.odom_topic), link.topic(link.scan_topic)) == ("/r0/odom", "/r0/scan")
+    assert (link.scan_timeout, link.obstacle_patience, link.type_hash) == (0.3, 20.0, "TypeHashNotSupported")
+    default = load_ros2_config(None).link("r0")
+    assert (default.cmd_vel_typename, default.scan_topic, default.pose_durability) == (ros.TWIST, "", "volatile")
+
+
+def test_twist_stamped_carries_stamp_and_frame():
+    msg = ros.deserialize(
+        ros.serialize(ros.cmd_vel(ros.TWIST_STAMPED, 0.4, -0.2, 1_700_000_000.25, "base_link"), ros.TWIST_STAMPED),
+        ros.TWIST_STAMPED,
+    )
+    assert ros.twist_of(msg, ros.TWIST_STAMPED) == pytest.approx((0.4, -0.2))
+    assert msg.header.frame_id == "base_link" and ros.seconds(msg.header.stamp) == pytest.approx(1_700_000_000.25)
+    assert ros.twist_of(ros.cmd_vel(ros.TWIST, 0.4, -0.2, 0.0, ""), ros.TWIST) == pytest.approx((0.4, -0.2))
+
+
 def test_door_sensors_in_the_config(tmp_path):
     from protocol.ros2.config import check_doors
     from protocol.site import load_site
@@ -162,6 +224,12 @@ def test_door_sensors_in_the_config(tmp_path):
         ({"doors": {"d_storage": "/x"}}, "ros2.doors.d_storage: must be a table"),
         ({"doors": {"bad door": {}}}, "ros2.doors.bad door: not a door id"),
         ({"doors": ["d_storage"]}, "ros2.doors: must be a table"),
+        ({"robots": {"r0": {"cmd_vel_type": "twiststamped"}}}, "ros2.robots.r0.cmd_vel_type"),
+        ({"robots": {"r0": {"pose_durability": "durable"}}}, "ros2.robots.r0.pose_durability"),
+        ({"robots": {"r0": {"odom_topic": "odom"}}}, "ros2.robots.r0.odom_topic: odometry between"),
+        ({"robots": {"r0": {"scan_topic": "bad scan"}}}, "ros2.robots.r0.scan_topic"),
+        ({"robots": {"r0": {"scan_timeout": 0}}}, "ros2.robots.r0.scan_timeout"),
+        ({"robots": {"r0": {"obstacle_patience": "long"}}}, "ros2.robots.r0.obstacle_patience"),
     ],
 )
 def test_config_errors_name_the_key(table, where):

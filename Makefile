@@ -1,5 +1,6 @@
-# make demo        — set up .venv if missing, then run the main job on the default site
-# make test        — set up .venv if missing, install the system packages tests need (when root),
+# make demo        — set up .venv with what the demo needs if missing, then run the main job on the default site
+# make docs        — the same, then regenerate every figure and number the docs quote, from a fresh demo run
+# make test        — set up .venv with the test tools if missing, install the system packages tests need (when root),
 #                    check lint and formatting (ruff), then run the whole test suite
 # make bench       — set up .venv if missing, then run every benchmark (JSON on stdout, files in benchmarks/results/)
 # make constraints — re-resolve every dependency to its newest allowed version and pin it in constraints.txt
@@ -7,24 +8,36 @@
 PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
-STAMP  := $(VENV)/.installed
+# One venv, two levels: what the demo needs (the package) and, on top, the test tools and extras.
+# Each stamp says that level is installed for this pyproject.toml and these constraints.
+STAMP_DEMO := $(VENV)/.installed-demo
+STAMP_TEST := $(VENV)/.installed-test
 # The versions CI installed (see `make constraints`): every install from this Makefile uses them.
 CONSTRAINTS := constraints.txt
 
-.PHONY: setup demo test lint bench constraints clean
+.PHONY: setup demo test lint bench docs constraints clean
 
 # -qq: pip still prints errors (and fails the make), but not setuptools' notice about editable
 # installs nor a machine's pip-config notices, which would greet every first run.
-$(STAMP): pyproject.toml $(CONSTRAINTS)
+define install
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	@echo "installing arroch and its dependencies into $(VENV) (versions from $(CONSTRAINTS); minutes the first time)"
+	@echo "installing $(1) and its dependencies into $(VENV) (versions from $(CONSTRAINTS); minutes the first time)"
 	$(PY) -m pip install -qq --upgrade 'pip>=24,<27'
-	$(PY) -m pip install -qq -c $(CONSTRAINTS) -e '.[test]'
-	@touch $(STAMP)
+	$(PY) -m pip install -qq -c $(CONSTRAINTS) -e '$(1)'
+endef
 
-setup: $(STAMP)
+$(STAMP_DEMO): pyproject.toml $(CONSTRAINTS)
+	$(call install,.)
+	@touch $(STAMP_DEMO)
 
-demo: setup
+# '.[test]' holds '.': the demo's level is then installed too.
+$(STAMP_TEST): pyproject.toml $(CONSTRAINTS)
+	$(call install,.[test])
+	@touch $(STAMP_TEST) $(STAMP_DEMO)
+
+setup: $(STAMP_TEST)
+
+demo: $(STAMP_DEMO)
 	$(VENV)/bin/arroch demo
 
 lint: setup
@@ -42,6 +55,11 @@ bench: setup
 		$(PY) $$b > benchmarks/results/$$(basename $$b .py).json || exit 1; \
 		cat benchmarks/results/$$(basename $$b .py).json; \
 	done
+
+# Every figure and number the docs quote, from a fresh demo run (docs/figures.json, docs/demo-timeline.png;
+# the docs quote them and tests/test_docs_figures.py checks they match).
+docs: $(STAMP_DEMO)
+	$(PY) docs/make_docs.py
 
 # A fresh venv with no constraints: pip picks the newest versions pyproject.toml allows; they are
 # then tested (make test) and committed. Run it to move to newer releases on purpose.

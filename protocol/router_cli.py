@@ -22,7 +22,7 @@ log = logging.getLogger("arroch.router")
 def run_router(args: argparse.Namespace) -> int:
     if not args.listen and not args.zenoh_config:
         args.listen = DEFAULT_ROUTER
-    args.mode = "router"
+    args.zenoh_mode = "router"
     try:
         opts = options_from(args)
         session = open_session(opts)

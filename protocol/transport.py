@@ -26,11 +26,12 @@ import ctypes
 import json
 import os
 import socket
+import sys
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import zenoh
 
@@ -50,7 +51,7 @@ class ZenohOptions:
     shared_memory: bool | None = None  # None: Zenoh's default
     # Names of the settings an environment variable or a command-line option gave explicitly
     # ("mode", "connect", ...). With a config file only these override the file, so an explicit
-    # ``--mode client`` beats a file's ``mode: "peer"`` while the default "client" does not.
+    # ``--zenoh-mode client`` beats a file's ``mode: "peer"`` while the default "client" does not.
     explicit: set[str] = field(default_factory=set)
 
     def effective_connect(self) -> list[str]:
@@ -64,13 +65,23 @@ def _split(value: str | None) -> list[str]:
     return [part.strip() for part in (value or "").split(",") if part.strip()]
 
 
+class _DeprecatedZenohMode(argparse.Action):
+    """``--mode`` for the Zenoh mode: works as ``--zenoh-mode`` does, with a warning on stderr."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any, option: Any = None):
+        print(f"{parser.prog}: --mode {values} is deprecated here: use --zenoh-mode {values}", file=sys.stderr)
+        setattr(namespace, self.dest, values)
+
+
 def add_zenoh_arguments(parser: argparse.ArgumentParser) -> None:
     """The Zenoh options every service's command line has."""
     group = parser.add_argument_group("zenoh transport")
     group.add_argument(
         "--zenoh-config", metavar="FILE", help="Zenoh JSON5 config file, used as it is (env ARROCH_ZENOH_CONFIG)"
     )
-    group.add_argument("--mode", choices=MODES, help="Zenoh mode (default client; env ARROCH_ZENOH_MODE)")
+    group.add_argument("--zenoh-mode", choices=MODES, help="Zenoh session mode (default client; env ARROCH_ZENOH_MODE)")
+    # The old spelling, kept working: elsewhere (arroch sim, up, demo) --mode is the site clock's mode.
+    group.add_argument("--mode", choices=MODES, dest="zenoh_mode", action=_DeprecatedZenohMode, help=argparse.SUPPRESS)
     group.add_argument(
         "--connect",
         metavar="ENDPOINTS",
@@ -111,8 +122,8 @@ def options_from(args: argparse.Namespace | None = None, env: dict[str, str] | N
     if args is not None:
         if getattr(args, "zenoh_config", None):
             opts.config_file = args.zenoh_config
-        if getattr(args, "mode", None):
-            opts.mode = args.mode
+        if getattr(args, "zenoh_mode", None):
+            opts.mode = args.zenoh_mode
             opts.explicit.add("mode")
         if getattr(args, "connect", None):
             opts.connect = _split(args.connect)

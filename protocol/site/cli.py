@@ -58,7 +58,7 @@ def _load_or_report(path: str | None) -> Site | None:
 def cmd_check(args: argparse.Namespace) -> int:
     site = _load_or_report(args.file)
     if site is None:
-        return 1
+        return 2  # bad input, as for every command (docs/architecture.md, "Exit codes")
     print(summary(site))
     print("ok")
     return 0
@@ -73,7 +73,7 @@ def cmd_show(args: argparse.Namespace) -> int:
         return 2
     site = _load_or_report(args.file)
     if site is None:
-        return 1
+        return 2
     from .render import render_site  # matplotlib loads only when drawing
 
     try:
@@ -92,11 +92,15 @@ def cmd_generate(args: argparse.Namespace) -> int:
         text = generate_site(args.robots, args.objects, args.seed)
     except (ValueError, TypeError) as exc:
         print(f"cannot generate: {exc}", file=sys.stderr)
-        return 1
+        return 2
     if args.out in (None, "-"):
         sys.stdout.write(text)
         return 0
-    Path(args.out).write_text(text, encoding="utf-8")
+    try:
+        Path(args.out).write_text(text, encoding="utf-8")
+    except OSError as exc:
+        print(f"cannot write {args.out}: {exc.strerror}", file=sys.stderr)
+        return 1
     print(f"wrote {args.out}: {args.robots} robots x {args.objects} objects, seed {args.seed}", file=sys.stderr)
     return 0
 
@@ -117,7 +121,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sub = parser.add_subparsers(dest="site_command", metavar="SUBCOMMAND", required=True)
 
     check = sub.add_parser(
-        "check", help="validate a site file and print a summary (exit 1 with the reason if it is refused)"
+        "check", help="validate a site file and print a summary (exit 2 with the reason if it is refused)"
     )
     check.add_argument("file", nargs="?", help=SITE_FILE_HELP)
     check.set_defaults(func=cmd_check)

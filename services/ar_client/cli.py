@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import re
 import sys
 from pathlib import Path
 from typing import Any
@@ -267,6 +268,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         "y down, z forward; pointing down, any unit): picks a single tag's right planar solution, adds "
         "gravity_error_deg",
     )
+    # A gravity vector often starts with a minus (-0.1,9.8,0.2); argparse takes only plain negative
+    # numbers for values, anything else starting with '-' for an option. This parser has no option
+    # that looks like a number, so a '-' followed by a digit is always a value here.
+    loc._negative_number_matcher = re.compile(r"^-\.?\d")
     loc.set_defaults(func=_localize)
 
     ren = ar_sub.add_parser(

@@ -6,7 +6,11 @@ planner can be fed a recorded mission. Pace: the recording's own (site seconds =
 ``--rate K`` times faster, ``--fast`` (no waiting), or ``--step`` (Enter publishes the next
 ``--step-size`` site seconds). ``--hold-camera`` lets what came before each camera frame land
 (``--settle``), publishes the frame and waits for the AR client's overlay of it (as the lockstep sim
-does), so overlays are drawn over the world they show.
+does), so overlays are drawn over the world they show. ``--loop`` plays the recording again and
+again until Ctrl-C (what ``arroch demo --linger`` shows after its mission): each pass after the first
+goes out re-timed, every site time (stamps, the clock, paths, door deadlines) shifted past the last
+pass and each sender renamed ``<src>~<pass>``, since receivers drop a sender's messages that are
+older than what they have (a pose stamped earlier, a clock with a lower ``seq``).
 
 Examples:
   arroch replay runs/20260101-120000/run.mcap --only 'robot/*/pose' --only 'intent/*' --only clock
@@ -21,11 +25,14 @@ import logging
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import TextIO
 
-from protocol.messages import CameraFrame, Overlay
+import msgspec
+
+from protocol.codec import encode
+from protocol.messages import CameraFrame, Clock, DoorState, Intent, Message, Overlay, RobotCommand
 from protocol.runner import add_common_arguments, zenoh_options
 from protocol.service import Service
 from protocol.transport import NoRouter, ZenohOptions, through_local_router
@@ -37,6 +44,7 @@ from .topics import MESSAGE_PREFIX, key_of
 log = logging.getLogger("arroch.replay")
 PROGRESS_EVERY = 5.0  # wall seconds between two progress lines
 LINGER = 0.5  # wall seconds between the last message and closing the session (a batch may still be on its way)
+LOOP_GAP = 2.0  # site seconds between the end of one --loop pass and the start of the next
 
 
 class Pacer:
@@ -73,6 +81,21 @@ def selected(topic: str, only: list[str], skip: list[str]) -> bool:
     if only and not any(fnmatch.fnmatchcase(rest, p) for p in only):
         return False
     return not any(fnmatch.fnmatchcase(rest, p) for p in skip)
+
+
+def retimed(record: Recorded, offset: float, suffix: str) -> Recorded:
+    """``record`` as a later ``--loop`` pass sends it: every site time ``offset`` later, its sender
+    ``src + suffix`` (a new sender, whose ``seq`` may start again)."""
+    msg = record.message
+    changes: dict[str, object] = {"stamp": msg.stamp + offset, "src": msg.src + suffix}
+    if isinstance(msg, Clock):
+        changes["time"] = msg.time + offset
+    elif isinstance(msg, (Intent, RobotCommand)):
+        changes["trajectory"] = [[row[0] + offset, *row[1:]] for row in msg.trajectory]
+    elif isinstance(msg, DoorState) and msg.until > 0:
+        changes["until"] = msg.until + offset
+    moved: Message = msgspec.structs.replace(msg, **changes)
+    return Recorded(record.topic, record.time + offset, encode(moved), moved)
 
 
 class Replayer(Service):
@@ -164,12 +187,7 @@ def replay_main(args: argparse.Namespace) -> int:
         return 1
     try:
         time.sleep(args.delay)  # subscribers discover the new publisher first
-        records = (
-            r
-            for r in messages(path, start=args.start, end=args.end)
-            if selected(r.topic, args.only or [], args.skip or [])
-        )
-        code = replayer.replay(records, pacer)
+        code = replayer.replay(_passes(path, args), pacer)
         time.sleep(LINGER)  # the last messages leave before the session closes
     except RecordingError as exc:
         log.error("%s", exc)
@@ -183,6 +201,24 @@ def replay_main(args: argparse.Namespace) -> int:
         f"replay: {replayer.published} messages published on namespace {namespace}{held}", file=sys.stderr, flush=True
     )
     return code
+
+
+def _passes(path: Path, args: argparse.Namespace) -> Iterator[Recorded]:
+    """The selected records once, or with ``--loop`` pass after pass (re-timed) until the replay stops."""
+    first = last = None  # site times of the first pass's first and last record (they come in time order)
+    k = 0
+    while True:
+        offset = 0.0 if first is None or last is None else k * (last - first + LOOP_GAP)
+        for record in messages(path, start=args.start, end=args.end):
+            if not selected(record.topic, args.only or [], args.skip or []):
+                continue
+            if k == 0:
+                first = record.time if first is None else first
+                last = record.time
+            yield record if k == 0 else retimed(record, offset, f"~{k}")
+        if not args.loop or first is None:
+            return
+        k += 1
 
 
 def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
@@ -199,6 +235,9 @@ def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
         "--only", action="append", metavar="PATTERN", help="replay only keys matching (e.g. 'robot/*/pose'; repeatable)"
     )
     parser.add_argument("--skip", action="append", metavar="PATTERN", help="do not replay keys matching (repeatable)")
+    parser.add_argument(
+        "--loop", action="store_true", help="play it again and again (later passes re-timed) until Ctrl-C"
+    )
     parser.add_argument("--start", type=float, metavar="T", help="from site time T")
     parser.add_argument("--end", type=float, metavar="T", help="up to site time T")
     parser.add_argument(

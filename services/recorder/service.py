@@ -32,6 +32,9 @@ from .topics import recorded_keys
 LOG_POLL = 0.25  # wall seconds between two looks at the followed log file
 RESEND_TICK = 0.2  # wall seconds between a viewer's subscription and the state sent again for it
 PROFILE_TICK = 1.0  # wall seconds between two calls of the profiles' tick (batches written when old)
+# On stop, what is still on its way lands first: the last messages (mission_done among them) come
+# right before the supervisor's SIGTERM, behind a lockstep run's dense poses and frames.
+SETTLE_QUIET, SETTLE_MAX = 0.3, 2.0  # wall s without a message that ends the wait; its longest
 
 
 def without_shared_memory(options: ZenohOptions) -> ZenohOptions:
@@ -175,7 +178,17 @@ class Recorder(Service):
                 for profile in self.profiles:
                     profile.tick()
 
+    def _settle(self) -> None:
+        """Wait (the session still open) until no message came for SETTLE_QUIET s, at most SETTLE_MAX s."""
+        deadline = time.monotonic() + SETTLE_MAX
+        seen = -1
+        while seen != self.messages and time.monotonic() < deadline:
+            seen = self.messages
+            time.sleep(SETTLE_QUIET)
+
     def teardown(self) -> None:
+        if not self._closed:
+            self._settle()
         if self.follower is not None and not self._closed:
             self._follow_log()  # the last lines
         with self._lock:

@@ -11,17 +11,21 @@ so tying frames to sim time would either flood them at high rates or stall the s
 
 Lockstep is the exception (:class:`FrameHold`): there site time runs only between the planner's
 answers, and then far faster than wall time, so a frame taken at a wall instant is drawn over a
-world that has moved on by the time the AR client has localised it. Instead the sim takes a frame
-every ``--camera-hold`` site seconds (30; 0: off): at the first tick at or past each multiple of it,
-once the plan answering that instant is in (so the robots' paths drawn are those of that instant),
-and holds time still until the AR client's Overlay for that frame (``ar/<cid>/overlay``, same
-``frame_seq``) has come back, or ``--camera-hold-timeout`` wall seconds (1.5) have passed. These
-held frames are then the only frames, so every frame the AR client and the tablet page get is drawn
-over the world it shows, at site times that are the same for the same mission. A hold costs a render
-(~0.1 s) and the AR client's turn (~0.05 s); one every 30 site seconds gives about as many frames as
-the wall rate did (the demo's lockstep runs at ~60x). After :data:`MAX_MISSED` holds in a row get no overlay (no
-AR client on this camera, or a dead one), the camera falls back to the wall rate, so such a run
-loses only that many timeouts; the first overlay seen again brings the holds back.
+world that has moved on by the time the AR client has localised it. Instead the sim takes its frames
+on the site clock. Every ``--camera-hold`` site seconds (30; 0: off) a held frame: at the first tick
+at or past each multiple of it, once the plan answering that instant is in (so the robots' paths
+drawn are those of that instant), it holds time still until the AR client's Overlay for that frame
+(``ar/<cid>/overlay``, same ``frame_seq``) has come back, or ``--camera-hold-timeout`` wall seconds
+(1.5) have passed; the AR client's kept pictures are of these frames, at site times that are the
+same for the same mission. Between them, a frame every ``--camera-every`` site seconds
+(:data:`LOCKSTEP_FRAME_PERIOD`, 2: 0.5 Hz of site time), time not held, so a recording or a page
+shows the mission in small steps whatever its speed; whoever draws them takes the robots' poses of
+the frame's capture instant (poses too come at a fixed site-time rate). A render costs ~0.1 s at
+640x480 (more on a loaded machine): a ~650 s mission spends about half a minute of wall time on its
+~330 frames, which a lockstep run paced at 10x real time (``arroch demo``) mostly hides. After
+:data:`MAX_MISSED` holds in a row get no overlay (no AR client on this camera, or a dead one), the
+camera falls back to the wall rate, so such a run loses only that many timeouts; the first overlay
+seen again brings the holds back.
 
 Each frame carries gravity in the camera frame as the tablet's accelerometer would measure it (the
 truth turned by ``--camera-gravity-noise`` degrees about each axis, default 1; ``--camera-no-gravity``
@@ -42,6 +46,9 @@ from typing import Any
 
 import numpy as np
 
+LOCKSTEP_FRAME_PERIOD = 2.0  # site s between two frames in lockstep (0.5 Hz of site time): smooth recordings
+HOLD_PERIOD = 30.0  # site s between two held frames in lockstep
+
 
 @dataclass(frozen=True)
 class CameraOptions:
@@ -54,7 +61,8 @@ class CameraOptions:
     fov: float = 60.0  # vertical field of view, degrees
     tablet_height: float = 1.3  # m
     tablet_pitch: float = 0.0  # radians
-    hold: float = 30.0  # lockstep: site seconds between held frames (0: wall-rate frames as in the other modes)
+    hold: float = HOLD_PERIOD  # lockstep: site s between held frames (0: wall-rate frames as elsewhere)
+    every: float = LOCKSTEP_FRAME_PERIOD  # lockstep: site s between two frames, held or not
     hold_timeout: float = 1.5  # wall seconds a held frame waits for its overlay
     gravity_noise: float | None = 1.0  # degrees per axis on the gravity sent with each frame (None: none sent)
 
@@ -82,10 +90,18 @@ def add_camera_arguments(group: Any) -> None:
     group.add_argument(
         "--camera-hold",
         type=float,
-        default=30.0,
+        default=HOLD_PERIOD,
         metavar="S",
-        help="lockstep: a frame every S site seconds, time held until the AR client's overlay of it comes back "
-        "(default 30; 0: frames at --camera-rate per wall second instead)",
+        help="lockstep: every S site seconds a frame with time held until the AR client's overlay of it comes back "
+        f"(default {HOLD_PERIOD:g}; 0: frames at --camera-rate per wall second instead)",
+    )
+    group.add_argument(
+        "--camera-every",
+        type=float,
+        default=LOCKSTEP_FRAME_PERIOD,
+        metavar="S",
+        help="lockstep: a frame every S site seconds besides the held ones, time not held for them "
+        f"(default {LOCKSTEP_FRAME_PERIOD:g}: 0.5 Hz of site time, so recordings are smooth)",
     )
     group.add_argument(
         "--camera-hold-timeout",
@@ -124,6 +140,9 @@ def camera_options_from(args: argparse.Namespace) -> CameraOptions | None:
         raise ValueError("--camera-rate must be > 0")
     if not (math.isfinite(args.camera_hold) and args.camera_hold >= 0):
         raise ValueError(f"--camera-hold must be >= 0 site seconds (0: no held frames), got {args.camera_hold}")
+    every = getattr(args, "camera_every", LOCKSTEP_FRAME_PERIOD)
+    if not (math.isfinite(every) and every > 0):
+        raise ValueError(f"--camera-every must be > 0 site seconds, got {every}")
     if not (math.isfinite(args.camera_hold_timeout) and args.camera_hold_timeout > 0):
         raise ValueError(f"--camera-hold-timeout must be > 0 wall seconds, got {args.camera_hold_timeout}")
     noise = getattr(args, "camera_gravity_noise", 1.0)
@@ -138,6 +157,7 @@ def camera_options_from(args: argparse.Namespace) -> CameraOptions | None:
         tablet_height=args.camera_height,
         tablet_pitch=math.radians(args.camera_pitch),
         hold=args.camera_hold,
+        every=every,
         hold_timeout=args.camera_hold_timeout,
         gravity_noise=None if getattr(args, "camera_no_gravity", False) else getattr(args, "camera_gravity_noise", 1.0),
     )
@@ -276,6 +296,7 @@ class CameraFeed:
         self.mirror = WorldMirror(self.world, engine)
         self.hold = FrameHold(options.hold, options.hold_timeout) if lockstep and options.hold > 0 else None
         self._next = 0.0
+        self._next_site = 0.0  # lockstep: site time of the next frame between holds
         self.frames = 0
         self._rng = np.random.default_rng()  # the IMU noise on each frame's gravity
 
@@ -289,11 +310,17 @@ class CameraFeed:
         if self.at_wall_rate and wall >= self._next:
             self.render(service, wall)
 
+    def maybe_render_between_holds(self, service: Any, wall: float) -> None:
+        """Lockstep: render and publish a frame (time not held) if one is due on the site clock."""
+        if not self.at_wall_rate and self.engine.time >= self._next_site - _EPS:
+            self.render(service, wall)
+
     def render(self, service: Any, wall: float) -> int:
         """Render and publish a frame now (CameraFrame, then its CameraTruth); returns its seq."""
         from .camera import frame_message, truth_message
 
         self._next = wall + 1.0 / self.options.rate
+        self._next_site = (math.floor(self.engine.time / self.options.every + _EPS) + 1) * self.options.every
         self.mirror.sync()
         spec = camera_spec(self.options, self.engine.human_pose())
         frame = frame_message(

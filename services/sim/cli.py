@@ -5,9 +5,8 @@ the mission is done; exit code 0, or 4 when the experimenter aborted the trial).
 (site file, human config, options; ``--human participant`` with ``--mode lockstep``) exits 2 before
 any Zenoh session is opened.
 
-``--mode`` here is the clock mode (realtime, rate, lockstep), as the issue's command line has it;
-the Zenoh session mode every other service calls ``--mode`` is ``--zenoh-mode`` here (or env
-``ARROCH_ZENOH_MODE``).
+``--mode`` here is the clock mode (realtime, rate, lockstep); the Zenoh session mode is
+``--zenoh-mode``, as in every command (or env ``ARROCH_ZENOH_MODE``).
 """
 
 from __future__ import annotations
@@ -18,7 +17,6 @@ from typing import Any
 
 from protocol.runner import add_common_arguments, run_service
 from protocol.schema import ID_REGEX
-from protocol.transport import MODES as ZENOH_MODES
 from protocol.transport import options_from
 
 from .human import FOCUS_READINGS, METHODS, HumanConfig
@@ -35,12 +33,9 @@ def register(subparsers: Any) -> None:
             "human works, opens her door and gives feedback (ARROCH). Publishes clock, poses, statuses, door "
             "states, events and, at the end, the mission's metrics (Event mission_done)."
         ),
-        conflict_handler="resolve",  # our --mode (clock mode) replaces the Zenoh --mode
+        conflict_handler="resolve",  # our --mode (clock mode) replaces the deprecated Zenoh --mode
     )
     add_common_arguments(parser)
-    parser.add_argument(
-        "--zenoh-mode", choices=ZENOH_MODES, help="Zenoh session mode (default client; env ARROCH_ZENOH_MODE)"
-    )
     run = parser.add_argument_group("simulation")
     run.add_argument(
         "--method", choices=METHODS, default="arroch", help="arroch (default), no-feedback or no-comm (paper §V-A)"
@@ -242,7 +237,6 @@ def _run(args: argparse.Namespace) -> int:
 
         site = load_site(args.site)
         options = build_options(args)
-        zenoh_args = argparse.Namespace(**{**vars(args), "mode": args.zenoh_mode})
-        return SimService(site, options, options_from(zenoh_args), namespace=args.namespace)
+        return SimService(site, options, options_from(args), namespace=args.namespace)
 
     return run_service(build)

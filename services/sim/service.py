@@ -21,9 +21,13 @@ then the events, then the clock. A planner woken by an event (or by the new ``wo
 a status) has therefore already received the poses of that instant.
 
 Publishing rates:
-- poses every ``1/pose_rate`` of sim time (20 Hz by default); in lockstep also at most
-  ``pose_rate`` times per wall second (more is of no use to anyone watching, and at 1000x real
-  time would flood the network), and always at a new world version, when the planner needs them;
+- poses every ``1/pose_rate`` of sim time (20 Hz by default) in every mode, lockstep included, so a
+  recording or a viewer gets the same smooth track at any speed (the instants are site times, so
+  they do not depend on the machine's load either), and always at a new world version, when the
+  planner needs them. In lockstep with nobody watching (no live service but the mission's own loop,
+  :data:`NOT_WATCHING`: a sweep's trial) only every ``1/SPARSE_POSE_RATE`` site s between world
+  versions: the planner plans from a version's poses only, and the poses nobody reads cost a sweep
+  trial about half its CPU time again;
 - the clock with every pose batch, at every new world version, and twice a wall second while
   time stands still (paused in lockstep, or the mission over);
 - statuses and door states when they change, and all of them once a wall second for late joiners
@@ -47,6 +51,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
+
+import zenoh
 
 from protocol.keys import chunk_at
 from protocol.messages import (
@@ -83,6 +89,8 @@ FEEDBACK_ABORT = 120.0  # lockstep: default wall s without an ack of the human's
 EXIT_ABORTED = 3  # exit code of a lockstep run aborted for want of an answer (feedback ack)
 EXIT_STUDY_ABORTED = 4  # exit code (--until-done) of a trial the experimenter aborted (StudyControl abort)
 REFUSAL_LOG_INTERVAL = 60.0  # wall s between two WARNING lines about one door sensor's same fault
+SPARSE_POSE_RATE = 1.0  # Hz of site time: lockstep poses between world versions when nobody watches
+NOT_WATCHING = frozenset({"sim", "planner", "restrictor", "supervisor"})  # services that need no pose track
 
 
 @dataclass
@@ -154,8 +162,8 @@ class SimService(Service):
         else:
             self.pacer = WallPacer(options.rate if options.mode == "rate" else 1.0, options.engine.tick)
         self._pose_period = 1.0 / options.pose_rate
+        self._watchers: set[str] = set()  # live services (liveliness keys) that may watch the poses
         self._next_pose_sim = 0.0
-        self._last_pose_wall = 0.0
         self._last_heartbeat = 0.0
         self._last_clock_wall = 0.0
         self._blocker = ""
@@ -211,6 +219,13 @@ class SimService(Service):
             )
             if self._camera.hold is not None:
                 self.subscribe(self.keys.overlay(self.options.camera.id), Overlay, self._on_overlay)
+        if self.options.mode == "lockstep":
+            # history=True: those up before the sim count too.
+            self._declared.append(
+                self.session.liveliness().declare_subscriber(
+                    self.keys.liveliness("*", "*"), self._on_liveliness, history=True
+                )
+            )
         self._started_wall = time.monotonic()
         self.engine.start()
         self._publish_tick(force_poses=True)
@@ -424,7 +439,7 @@ class SimService(Service):
         for request in self.engine.take_feedback():
             self._send_feedback(request)
         changed = self.engine.world_version != version
-        self._publish_tick(force_poses=changed, wall=wall)
+        self._publish_tick(force_poses=changed)
         if self._external is not None:
             self._external.after_tick()  # the ROS 2 bases' odometry, after the door states it depends on
         if self.engine.done:
@@ -434,17 +449,24 @@ class SimService(Service):
 
     # ------------------------------------------------------------------ publishing
 
-    def _publish_tick(self, *, force_poses: bool, wall: float | None = None) -> None:
-        wall = time.monotonic() if wall is None else wall
+    def _on_liveliness(self, sample: Any) -> None:
+        """Who is up (Zenoh's thread): a service outside the mission's own loop may watch the poses."""
+        service, instance = str(sample.key_expr).split("/")[-2:]
+        if service in NOT_WATCHING:
+            return
+        if sample.kind == zenoh.SampleKind.PUT:
+            self._watchers.add(f"{service}/{instance}")
+        else:
+            self._watchers.discard(f"{service}/{instance}")
+
+    def _publish_tick(self, *, force_poses: bool) -> None:
         t = self.engine.time
         events = self.engine.take_events()
         due = t >= self._next_pose_sim - 1e-9
-        if due and self.options.mode == "lockstep" and wall - self._last_pose_wall < self._pose_period:
-            due = False  # in lockstep, no faster than pose_rate per wall second either
         if force_poses or due or events:
             self._publish_poses()
-            self._last_pose_wall = wall
-            self._next_pose_sim = t + self._pose_period
+            watched = self.options.mode != "lockstep" or self._watchers
+            self._next_pose_sim = t + (self._pose_period if watched else 1.0 / SPARSE_POSE_RATE)
         # Lockstep: at a new world version every status as of this instant (see the module docstring).
         self._publish_states(everything=force_poses and self.options.mode == "lockstep")
         for event in events:
@@ -575,6 +597,7 @@ class SimService(Service):
             return
         t = self.engine.time
         if not hold.due(t):
+            self._camera.maybe_render_between_holds(self, wall)  # 0.5 Hz of site time, for recordings
             return
         if hold.suspended:
             hold.skip(t)
@@ -585,7 +608,6 @@ class SimService(Service):
         self.count("camera_holds")
         # The AR client draws the world as of this instant: its poses and the (paused) clock go first.
         self._publish_poses()
-        self._last_pose_wall = wall
         self._publish_clock()
         hold.framed(self._camera.render(self, wall), time.monotonic())
 

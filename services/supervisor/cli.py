@@ -235,8 +235,9 @@ def add_up_arguments(parser: argparse.ArgumentParser) -> None:
     mission.add_argument(
         "--mode",
         choices=("realtime", "rate", "lockstep"),
-        help="simulation clock: realtime, rate (with --rate) or lockstep (time advances only when every request is "
-        "answered)",
+        help="simulation clock: realtime (the default: the default mission then takes about 11 minutes, as on the "
+        "site), rate (with --rate) or lockstep (time advances only when every request is answered: the same "
+        "mission in seconds; `arroch demo` paces it to about a minute)",
     )
     mission.add_argument(
         "--rate", type=float, metavar="K", help="simulate at K times real time (with --mode lockstep: at most)"

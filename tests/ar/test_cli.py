@@ -178,3 +178,21 @@ def test_apriltag_detector_without_its_library_is_a_usage_error_naming_the_extra
     assert "pip install 'arroch[apriltag]'" in capsys.readouterr().err
     with pytest.raises(ValueError, match=r"arroch\[apriltag\]"):
         TagDetector("apriltag")
+
+
+@pytest.mark.parametrize("given", ["-0.1,9.8,0.2", "-.1,9.8,0.2", "0.1,9.8,-0.2"])
+def test_localize_takes_a_gravity_that_starts_with_a_minus_as_its_value(given):
+    """``--gravity -0.1,9.8,0.2`` (space, not '='): a value, though argparse reads most '-' words as options."""
+    from services.cli import build_parser
+
+    argv = ["ar", "localize", "--image", "x.png", "--intrinsics", "500,500,320,240,640,480", "--gravity", given]
+    args = build_parser().parse_args(argv)
+    assert args.gravity == given
+
+
+def test_localize_with_a_negative_gravity_runs_end_to_end(frame_png):
+    intrinsics = ",".join(f"{v:g}" for v in HD.as_list())
+    argv = ("--site", str(HALL_FILE), "--image", frame_png, "--intrinsics", intrinsics, "--json")
+    result = _run("ar", "localize", *argv, "--gravity", "-0.1,9.8,0.2")
+    assert result.returncode in (0, 1), result.stderr  # a pose or none: never a usage error
+    assert "gravity_error_deg" in json.loads(result.stdout) or not json.loads(result.stdout)["ok"]

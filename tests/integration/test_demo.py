@@ -1,9 +1,11 @@
-"""``arroch demo`` (what ``make demo`` runs) end to end: the whole mission with the tablet camera, the
-AR client and the tablet page; the page's URL and token printed and the page really served; the run
-folder with the metrics, the event log and a few overlay frames that are real drawings over the
-camera's images, taken at the sim's held instants (lockstep: a frame every ``--camera-hold`` site
-seconds, time held until its overlay came back), so how many are kept does not depend on the load.
-With ``--linger`` the page stays up after the mission until Ctrl-C, the metrics printed as a table."""
+"""``arroch demo`` (what ``make demo`` runs) end to end: the page's URL and token printed before the
+mission starts and the page really served; the whole mission paced (lockstep, at most ``--pace``
+times real time) with the tablet camera and the AR client; the run folder with the metrics, the
+event log and a few overlay frames that are real drawings over the camera's images, taken at the
+sim's held instants (lockstep: a frame every ``--camera-hold`` site seconds, time held until its
+overlay came back), so how many are kept does not depend on the load. With ``--linger`` the page
+goes on showing the run after the mission (its recording replayed in a loop) until Ctrl-C: a
+Chromium opened then sees the camera stream with the robots drawn over it."""
 
 from __future__ import annotations
 
@@ -13,6 +15,8 @@ import signal
 import ssl
 import time
 import urllib.request
+from collections.abc import Iterator
+from dataclasses import dataclass
 from itertools import pairwise
 from pathlib import Path
 
@@ -20,12 +24,15 @@ import cv2
 import numpy as np
 import pytest
 
+from services.ar_client.web.headless import Browser, chromium_path
+from services.recorder.reading import channel_stats
 from services.sim.camfeed import CameraOptions
-from tests.procs import arroch
+from tests.procs import Proc, arroch
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
-TIMEOUT = 150.0  # wall s; the demo takes 20-35 s on two cores
+TIMEOUT = 600.0  # wall s; the demo at --pace 30 takes about a minute on two idle cores, minutes on busy ones
+PACE = 30.0  # the test's pace (the default, 10, takes a minute more; the pacing is the same code)
 COLOUR_TOLERANCE = 60.0  # distance in RGB between a drawn pixel and its primitive's colour
 
 
@@ -57,33 +64,100 @@ def drawn_fraction(image: np.ndarray, primitives: list[dict]) -> tuple[int, floa
     return total, hits / max(total, 1)
 
 
-def test_demo_runs_the_mission_serves_the_tablet_page_and_keeps_overlay_frames(spawn, tmp_path: Path):
-    state = tmp_path / "state"  # the tablet's certificate goes to $XDG_STATE_HOME/arroch/tablet
-    proc = spawn(
-        arroch("demo", "--run-dir", str(tmp_path / "runs"), "--linger"),
+@dataclass
+class Demo:
+    proc: Proc
+    url: str
+    context: ssl.SSLContext
+    runs: Path
+    mission_wall: float  # wall s from the mission's start to the end of its run
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Demo]:
+    """One ``arroch demo --linger`` run, lingering once its mission is over (the tests below end it)."""
+    tmp = tmp_path_factory.mktemp("demo")
+    state = tmp / "state"  # the tablet's certificate goes to $XDG_STATE_HOME/arroch/tablet
+    proc = Proc(
+        arroch("demo", "--run-dir", str(tmp / "runs"), "--linger", "--pace", f"{PACE:g}"),
         env={"XDG_STATE_HOME": str(state)},
         name="demo",
     )
+    try:
+        # The URL and the token, said clearly before the mission starts, and the page really there.
+        proc.wait_for("==> tablet page", timeout=60)
+        token_line = proc.wait_for("access token:", timeout=10)
+        token = re.search(r"access token: (\S+)", token_line).group(1)
+        out = proc.output
+        url = next(line.strip() for line in out.splitlines() if line.strip().startswith("https://127.0.0.1:"))
+        assert f"?token={token}&mode=viewer" in url, url
+        assert "==> running one mission" not in out.split("==> tablet page")[0], out
+        context = ssl.create_default_context(cafile=str(state / "arroch" / "tablet" / "ca.pem"))
+        with urllib.request.urlopen(url, context=context, timeout=10) as page:
+            assert page.status == 200 and b"<html" in page.read().lower()
+        mission = proc.wait_for("==> running one mission", timeout=30)
+        assert f"lockstep, at most {PACE:g}x real time" in mission, mission
+        started = time.monotonic()
+        proc.wait_for("==> done; metrics", timeout=TIMEOUT)
+        mission_wall = time.monotonic() - started
+        proc.wait_for("the page replays its recording in a loop until Ctrl-C", timeout=30)
+        yield Demo(proc, url, context, tmp / "runs", mission_wall)
+    finally:
+        proc.stop()
 
-    # The URL and the token, said clearly while the mission runs, and the page really there.
-    proc.wait_for("==> tablet page", timeout=60)
-    token_line = proc.wait_for("access token:", timeout=10)
-    token = re.search(r"access token: (\S+)", token_line).group(1)
-    url = next(line.strip() for line in proc.output.splitlines() if line.strip().startswith("https://127.0.0.1:"))
-    assert f"?token={token}&mode=viewer" in url, url
-    context = ssl.create_default_context(cafile=str(state / "arroch" / "tablet" / "ca.pem"))
-    with urllib.request.urlopen(url, context=context, timeout=10) as page:
-        assert page.status == 200 and b"<html" in page.read().lower()
 
-    # --linger: after the mission, its metrics as a table, and the page still served until Ctrl-C.
-    proc.wait_for("stay up until Ctrl-C", timeout=TIMEOUT)
+def _robots_drawn(page: Browser) -> list[dict]:
+    """The overlays the page received that draw a robot over a localised camera frame (its WebSocket
+    traffic, as DevTools reports it; the page draws what it receives)."""
+    found = []
+    for event in list(page.events):
+        if event.get("method") != "Network.webSocketFrameReceived":
+            continue
+        text = event["params"]["response"].get("payloadData", "")
+        if '"overlay"' not in text[:200]:
+            continue
+        message = json.loads(text)
+        if message.get("ok") and any(p["l"].startswith("robot:") for p in message.get("primitives", [])):
+            found.append(message)
+    return found
+
+
+def test_after_the_mission_the_page_shows_the_robots_over_the_replayed_camera(demo: Demo):
+    if chromium_path() is None:
+        pytest.skip("no Chromium on this machine (sudo apt-get install chromium)")
+    with Browser(window=(1280, 800)) as page:
+        page.call("Network.enable")
+        page.navigate(demo.url)
+        state = page.wait_for(
+            "window.arroch && window.arroch.state().stream_frames > 5 && window.arroch.state().overlay"
+            " && window.arroch.state().overlay.ok && window.arroch.state()",
+            timeout=60,
+        )
+        assert state["mode"] == "viewer" and sorted(state["robots"]) == ["r0", "r1", "r2"], state
+        deadline = time.monotonic() + 60
+        while not _robots_drawn(page) and time.monotonic() < deadline:
+            time.sleep(0.5)
+        frames = [e for e in page.events if e.get("method") == "Network.webSocketFrameReceived"]
+        assert frames, "DevTools reported none of the page's WebSocket traffic"
+        assert _robots_drawn(page), "no overlay with a robot drawn on the camera image reached the page"
+        # Drawn on screen: the overlay canvas over the stream has the robots' pixels.
+        painted = page.wait_for(
+            "(() => { const c = document.getElementById('overlay'); const d = c.getContext('2d')"
+            ".getImageData(0, 0, c.width, c.height).data; let n = 0; for (let i = 3; i < d.length; i += 4)"
+            " n += d[i] > 0; return n > 500 && n; })()",
+            timeout=30,
+        )
+        assert painted > 500
+    assert demo.proc.alive()
+
+
+def test_demo_runs_the_mission_serves_the_tablet_page_and_keeps_overlay_frames(demo: Demo):
+    proc = demo.proc
     for row in ("[up] completed ", "[up] human door openings ", "[up] door openings, all ", "the paper's measure"):
         assert row in proc.output, row
     assert re.search(r"\[up\] team completion time +\d+\.\d  s ", proc.output), proc.output[-3000:]
-    time.sleep(1.0)
-    assert proc.alive()
-    with urllib.request.urlopen(url, context=context, timeout=10) as page:
-        assert page.status == 200
+    with urllib.request.urlopen(demo.url, context=demo.context, timeout=10) as page:
+        assert page.status == 200  # still served while lingering
     proc.signal(signal.SIGINT)  # what a terminal's Ctrl-C sends to the foreground group
 
     deadline = time.monotonic() + TIMEOUT
@@ -93,7 +167,7 @@ def test_demo_runs_the_mission_serves_the_tablet_page_and_keeps_overlay_frames(s
     assert proc.popen.returncode == 0, proc.output[-4000:]
     assert "[up] final progress" in proc.output and "delivered 9/9" in proc.output
 
-    (run,) = [p for p in (tmp_path / "runs").iterdir() if p.is_dir()]
+    (run,) = [p for p in demo.runs.iterdir() if p.is_dir()]
     metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["completed"] is True
     assert sorted(o for r in metrics["robots"].values() for o in r["delivered"]) == [f"o{i}" for i in range(9)]
@@ -102,6 +176,15 @@ def test_demo_runs_the_mission_serves_the_tablet_page_and_keeps_overlay_frames(s
     assert (run / "site.png").stat().st_size > 0
     # Recorded by default (tests/recorder/ checks what the recording holds).
     assert (run / "run.mcap").stat().st_size > 100_000 and f"==> recording {run / 'run.mcap'}" in proc.output
+    # Camera frames at 0.5 Hz of site time (lockstep: one every 2 site s, held or not) and robot poses
+    # at 10 Hz or more, however fast the mission ran: a smooth recording.
+    stats = {c.topic: c for c in channel_stats(run / "run.mcap")}
+    frames_channel = stats["/camera/tablet/image"]
+    assert frames_channel.messages >= 0.5 * (frames_channel.last - frames_channel.first), frames_channel
+    poses = stats["/arroch/robot/r0/pose"]
+    assert poses.messages >= 10 * (poses.last - poses.first), poses
+    # Paced: site time went no faster than PACE times real time (the lockstep cap the demo passed on).
+    assert metrics["team_completion_time"] / PACE <= demo.mission_wall, (metrics["team_completion_time"], demo)
 
     frames = sorted((run / "overlays").glob("overlay-*.png"))
     assert 4 <= len(frames) <= 5, frames  # 5 kept of the ~9 held frames that show a robot and its path
@@ -126,9 +209,9 @@ def test_demo_runs_the_mission_serves_the_tablet_page_and_keeps_overlay_frames(s
         drawn += samples >= 20
         times.append(record["time"])
     assert drawn >= 3, f"only {drawn} frames with solid lines drawn"
-    # Every one a held frame: drawn at its capture instant, a multiple of the hold interval.
-    hold = CameraOptions().hold
-    assert all(abs(t - hold * round(t / hold)) < 1e-6 for t in times), times
+    # Every one a frame taken on the site clock (held or not): at a multiple of the frame interval.
+    every = CameraOptions().every
+    assert all(abs(t - every * round(t / every)) < 1e-6 for t in times), times
     # Spread over the mission: from its first minute to the deliveries after the human's first focus
     # interval (the camera shows little else in between: the robots wait behind her door).
     assert times[0] < 60.0 and times[-1] - times[0] > 200.0, times

@@ -72,6 +72,7 @@ def test_holds_are_suspended_after_missed_overlays_and_resume_with_the_next_over
         (["--camera-hold", "-1"], "--camera-hold must be >= 0"),
         (["--camera-hold", "nan"], "--camera-hold must be >= 0"),
         (["--camera-hold-timeout", "0"], "--camera-hold-timeout must be > 0"),
+        (["--camera-every", "0"], "--camera-every must be > 0"),
     ],
 )
 def test_bad_hold_options_are_refused_naming_the_option(args, message):
@@ -81,11 +82,11 @@ def test_bad_hold_options_are_refused_naming_the_option(args, message):
         camera_options_from(parser.parse_args(["--camera", "tablet", *args]))
 
 
-def test_hold_options_default_to_a_hold_every_30_site_seconds():
+def test_hold_options_default_to_a_hold_every_30_and_a_frame_every_2_site_seconds():
     parser = argparse.ArgumentParser()
     add_camera_arguments(parser)
     options = camera_options_from(parser.parse_args(["--camera", "tablet"]))
-    assert (options.hold, options.hold_timeout) == (30.0, 1.5)
+    assert (options.hold, options.hold_timeout, options.every) == (30.0, 1.5, 2.0)  # 0.5 Hz of site time
     assert camera_options_from(parser.parse_args(["--camera", "tablet", "--camera-hold", "0"])).hold == 0.0
 
 
@@ -143,6 +144,8 @@ def test_lockstep_holds_time_for_each_frames_overlay_then_times_out_then_falls_b
             "--camera-rate",
             str(RATE),
             "--camera-hold",
+            str(HOLD),
+            "--camera-every",  # no frames between the held ones: each frame seen here is a held one
             str(HOLD),
             "--camera-hold-timeout",
             str(TIMEOUT),

@@ -40,14 +40,14 @@ def test_check_prints_a_summary() -> None:
 
 def test_check_refuses_a_bad_file_with_the_reason() -> None:
     out = run("site", "check", str(BAD / "door_off_edge.toml"))
-    assert out.returncode == 1
+    assert out.returncode == 2
     assert (
         'door_off_edge.toml: doors[1] (id "d_b"): center (6, 3.3) is not on an edge shared by rooms "c" and "b"'
         in out.stderr
     )
     assert out.stdout == ""
     missing = run("site", "check", "no/such/site.toml")
-    assert missing.returncode == 1 and "site.toml: no such site file" in missing.stderr
+    assert missing.returncode == 2 and "site.toml: no such site file" in missing.stderr
 
 
 def test_show_renders_a_png(tmp_path: Path) -> None:
@@ -62,7 +62,7 @@ def test_show_renders_a_png(tmp_path: Path) -> None:
     assert (np.abs(image.astype(int) - [0x3B, 0x3B, 0x3B]).sum(axis=2) < 30).sum() > 5000
     assert (np.abs(image.astype(int) - [0x28, 0x27, 0xD6]).sum(axis=2) < 40).sum() > 20  # BGR of #d62728
     bad = run("site", "show", str(BAD / "unreachable_room.toml"), "--png", str(tmp_path / "x.png"))
-    assert bad.returncode == 1 and "not reachable" in bad.stderr and not (tmp_path / "x.png").exists()
+    assert bad.returncode == 2 and "not reachable" in bad.stderr and not (tmp_path / "x.png").exists()
 
 
 def test_generate_writes_a_valid_deterministic_site(tmp_path: Path) -> None:
@@ -75,7 +75,7 @@ def test_generate_writes_a_valid_deterministic_site(tmp_path: Path) -> None:
     assert tomllib.loads(a.read_text())["site"]["name"] == "gen_4x2_s9"
     assert run("site", "check", str(a)).returncode == 0
     bad = run("site", "generate", "--robots", "0")
-    assert bad.returncode == 1 and "robots must be an integer >= 1" in bad.stderr
+    assert bad.returncode == 2 and "robots must be an integer >= 1" in bad.stderr
 
 
 @pytest.mark.parametrize("argv", [("site",), ("site", "show", "x.toml")])

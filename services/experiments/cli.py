@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import os
 import tomllib
 from collections.abc import Callable
@@ -230,11 +231,27 @@ def _add_sweep_arguments(parser: argparse.ArgumentParser, kind: str) -> None:
     add_common_arguments(parser, sweep, kind)
 
 
+def _number(lo: float, hi: float = math.inf) -> Callable[[str], float]:
+    """A finite number in [lo, hi], refused by argparse (exit 2, naming the option) before anything starts."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not (math.isfinite(value) and lo <= value <= hi):
+            bound = f"[{lo:g}, {hi:g}]" if math.isfinite(hi) else f">= {lo:g}"
+            raise argparse.ArgumentTypeError(f"must be {bound}, got {text}")
+        return value
+
+    return parse
+
+
 def add_human_arguments(group: argparse._ArgumentGroup) -> None:
     """The human-model options every sweep takes; unset, the sim's defaults (all off) hold."""
     group.add_argument(
         "--anticipation",
-        type=float,
+        type=_number(0.0),
         default=None,
         metavar="S",
         help="she may leave for her door when a robot's planned arrival there is this many s ahead "
@@ -242,7 +259,7 @@ def add_human_arguments(group: argparse._ArgumentGroup) -> None:
     )
     group.add_argument(
         "--focus-fraction",
-        type=float,
+        type=_number(0.0, 0.9),  # the intervals must fit in her task (the sim's limit)
         default=None,
         metavar="F",
         help="share of her task in focus intervals, fixed whatever her task length (default: off, whole-minute "
@@ -250,7 +267,7 @@ def add_human_arguments(group: argparse._ArgumentGroup) -> None:
     )
     group.add_argument(
         "--focus-responsiveness",
-        type=float,
+        type=_number(0.0, 1.0),
         default=None,
         metavar="R",
         help="x her chances during a focus interval she did not declare (default 1: faithful; 0: she stays)",

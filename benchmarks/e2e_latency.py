@@ -33,7 +33,19 @@ A probe (this script with ``probe``, a Zenoh client with the AR identity, on the
   ``send_feedback`` on the ``feedback`` queryable; door_unavailable for 1 min and door_available_now
   on the human's door in turn, each replacing the other) → its acknowledgement, and → the arrival of
   the first TeamPlan whose ``constraints_version`` includes it; ``plan_solve_ms`` is that plan's own
-  ``solve_time`` (the planner's replan, the rest being its settling, queueing and the messages).
+  ``solve_time`` (the planner's replan, the rest being its settling, queueing and the messages);
+* ``press_hops_ms``, the press → plan time by hop, from the Zenoh timestamps the router gives the
+  ConstraintSet and the TeamPlan as they come in: ``to_restrictor`` (press → the ConstraintSet that
+  holds it published: the AR client's query, the restrictor judging it and publishing),
+  ``planner_waiting`` (ConstraintSet published → the plan's publication, less its solve: the
+  planner receiving it, waiting for a replan already running, building the problems, dispatching),
+  ``planner_solving`` (the plan's ``solve_time``) and ``plan_out`` (the plan's publication → its
+  arrival at the AR host). Each press's hops add up to its ``press_to_plan``;
+* on one host, the same from the tablet's page: the ``tablet`` service runs too, and every other press
+  is sent as the page sends it (``{"type": "feedback"}`` on its WebSocket, answered by an ``ack``;
+  the tablet server is the page's AR client and sends the Feedback on). ``press_hops_ms`` then has a
+  ``direct`` and a ``page`` part; the page → AR client hop is the difference of their ``to_restrictor``
+  medians (``page_to_ar_client_ms``). Across hosts only the AR client's sender presses.
 
 Prints one JSON document on stdout (p50, p95, mean, max, n per figure and placement); progress on stderr.
 """
@@ -41,6 +53,7 @@ Prints one JSON document on stdout (p50, p95, mean, max, n per figure and placem
 from __future__ import annotations
 
 import argparse
+import asyncio
 import itertools
 import json
 import os
@@ -62,12 +75,14 @@ from benchmarks.lib import figures  # noqa: E402
 from benchmarks.lib.figures import log  # noqa: E402
 from protocol.clock import WallClock  # noqa: E402
 from protocol.codec import decode  # noqa: E402
-from protocol.messages import Overlay, RobotPose, TeamPlan  # noqa: E402
+from protocol.messages import ConstraintSet, Overlay, RobotPose, TeamPlan  # noqa: E402
 from protocol.service import Service  # noqa: E402
 from protocol.transport import ZenohOptions, free_tcp_port  # noqa: E402
 from tests.procs import Proc, arroch  # noqa: E402
+from tests.tablet.helpers import start_tablet  # noqa: E402
 
 CAMERA = "tablet"
+HOPS = ("to_restrictor", "planner_waiting", "planner_solving", "plan_out")  # a press's way to its plan
 MISSION = ["--mode", "realtime", "--method", "no-feedback", "--seed", "1", "--camera", CAMERA]
 HUB_PORT = 7447
 
@@ -85,17 +100,62 @@ def zenoh_time(sample: Any, fallback: float) -> float:
     return stamp.get_time().timestamp() if stamp is not None else fallback
 
 
+class PagePresser:
+    """Presses feedback buttons as the tablet's page does: over its WebSocket (an event loop of its own)."""
+
+    def __init__(self, url: str) -> None:
+        self.base = url.split("?", 1)[0].rstrip("/")
+        self.token = url.split("token=", 1)[1].split("&", 1)[0]
+        self.loop = asyncio.new_event_loop()
+        threading.Thread(target=self.loop.run_forever, name="page", daemon=True).start()
+        self.acks: dict[int, asyncio.Future] = {}
+        self.ids = itertools.count(1)
+        self.ws: Any = None
+        asyncio.run_coroutine_threadsafe(self._connect(), self.loop).result(timeout=30)
+
+    async def _connect(self) -> None:
+        import aiohttp
+
+        self.http = aiohttp.ClientSession(connector=aiohttp.TCPConnector(ssl=False))  # the run's own certificate
+        self.ws = await self.http.ws_connect(f"{self.base}/ws?token={self.token}", headers={"Origin": self.base})
+        self.loop.create_task(self._read())
+
+    async def _read(self) -> None:
+        async for message in self.ws:
+            if message.type.name != "TEXT":
+                continue
+            doc = json.loads(message.data)
+            waiting = self.acks.pop(doc.get("id"), None) if doc.get("type") == "ack" else None
+            if waiting is not None and not waiting.done():
+                waiting.set_result(doc)
+
+    async def _press(self, kind: str, params: dict[str, Any]) -> dict[str, Any]:
+        n = next(self.ids)
+        self.acks[n] = self.loop.create_future()
+        await self.ws.send_str(json.dumps({"type": "feedback", "id": n, "kind": kind, "params": params}))
+        return await self.acks[n]
+
+    def press(self, kind: str, params: dict[str, Any], timeout: float) -> dict[str, Any] | None:
+        """The page's ack (``status``, ``constraints_version``), or None without one in time."""
+        try:
+            return asyncio.run_coroutine_threadsafe(self._press(kind, params), self.loop).result(timeout)
+        except TimeoutError:
+            return None
+
+
 class Probe:
     """Records poses, overlays and plans as they arrive, and presses feedback buttons."""
 
-    def __init__(self, client: Service, door: str) -> None:
+    def __init__(self, client: Service, door: str, page: PagePresser | None = None) -> None:
         self.client = client
         self.door = door
+        self.page = page
         self.lock = threading.Lock()
         self.poses: dict[str, list[tuple[float, float]]] = {}  # rid -> [(stamp, publication time)]
         self.overlays: list[dict[str, Any]] = []
         self.frames: dict[int, float] = {}  # camera frame seq -> publication time
-        self.plans: list[tuple[float, int, float]] = []  # (arrival, constraints_version, solve_time)
+        self.plans: list[tuple[float, int, float, float]] = []  # (arrival, constraints_version, solve_time, published)
+        self.constraint_sets: dict[int, float] = {}  # version -> publication time
         self.unstamped = 0
 
     def listen(self) -> None:
@@ -105,6 +165,7 @@ class Probe:
             (keys.overlay(CAMERA), self._on_overlay),
             (keys.plan(), self._on_plan),
             (keys.camera_frame(CAMERA), self._on_frame),
+            (keys.constraints(), self._on_constraints),
         ):
             self.client._declared.append(session.declare_subscriber(key, handler))  # undeclared when the client closes
 
@@ -143,7 +204,13 @@ class Probe:
         arrival = time.time()
         plan = decode(sample.payload.to_bytes(), TeamPlan)
         with self.lock:
-            self.plans.append((arrival, plan.constraints_version, plan.solve_time))
+            self.plans.append((arrival, plan.constraints_version, plan.solve_time, zenoh_time(sample, arrival)))
+
+    def _on_constraints(self, sample: Any) -> None:
+        arrival = time.time()
+        cs = decode(sample.payload.to_bytes(), ConstraintSet)
+        with self.lock:
+            self.constraint_sets.setdefault(cs.version, zenoh_time(sample, arrival))
 
     def wait_live(self, timeout: float) -> None:
         deadline = time.monotonic() + timeout
@@ -154,42 +221,59 @@ class Probe:
             time.sleep(0.1)
         raise RuntimeError(f"no plan and localised overlay within {timeout:.0f} s")
 
-    def press(self, kind: str, params: dict[str, Any]) -> dict[str, Any]:
+    def press(self, kind: str, params: dict[str, Any], via_page: bool = False) -> dict[str, Any]:
         from protocol.feedback_client import send_feedback
 
+        via = "page" if via_page and self.page is not None else "direct"
         pressed = time.time()
-        ack = send_feedback(self.client, kind, params, timeout=10.0)
-        acked = time.time()
-        if ack is None or not ack.accepted:
-            return {"kind": kind, "ack": None if ack is None else ack.reason}
+        if self.page is not None and via == "page":
+            answer = self.page.press(kind, params, timeout=10.0)
+            acked = time.time()
+            if answer is None or answer.get("status") != "accepted":
+                return {"kind": kind, "via": via, "ack": None if answer is None else answer.get("reason")}
+            version = int(answer["constraints_version"])
+        else:
+            ack = send_feedback(self.client, kind, params, timeout=10.0)
+            acked = time.time()
+            if ack is None or not ack.accepted:
+                return {"kind": kind, "via": via, "ack": None if ack is None else ack.reason}
+            version = ack.constraints_version
         deadline = time.monotonic() + 15.0
         planned = None
         while planned is None and time.monotonic() < deadline:
             with self.lock:
                 planned = next(
-                    (
-                        (t, solve)
-                        for t, version, solve in self.plans
-                        if version >= ack.constraints_version and t >= pressed
-                    ),
+                    (row for row in self.plans if row[1] >= version and row[0] >= pressed),
                     None,
                 )
             time.sleep(0.002)
-        return {
+        with self.lock:
+            published = self.constraint_sets.get(version)
+        out: dict[str, Any] = {
             "kind": kind,
+            "via": via,
             "press_to_ack": acked - pressed,
             "press_to_plan": None if planned is None else planned[0] - pressed,
-            "solve_time": None if planned is None else planned[1],
-            "constraints_version": ack.constraints_version,
+            "solve_time": None if planned is None else planned[2],
+            "constraints_version": version,
         }
+        if planned is not None and published is not None:
+            arrival, _, solve, plan_published = planned
+            out["hops"] = {
+                "to_restrictor": published - pressed,
+                "planner_waiting": plan_published - published - solve,
+                "planner_solving": solve,
+                "plan_out": arrival - plan_published,
+            }
+        return out
 
     def presses(self, count: int, gap: float, until: float) -> list[dict[str, Any]]:
         choices = itertools.cycle(
             [("door_unavailable", {"door": self.door, "minutes": 1}), ("door_available_now", {"door": self.door})]
         )
-        out = []
+        out: list[dict[str, Any]] = []
         while len(out) < count and time.monotonic() < until:
-            out.append(self.press(*next(choices)))
+            out.append(self.press(*next(choices), via_page=len(out) % 2 == 1))  # every other one from the page
             time.sleep(gap)
         return out
 
@@ -233,6 +317,24 @@ class Probe:
         }
 
 
+def hop_figures(presses: list[dict[str, Any]]) -> dict[str, Any]:
+    """Each hop's summary over all presses and, when some came from the page, per way in (the AR
+    client's sender, the page), with the page → AR client hop: how much longer a press from the page
+    takes to reach the restrictor (medians)."""
+
+    def of(rows: list[dict[str, Any]]) -> dict[str, Any]:
+        return {hop: summary([p["hops"][hop] for p in rows if "hops" in p]) for hop in HOPS}
+
+    out: dict[str, Any] = of(presses)
+    ways = {via: [p for p in presses if p.get("via") == via] for via in ("direct", "page")}
+    if ways["page"]:
+        out |= {via: of(rows) for via, rows in ways.items()}
+        medians = [out[via]["to_restrictor"].get("p50") for via in ("page", "direct")]
+        if None not in medians:
+            out["page_to_ar_client_ms"] = round(medians[0] - medians[1], 1)
+    return out
+
+
 def run_probe(args: argparse.Namespace) -> int:
     from protocol.site import load_site
 
@@ -245,7 +347,7 @@ def run_probe(args: argparse.Namespace) -> int:
     client = Service("probe", args.namespace, options, clock=WallClock())
     client.open()
     try:
-        probe = Probe(client, door)
+        probe = Probe(client, door, PagePresser(args.page) if args.page else None)
         probe.listen()
         probe.wait_live(args.live_timeout)
         started = time.monotonic()
@@ -263,6 +365,7 @@ def run_probe(args: argparse.Namespace) -> int:
             "press_to_ack_ms": summary([p["press_to_ack"] for p in presses if "press_to_ack" in p]),
             "press_to_plan_ms": summary([p["press_to_plan"] for p in presses if p.get("press_to_plan") is not None]),
             "plan_solve_ms": summary([p["solve_time"] for p in presses if p.get("solve_time") is not None]),
+            "press_hops_ms": hop_figures(presses),
             "presses": len(presses),
             "presses_without_plan": sum(1 for p in presses if p.get("press_to_plan") is None),
             "overlays_per_s": round(len(overlays) / elapsed, 2),
@@ -279,7 +382,7 @@ def run_probe(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------- placements
 
 
-def probe_argv(zenoh: list[str], namespace: str, args: argparse.Namespace) -> list[str]:
+def probe_argv(zenoh: list[str], namespace: str, args: argparse.Namespace, page: str = "") -> list[str]:
     return [
         sys.executable,
         str(Path(__file__).resolve()),
@@ -293,6 +396,7 @@ def probe_argv(zenoh: list[str], namespace: str, args: argparse.Namespace) -> li
         str(args.presses),
         "--gap",
         str(args.gap),
+        *(["--page", page] if page else []),
     ]
 
 
@@ -306,6 +410,11 @@ def run_local(args: argparse.Namespace, workdir: Path) -> dict[str, Any]:
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     env = {"XDG_STATE_HOME": str(workdir / "state")}
     procs: list[Proc] = []
+
+    def track(proc: Proc) -> Proc:
+        procs.append(proc)
+        return proc
+
     try:
         up = Proc(
             arroch(
@@ -329,7 +438,8 @@ def run_local(args: argparse.Namespace, workdir: Path) -> dict[str, Any]:
         )
         procs.append(up)
         up.wait_for("router ready", timeout=60)
-        probe = Proc(probe_argv(["--connect", endpoint], namespace, args), env=env, name="probe")
+        tablet = start_tablet(lambda argv, name: track(Proc(argv, env=env, name=name)), endpoint, namespace, workdir)
+        probe = Proc(probe_argv(["--connect", endpoint], namespace, args, tablet.url), env=env, name="probe")
         procs.append(probe)
         return collect(probe, args.seconds + 120)
     finally:
@@ -402,6 +512,7 @@ def main() -> int:
     parser.add_argument("--connect", help=argparse.SUPPRESS)
     parser.add_argument("--zenoh-config", help=argparse.SUPPRESS)
     parser.add_argument("--namespace", help=argparse.SUPPRESS)
+    parser.add_argument("--page", help=argparse.SUPPRESS)  # the tablet's URL, token included: press from the page
     parser.add_argument("--live-timeout", type=float, default=90.0, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.role == "probe":
@@ -411,6 +522,7 @@ def main() -> int:
     if unknown:
         parser.error(f"--placements: unknown {', '.join(unknown)} (local, hosts)")
     results: dict[str, Any] = {}
+    load_at_start = round(os.getloadavg()[0], 2)
     with tempfile.TemporaryDirectory(prefix="arroch-e2e-") as tmp:
         for placement in placements:
             log(f"== {placement}")
@@ -425,6 +537,7 @@ def main() -> int:
                     "python": platform.python_version(),
                     "cpus": os.cpu_count(),
                     "load_avg_1min": round(os.getloadavg()[0], 2),
+                    "load_avg_1min_at_start": load_at_start,
                 },
                 "setup": {"mission": " ".join(MISSION), "seconds": args.seconds, "presses": args.presses},
                 **results,

@@ -55,6 +55,7 @@ class MotionPlanner:
         self._res = self.grid.resolution
         self._paths: dict[tuple[Point, Point], Path] = {}
         self._snapped: dict[Point, Point] = {}
+        self._rows: list[list[bool]] | None = None  # the grid as plain lists (A* windows are cut from it)
         self.stats = {"paths": 0, "cache_hits": 0, "astar": 0}
 
     # ------------------------------------------------------------------ free space
@@ -179,12 +180,10 @@ class MotionPlanner:
         self, start: tuple[int, int], goal: tuple[int, int], window: tuple[int, int, int, int]
     ) -> list[tuple[int, int]] | None:
         r0, r1, c0, c1 = window
-        occ = self._occ[r0:r1, c0:c1].tolist()  # plain lists index much faster than numpy per cell
         h, w = r1 - r0, c1 - c0
         sr, sc = start[0] - r0, start[1] - c0
         gr, gc = goal[0] - r0, goal[1] - c0
-        occ[sr][sc] = False
-        occ[gr][gc] = False
+        occ = self._window(r0, r1, c0, c1, ((sr, sc), (gr, gc)))
         diag = math.sqrt(2.0)
         steps = (
             (1, 0, 1.0),
@@ -226,6 +225,17 @@ class MotionPlanner:
                     parent[(nr, nc)] = (r, c)
                     heapq.heappush(heap, (ng + heuristic(nr, nc), ng, nr, nc))
         return None
+
+    def _window(self, r0: int, r1: int, c0: int, c1: int, free: tuple[tuple[int, int], ...]) -> list[list[bool]]:
+        """The occupancy of a grid window as plain lists (they index much faster than numpy per cell),
+        with the ``free`` cells (window coordinates) cleared. Rows are cut from the whole grid's lists,
+        made once: converting each window afresh cost as much as the search in it."""
+        if self._rows is None:
+            self._rows = self._occ.tolist()
+        occ = [row[c0:c1] for row in self._rows[r0:r1]]
+        for r, c in free:
+            occ[r][c] = False
+        return occ
 
     def _shorten(self, pts: list[Point]) -> list[Point]:
         """Greedy line-of-sight shortening of a grid path (keeps the end points)."""

@@ -2,7 +2,8 @@
 
 Builds each robot's problem (:mod:`.problem`), then runs IIDP (:mod:`.iidp`) or the joint program
 (:mod:`.joint`, which first runs IIDP for its horizon and hints). A plan from scratch runs IIDP
-twice, breaking ties between a robot's equally good plans two ways, and keeps the better team. When
+twice, breaking ties between a robot's equally good plans two ways, and keeps the better team (the
+two runs are independent: they run side by side on two threads, clingo's work in parallel). When
 the constraints leave a robot no plan at all, the result says which constraints conflict (status
 ``conflict``) instead of a plan.
 """
@@ -11,7 +12,9 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 
 from protocol.site import Site
@@ -40,6 +43,7 @@ class PlannerSettings:
     joint_time_limit: float = 60.0  # s for the joint program
     routes_per_leg: int = 1  # candidate routes per leg; 2 when constraints mention rooms
     max_rounds: int | None = None  # IIDP rounds (default 2·N)
+    threads: int = 2  # 2: a plan from scratch makes its two tie-breaking runs side by side; 1: one after the other
 
 
 class TaskPlanner:
@@ -49,6 +53,8 @@ class TaskPlanner:
         self.motion = MotionPlanner(site)
         self.builder = ProblemBuilder(site, self.motion, routes_per_leg=self.settings.routes_per_leg)
         self.hold = hold_seconds(site)
+        self._beside: ThreadPoolExecutor | None = None  # the second tie-breaking run of a plan from scratch
+        self._beside_pid = 0
 
     def problems(
         self, world: World, base: int, constraints: ConstraintProgram | None = None
@@ -124,15 +130,21 @@ class TaskPlanner:
         single = SingleRobotSolver(common, self.hold, constraints, solve_limit, existing, base=base)
         limit = (self.settings.time_limit if time_limit is None else time_limit) * scale
         warm_plans = self._warm(warm, base)
+        # From scratch, the run breaking ties the other way starts now, beside this one, with the
+        # deadline it has when it runs after it.
+        deadline = t0 + limit
+        other = self._start_other_ties(single, problems, deadline) if warm_plans is None else None
         try:
             plans, stats = iidp(
                 single, problems, time_limit=limit, max_rounds=self.settings.max_rounds, warm=warm_plans
             )
         except NoPlan as exc:
+            if other is not None:
+                other.result()  # never left running into the next plan
             return self._no_plan(result, single, problems, exc, t0)
         solves = single.calls
         if warm_plans is None:
-            plans, stats, solves = self._other_ties(single, problems, plans, stats, limit - (time.perf_counter() - t0))
+            plans, stats, solves = self._other_ties(single, problems, plans, stats, other, deadline)
         result.plans, result.iterations = plans, stats.rounds
         cap = self.settings.max_rounds if self.settings.max_rounds is not None else 2 * len(problems)
         result.status = "ok" if stats.converged or stats.rounds >= cap else "timeout"
@@ -170,26 +182,69 @@ class TaskPlanner:
         result.solves = solves
         return result
 
-    def _other_ties(self, single: SingleRobotSolver, problems: dict[str, RobotProblem], plans, stats, remaining: float):
-        """A plan from scratch, made again with ties between a robot's equally good plans broken the
-        other way (every gothrough as early as it can be, objective.lp); the better team is kept
-        (the first on a tie). Each robot placed depends on how those before it broke their ties, so
-        either way can be the better one by a whole opening or more; planning twice from scratch is
-        cheap next to a mission's replans. Returns plans, IIDP figures and the programs solved."""
-        if remaining <= 0:
-            return plans, stats, single.calls
-        other = replace(
+    def _tie_breaker(self, single: SingleRobotSolver, own_constraints: bool) -> SingleRobotSolver:
+        """The solver breaking ties between a robot's equally good plans the other way (every
+        gothrough as early as it can be, objective.lp), with nothing cached; ``own_constraints``: the
+        constraints parsed again for it (a thread adds only clingo AST nodes it made, controls.py)."""
+        constraints = single.constraints
+        if own_constraints and constraints is not None:
+            constraints = ConstraintProgram.build(constraints.items)
+        return replace(
             single,
             site_facts=single.site_facts + "early.\n",
+            constraints=constraints,
             _cache={},
             _facts={},
             calls=0,
             cache_hits=0,
             solve_seconds=0.0,
         )
+
+    def _start_other_ties(
+        self, single: SingleRobotSolver, problems: dict[str, RobotProblem], deadline: float
+    ) -> Future | None:
+        """The other tie-breaking run of a plan from scratch, started on a second thread, to end by
+        ``deadline`` (``time.perf_counter``) as when it runs after the first (None with ``threads`` = 1
+        or no time left: it then runs after the first, or not). Its result: (plans, IIDP figures,
+        solver), or (None, None, solver) when it finds no plan."""
+        remaining = deadline - time.perf_counter()
+        if self.settings.threads < 2 or remaining <= 0:
+            return None
+        if self._beside is None or self._beside_pid != os.getpid():  # a forked child has no such thread
+            self._beside = ThreadPoolExecutor(max_workers=1, thread_name_prefix="planner-ties")
+            self._beside_pid = os.getpid()
+        return self._beside.submit(self._run_other_ties, self._tie_breaker(single, True), problems, remaining)
+
+    def _run_other_ties(self, other: SingleRobotSolver, problems: dict[str, RobotProblem], limit: float):
         try:
-            plans2, stats2 = iidp(other, problems, time_limit=remaining, max_rounds=self.settings.max_rounds)
+            plans, stats = iidp(other, problems, time_limit=limit, max_rounds=self.settings.max_rounds)
         except NoPlan:
+            return None, None, other
+        return plans, stats, other
+
+    def _other_ties(
+        self,
+        single: SingleRobotSolver,
+        problems: dict[str, RobotProblem],
+        plans,
+        stats,
+        started: Future | None,
+        deadline: float,
+    ):
+        """A plan from scratch, made again with ties between a robot's equally good plans broken the
+        other way; the better team is kept (the first on a tie). Each robot placed depends on how
+        those before it broke their ties, so either way can be the better one by a whole opening or
+        more; planning twice from scratch is cheap next to a mission's replans. ``started``: that run,
+        already going on a second thread (else it runs now, until ``deadline``). Returns plans, IIDP
+        figures and the programs solved."""
+        remaining = deadline - time.perf_counter()
+        if started is not None:
+            plans2, stats2, other = started.result()
+        elif remaining <= 0:
+            return plans, stats, single.calls
+        else:
+            plans2, stats2, other = self._run_other_ties(self._tie_breaker(single, False), problems, remaining)
+        if plans2 is None:
             return plans, stats, single.calls + other.calls
         existing = frozenset(single.existing)
         first = TeamResult("iidp", 0, self.hold, plans, existing=existing).cost()

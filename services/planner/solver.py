@@ -12,6 +12,7 @@ deletion to a minimal set of constraint ids that cannot hold together (see :mod:
 from __future__ import annotations
 
 import functools
+import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -21,6 +22,7 @@ import clingo
 import clingo.ast as ast
 
 from .constraints import ConstraintProgram
+from .controls import shop
 
 HERE = Path(__file__).resolve().parent
 ENCODING = {
@@ -55,8 +57,16 @@ class ClingoWork:
             self.solve_seconds - before.solve_seconds,
         )
 
+    def add(self, programs: int = 0, build: float = 0.0, ground: float = 0.0, solve: float = 0.0) -> None:
+        with _WORK_LOCK:  # a plan from scratch plans on two threads (planner.py)
+            self.programs += programs
+            self.build_seconds += build
+            self.ground_seconds += ground
+            self.solve_seconds += solve
 
-WORK = ClingoWork()  # the process's totals; single-threaded use, like the planner itself
+
+_WORK_LOCK = threading.Lock()
+WORK = ClingoWork()  # the process's totals
 
 
 @functools.cache
@@ -64,14 +74,24 @@ def encoding_text(part: str) -> str:
     return (HERE / ENCODING[part]).read_text(encoding="utf-8")
 
 
-@functools.cache
+_PARSED = threading.local()
+
+
 def encoding_statements(part: str) -> tuple[ast.AST, ...]:
-    """A part of the encoding parsed once per process: handing clingo the parsed statements of every
-    program costs about a third of parsing the text again."""
-    out: list[ast.AST] = []
-    ast.parse_string(encoding_text(part), out.append)
-    comment = getattr(ast.ASTType, "Comment", None)  # comments are statements from clingo 5.7 on
-    return tuple(s for s in out if s.ast_type != comment)
+    """A part of the encoding parsed once per thread: handing clingo the parsed statements of every
+    program costs about a third of parsing the text again. Per thread, because clingo counts the
+    references of its AST nodes without atomics (controls.py)."""
+    cache: dict[str, tuple[ast.AST, ...]] = _PARSED.__dict__.setdefault("parts", {})
+    hit = cache.get(part)
+    if hit is None:
+        out: list[ast.AST] = []
+        ast.parse_string(encoding_text(part), out.append)
+        comment = getattr(ast.ASTType, "Comment", None)  # comments are statements from clingo 5.7 on
+        hit = cache[part] = tuple(s for s in out if s.ast_type != comment)
+    return hit
+
+
+CONTROLS = shop(encoding_statements)  # Controls made ahead and freed behind (controls.py)
 
 
 @dataclass
@@ -103,11 +123,7 @@ def _grounded(
     facts: str, parts: Sequence[str], constraints: ConstraintProgram | None, args: list[str], extra: str = ""
 ) -> clingo.Control:
     t0 = time.perf_counter()
-    ctl = clingo.Control(args)
-    with ast.ProgramBuilder(ctl) as builder:
-        for part in parts:
-            for statement in encoding_statements(part):
-                builder.add(statement)
+    ctl = CONTROLS.take(args, parts)  # options and encoding already in, most of the time
     ctl.add("base", [], facts)
     if extra:
         ctl.add("base", [], extra)
@@ -115,9 +131,7 @@ def _grounded(
         constraints.add_to(ctl)
     t1 = time.perf_counter()
     ctl.ground([("base", [])])
-    WORK.programs += 1
-    WORK.build_seconds += t1 - t0
-    WORK.ground_seconds += time.perf_counter() - t1
+    WORK.add(programs=1, build=t1 - t0, ground=time.perf_counter() - t1)
     # An #external atom is false unless released; free ones can then be assumed true or false per solve.
     for i in constraints.active if constraints else []:
         ctl.assign_external(ConstraintProgram.guard_symbol(i), None)  # None: free
@@ -144,7 +158,7 @@ def _optimise(
         if not finished:
             handle.cancel()
         result = handle.get()
-    WORK.solve_seconds += time.perf_counter() - t1
+    WORK.add(solve=time.perf_counter() - t1)
     out = Outcome(status="unknown", seconds=time.perf_counter() - t0, ground_seconds=ground)
     if best:
         out.atoms, out.cost = best[0], best[1]
@@ -182,6 +196,7 @@ def solve(
     if out.status == "unsat" and diagnose:
         _explain(ctl, constraints, core, out)
         out.seconds = time.perf_counter() - t0
+    CONTROLS.give_back(ctl)
     return out
 
 
@@ -209,6 +224,7 @@ def solve_each(
         t1 = time.perf_counter()
         on = [(clingo.Function("active", [clingo.Function(o)]), o == r) for o in robots]
         out[r] = _optimise(ctl, on + guards, time_limit, t1, ground)
+    CONTROLS.give_back(ctl)
     return out
 
 
@@ -223,7 +239,7 @@ def _check(ctl: clingo.Control, constraints: ConstraintProgram, on: set[int]) ->
                 return None
             return bool(handle.get().satisfiable)
     finally:
-        WORK.solve_seconds += time.perf_counter() - t0
+        WORK.add(solve=time.perf_counter() - t0)
 
 
 def _explain(ctl: clingo.Control, constraints: ConstraintProgram | None, core: list[int], out: Outcome) -> None:

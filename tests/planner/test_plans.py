@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from services.planner.constraints import ConstraintProgram, unavailable
 from services.planner.facts import Context, site_facts
 from services.planner.iidp import NoPlan, iidp
 from services.planner.plan import RobotPlan, Step, TeamResult, share_windows
@@ -131,9 +132,12 @@ def test_a_plan_moved_past_its_end_finishes_now_not_before():
 
 def _iidp_out_of_time_first(times: int, limits: list[tuple[float, float]]):
     """IIDP that finds no model in time on its first ``times`` calls (as on a loaded machine),
-    then plans for real; ``limits`` collects each call's (solve limit, time limit)."""
+    then plans for real; ``limits`` collects each call's (solve limit, time limit). Only the run
+    breaking ties the first way counts: the other one (``early``) runs beside it on its own thread."""
 
     def fake(single, problems, *, time_limit, **kwargs):  # noqa: ANN001, ANN202
+        if "early." in single.site_facts:
+            return iidp(single, problems, time_limit=time_limit, **kwargs)
         limits.append((single.solve_limit, time_limit))
         if len(limits) <= times:
             raise NoPlan(sorted(problems)[0], Outcome(status="unknown"))
@@ -166,3 +170,22 @@ def test_a_plan_still_out_of_time_after_the_retries_fails_and_says_why(monkeypat
     assert result.status == "failed" and result.out_of_time
     assert "within the time limit" in result.diagnostic
     assert [s for s, _ in limits] == [2.0, 8.0, 32.0]  # tried, then retried twice
+
+
+@pytest.mark.parametrize("name", ["gen2", "office"])
+def test_the_two_tie_breaking_runs_side_by_side_give_the_plan_they_give_one_after_the_other(name):
+    """A plan from scratch makes its two runs on two threads (``threads=2``, the default); the team
+    handed out is the one the runs give in turn, with and without a constraint."""
+    site = site_named(name)
+    world = initial_world(site)
+    door = next(d for d, o in site.doors.items() if o.human_operated)
+    program = ConstraintProgram.build([unavailable(door, 0, 90, "busy")])
+    strip = lambda r: {k: v for k, v in r.as_json().items() if k != "solve_time"}  # noqa: E731
+    for constraints in (None, program):
+        results = [
+            TaskPlanner(site, PlannerSettings(time_limit=60.0, threads=threads)).plan(world, constraints)
+            for threads in (1, 2)
+        ]
+        assert results[0].status == "ok" and results[0].solves > 0
+        assert strip(results[1]) == strip(results[0])
+        assert results[1].solves == results[0].solves  # both runs counted

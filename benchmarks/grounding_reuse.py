@@ -20,7 +20,7 @@ context per solve. This measures how much that could save, on a first plan and i
   whole program once per solve would save. That is an upper
   bound, reached only if the context can enter a grounded program without being grounded into it
   (the encoding lets the context settle the grounding: the horizon bounds the time chain,
-  ``blocked``/``near``/``closed`` prune times; see ``docs/architecture.md``, "The context");
+  ``blocked``/``near``/``closed`` prune times; see ``docs/services/planner.md``, "Encoding");
 - then the kept programs themselves (:func:`with_externals`), made, grounded and optimised against
   the planner's own fresh programs with the same time limit: the whole context held as
   ``#external`` atoms (one grounding per problem), and only its bounds (horizon, the others' end,

@@ -6,7 +6,7 @@ writes
 - ``docs/figures.json``: each figure's value and the text the docs quote (``{"key": {"value", "text"}}``);
 - ``docs/demo-timeline.png``: the run's timeline, as ``arroch runs show RUN --png`` draws it;
 
-and rewrites every quoted figure in README.md and docs/*.md: a figure is quoted as
+and rewrites every quoted figure in README.md, docs/*.md and docs/services/*.md: a figure is quoted as
 ``<!--figure:KEY-->TEXT<!--/figure-->`` (the comments do not show in rendered Markdown), and TEXT is
 replaced by the figure's text. ``tests/test_docs_figures.py`` checks that every quote matches
 ``figures.json``, so the docs cannot drift from what was measured.
@@ -42,7 +42,11 @@ class Figure:
 
 
 def quoted_files() -> list[Path]:
-    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    return [
+        ROOT / "README.md",
+        *sorted((ROOT / "docs").glob("*.md")),
+        *sorted((ROOT / "docs" / "services").glob("*.md")),
+    ]
 
 
 def run_demo(folder: Path) -> tuple[Path, float]:

@@ -6,7 +6,7 @@ will judge the feedback accepts.
 
 Wire form: one MessagePack map, ``{"v": 1, "type": "ConstraintLibrary", "src", "site", "entries"}``;
 ``entries`` is the library with the site's choices resolved, one map per entry (``id``, ``label``,
-``help``, ``effect``, ``window``, ``usable``, ``params``: see docs/architecture.md, "Restrictor").
+``help``, ``effect``, ``window``, ``usable``, ``params``: see docs/services/restrictor.md, "Library file").
 :func:`decode_library` checks the shape and limits and raises :class:`ProtocolError` naming the
 field; fields it does not know are ignored (a newer minor revision may add some).
 """

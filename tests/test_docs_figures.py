@@ -1,6 +1,7 @@
 """The figures the docs quote from a demo run are the ones ``make docs`` measured (``docs/make_docs.py``
-writes ``docs/figures.json`` and rewrites every ``<!--figure:KEY-->TEXT<!--/figure-->`` quote): every
-quote names a measured figure and shows its text, and every figure is quoted somewhere."""
+writes ``docs/figures.json`` and rewrites every ``<!--figure:KEY-->TEXT<!--/figure-->`` quote in README.md,
+docs/*.md and docs/services/*.md): every quote names a measured figure and shows its text, and every
+figure is quoted somewhere."""
 
 from __future__ import annotations
 
@@ -40,6 +41,8 @@ def test_every_quoted_figure_is_the_one_make_docs_measured():
     figures = json.loads(FIGURES.read_text())
     found = quotes()
     assert len(found) >= 10
+    scanned = set(make_docs.quoted_files())
+    assert set((ROOT / "docs" / "services").glob("*.md")) <= scanned, "a service page make docs does not rewrite"
     for path, key, text in found:
         assert key in figures, f"{path.name} quotes {key!r}: not in {FIGURES.name} (run make docs)"
         assert text == figures[key]["text"], (

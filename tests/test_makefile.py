@@ -41,3 +41,11 @@ def test_make_test_installs_the_test_extras_into_the_same_venv_and_stamps_both_l
     for stamp in (".installed-test", ".installed-demo"):
         (venv / stamp).touch()
     assert installs(dry_run("demo", venv)) == []
+
+
+def test_make_bench_installs_the_peers_extra_the_peer_benchmark_needs(tmp_path: Path):
+    venv = tmp_path / "venv"
+    lines = dry_run("bench", venv)
+    assert installs(lines) == ["'.[test,peers]'"], lines
+    assert f"touch {venv}/.installed-bench {venv}/.installed-test {venv}/.installed-demo" in lines
+    assert any("benchmarks/*.py" in line for line in lines)

@@ -2,7 +2,7 @@
 
 Every module under ``services/`` is parsed (``ast``, nothing is imported) and each import it makes,
 absolute or relative, at module level or inside a function, is resolved to a module name. What is
-allowed (docs/architecture.md, "Packages"):
+allowed (docs/architecture.md, "Packages and who owns which contract"):
 
 - a module of ``services/<X>/`` imports ``protocol``, third-party and standard modules, and its own
   package ``services.<X>``; never ``services.<Y>`` (Y ≠ X) nor a top-level ``services`` module,

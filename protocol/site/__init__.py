@@ -2,7 +2,7 @@
 
 A site is a TOML file describing the building (rooms, doors, passages, wall landmarks), the
 robots, the objects to deliver and the human (DESIGN §2; the "Site model" section of
-docs/architecture.md is the API). Every service loads the same file with :func:`load_site`, so
+docs/services/protocol.md is the API). Every service loads the same file with :func:`load_site`, so
 every service agrees on geometry.
 """
 

@@ -1,6 +1,6 @@
 """Rasterise Overlay primitives onto a BGR image (what a thin client does with an Overlay).
 
-Primitive conventions (also in docs/architecture.md, "AR client"):
+Primitive conventions (also in docs/services/ar_client.md, "Overlay"):
 
 * coordinates are image pixels (OpenCV convention, pixel centres at integers); ``color`` is RGBA;
 * ``line``/``polyline``: stroked through ``points``, ``width`` pixels;

@@ -39,7 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=False,
         help="time each robot's trajectory against the others' (space-time reservations): robots wait or pull "
         "aside (default off: on generated 6-robot sites it meets more and can stall the task planner; "
-        "see docs/architecture.md)",
+        "see docs/services/planner.md)",
     )
     svc.set_defaults(func=_run_service)
 

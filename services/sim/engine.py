@@ -10,7 +10,7 @@ Everything the outside world must hear comes out of :meth:`take_events` (in orde
 :meth:`take_feedback`. The engine never reads a clock or the network: given the site, the seed and
 the same commands at the same ticks, it produces the same events.
 
-``world_version`` counts the states the planner must answer (docs/architecture.md): the mission
+``world_version`` counts the states the planner must answer (docs/services/sim.md): the mission
 start, every action done or failed (except a ``stop``), every opening or closing of a
 human-operated door. Automatic doors open and close for robots without a new version: they never
 block a plan, and a version per automatic door swing would only make the planner replan for nothing.

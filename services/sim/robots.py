@@ -1,4 +1,4 @@
-"""Executing RobotCommands: one state machine per robot (docs/architecture.md, execution contract).
+"""Executing RobotCommands: one state machine per robot (docs/services/robot.md, execution contract).
 
 An action runs through phases: *drive* (follow the trajectory with :class:`PurePursuit`), then,
 depending on the action, *wait for the door* (``opendoor``) or *dwell* (``load``/``unload``

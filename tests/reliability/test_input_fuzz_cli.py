@@ -37,15 +37,22 @@ from tests.reliability.fuzzing import Overran, contained
 
 LIMIT = 30.0  # wall s a single run may take
 DEAD_ROUTER = "tcp/127.0.0.1:1"  # nothing listens there: opening a session fails at once
-PARSE_ONLY = {("router",), ("demo",), ("experiment", "robots"), ("experiment", "laziness"), ("experiment", "map")}
+PARSE_ONLY = {("router",), ("demo",)} | {
+    ("experiment", sweep) for sweep in ("robots", "laziness", "map", "detour", "sensitivity", "population")
+}
 # Services: the arguments that point them at the absent router, and the options left out because they
 # would point Zenoh elsewhere (their Zenoh-mode flag among them).
 ZENOH = {"--connect", "--listen", "--multicast", "--zenoh-config"}
 CLIENT = (["--mode", "client"], ZENOH | {"--mode"})
+# Commands whose --mode is something else (the clock's) or that have none: the Zenoh mode by its own name.
+ZENOH_CLIENT = (["--zenoh-mode", "client"], ZENOH | {"--zenoh-mode"})
 SERVICES: dict[tuple[str, ...], tuple[list[str], set[str]]] = {
     ("planner",): CLIENT,
     ("restrictor",): CLIENT,
-    ("sim",): (["--zenoh-mode", "client"], ZENOH | {"--zenoh-mode"}),  # its --mode is the clock's
+    ("sim",): ZENOH_CLIENT,
+    # without --connect these two become the router themselves and run until stopped
+    ("record",): ZENOH_CLIENT,
+    ("view",): ZENOH_CLIENT,
     ("ar",): CLIENT,
     ("tablet",): CLIENT,
     ("ping", "serve"): CLIENT,

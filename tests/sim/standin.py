@@ -3,7 +3,7 @@ benchmarks without clingo: each robot fetches its objects one after the other, r
 the shortest chain of openings, with straight-line trajectories (rooms are convex rectangles).
 
 :class:`ScriptedPlanner` is the pure part (what to command next); :class:`StandInPlanner` puts it
-on Zenoh the way docs/architecture.md's execution contract asks: a TeamPlan answering every world
+on Zenoh the way docs/services/robot.md's execution contract asks: a TeamPlan answering every world
 version (and every constraints version it acknowledged), a RobotCommand for each robot's front
 action. It answers world version ``w`` only once it has heard every event announcing versions up
 to ``w``, so its decisions do not depend on message timing and lockstep runs repeat exactly.

@@ -31,6 +31,7 @@ COMMANDS: dict[str, tuple[str, ...]] = {
     "services.experiments.cli": ("experiment",),
     "services.recorder.cli": ("record", "view", "replay", "runs"),
     "services.study.cli": ("study",),  # arroch study plan|run|report|calibrate
+    "services.graph.cli": ("graph",),  # arroch graph [--format text|json|dot|markdown] [--out FILE.png|.svg]
 }
 #: Modules whose ``register`` extends another's commands, with the module they need first.
 REQUIRES: dict[str, str] = {"services.ar_client.web.cli": "services.ar_client.cli"}

@@ -44,6 +44,7 @@ from protocol.transport import free_tcp_port
 
 SERVICES = "planner,restrictor,sim,ar"  # under the supervisor; the router and the page are the demo's own
 CAMERA = "tablet"
+WATCHED_CAMERA_EVERY = 2.0  # site s between camera frames: people watch the demo and its recording
 NAMESPACE = "demo"
 DEFAULT_PACE = 10.0  # lockstep at most this many times real time: a mission a person can follow
 ROUTER_READY = "router ready"
@@ -157,6 +158,8 @@ class Demo:
             SERVICES,
             "--camera",
             CAMERA,
+            "--camera-every",
+            f"{WATCHED_CAMERA_EVERY:g}",
             "--method",
             args.method,
             "--mode",

@@ -36,6 +36,7 @@ class MissionOptions:
     seed: int | None = None
     time_limit: float | None = None  # site seconds after which the sim ends the mission unfinished
     camera: str | None = None  # the sim's virtual camera ('tablet' or X,Y,Z,YAW,PITCH); None: no camera
+    camera_every: float | None = None  # lockstep: site s between the camera's frames besides the held ones
     view_port: int | None = None  # serve the recorder's channels live to Foxglove on this port; None: don't
     human: str | None = None  # the sim's human: 'simulated' or 'participant' (a person on her tablet page)
     doors: str | None = None  # the sim's human-operated doors: 'sim' or 'sensor' (real doors' sensors)
@@ -56,7 +57,12 @@ OPTION_FLAGS: dict[str, Callable[[Launch], list[str]]] = {
     "state": lambda launch: ["--state-dir", str(launch.run_dir / "state")] if launch.run_dir else [],
     # The sim renders the camera; the AR client (default source: that camera) and the tablet page
     # (viewer mode on it) show it. Without a camera the page uses each browser's own camera.
-    "camera": lambda launch: ["--camera", launch.mission.camera] if launch.mission.camera else [],
+    "camera": lambda launch: (
+        ["--camera", launch.mission.camera]
+        + (["--camera-every", f"{launch.mission.camera_every:g}"] if launch.mission.camera_every is not None else [])
+        if launch.mission.camera
+        else []
+    ),
     "camera_source": lambda launch: ["--camera-source", f"sim:{SIM_CAMERA_ID}"] if launch.mission.camera else [],
     # A few overlay frames spread over the run, kept with its other records.
     "snapshots": lambda launch: ["--snapshots", str(launch.run_dir / OVERLAY_FOLDER)] if launch.run_dir else [],

@@ -160,6 +160,7 @@ def build_config(args: argparse.Namespace) -> tuple[UpConfig, ZenohOptions]:
             seed=args.seed,
             time_limit=args.time_limit,
             camera=args.camera,
+            camera_every=args.camera_every,
             view_port=args.view_port if args.view else None,
             human=args.human,
             doors=args.doors,
@@ -254,6 +255,14 @@ def add_up_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="SPEC",
         help="the sim's virtual camera: 'tablet' (the human's tablet) or X,Y,Z,YAW,PITCH; "
         "the ar client and the tablet page (viewer mode) show it",
+    )
+    mission.add_argument(
+        "--camera-every",
+        type=float,
+        metavar="S",
+        help="lockstep with --camera: a frame every S site seconds besides the held ones, so a recording or a "
+        "page is smooth (default none: each frame costs a render, the AR client's turn and the recorder's; "
+        "arroch demo asks for 2)",
     )
     study = parser.add_argument_group("study trials (docs/study.md)")
     study.add_argument(

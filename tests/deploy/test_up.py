@@ -270,6 +270,10 @@ def test_the_camera_option_reaches_the_sim_and_the_tablet_page_and_overlays_go_t
     )
     sim, ar, tablet = (service_argv(SERVICES[name], launch) for name in ("sim", "ar", "tablet"))
     assert sim[sim.index("--camera") + 1] == "tablet" and sim[sim.index("--mode") + 1] == "lockstep"
+    assert "--camera-every" not in sim  # the sim's default: held frames only
+    smooth = Launch(namespace="n", mission=MissionOptions(camera="tablet", camera_every=2.0))
+    smooth_sim = service_argv(SERVICES["sim"], smooth)
+    assert smooth_sim[smooth_sim.index("--camera-every") + 1] == "2"  # arroch demo's, for people watching
     assert ar[ar.index("--snapshots") + 1] == str(run / "overlays") and "--camera" not in ar
     assert tablet[tablet.index("--camera-source") + 1] == "sim:tablet" and tablet[tablet.index("--port") + 1] == "0"
     assert tablet[tablet.index("--zenoh-config") + 1] == str(tmp_path / "ar.json5")  # the AR identity

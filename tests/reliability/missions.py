@@ -92,6 +92,7 @@ class UpMission:
                 "off",
                 "--timeout",
                 f"{timeout:g}",
+                "--no-record",  # outcomes are checked; a recorder doubles the poses sent (docs/services/sim.md)
                 *extra,
             ),
             name="up",

@@ -1,4 +1,5 @@
-"""The planner's side of the simulator's lockstep handshake (counterpart of the sim's ``LockstepGate``).
+"""The planner's side of the lockstep handshake (:mod:`protocol.lockstep`, the rules; the
+simulator holds its ``LockstepGate``), with the wall-time recovery from lost messages.
 
 In lockstep the simulator publishes everything of a world version (statuses, events, door states)
 and then its Clock, which says whether it is paused and what for (``awaiting``). A plan made before
@@ -21,6 +22,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 
+from protocol import lockstep
 from protocol.messages import Clock, TeamPlan
 
 REPEAT_AFTER = 2.0  # wall s the simulator may stay paused at a version the plan answers before the plan is sent again
@@ -76,36 +78,14 @@ class LockstepFollower:
             self.paused = (where, now)
 
     def version_complete(self, world_version: int, constraints_version: int) -> bool:
-        """Whether everything the plan for ``world_version`` must answer is in: that version's clock
-        (it comes after the version's statuses and events), no feedback ack pending, and the
-        constraints version the clock names (``constraints_version`` is the one held here)."""
-        clock = self.clock
-        if clock is None or clock.world_version < world_version:
-            return False
-        if clock.paused and clock.awaiting == "feedback":
-            return False
-        return constraints_version >= clock.constraints_version
-
-    def awaiting(self, what: str, world_version: int) -> Clock | None:
-        """The simulator's clock when it is paused in lockstep at ``world_version`` waiting for
-        ``what`` (Clock.awaiting); else None."""
-        clock = self.clock
-        if clock is None or clock.mode != "lockstep" or not clock.paused or clock.awaiting != what:
-            return None
-        return clock if clock.world_version == world_version else None
+        """Whether everything the plan for ``world_version`` must answer is in
+        (:func:`protocol.lockstep.version_complete`; ``constraints_version`` is the one held here)."""
+        return lockstep.version_complete(self.clock, world_version, constraints_version)
 
     def plan_awaited(self, world_version: int, constraints_version: int, sent: TeamPlan | None) -> bool:
-        """Whether the simulator waits for a plan newer than ``sent`` and the news it waits on is in:
-        its world version and the constraints version its accepted feedback made."""
-        clock = self.awaiting("plan", world_version)
-        if clock is None or constraints_version < clock.constraints_version:
-            return False
-        answered = (
-            sent is not None
-            and sent.world_version >= clock.world_version
-            and sent.constraints_version >= clock.constraints_version
-        )
-        return not answered  # when answered, what is pending waits for the next version
+        """Whether the simulator waits for a plan newer than ``sent`` and the news it waits on is in
+        (:func:`protocol.lockstep.plan_awaited`)."""
+        return lockstep.plan_awaited(self.clock, world_version, constraints_version, sent)
 
     def repeat_due(self, sent: TeamPlan | None, now: float) -> Repeat | None:
         """Whether ``sent`` should be published again (the simulator may never have got it); a
@@ -123,10 +103,10 @@ class LockstepFollower:
         """A recovery step (at most one every REPEAT_AFTER s) when the simulator has been paused for
         REPEAT_AFTER s or more waiting for a plan newer than ``sent``; None otherwise."""
         clock = self.clock
-        if self.paused is None or clock is None or clock.mode != "lockstep" or clock.awaiting != "plan":
+        if self.paused is None or clock is None or not lockstep.awaits(clock, lockstep.PLAN):
             return None
         (version, _), since = self.paused
-        if sent is not None and sent.world_version >= version and sent.constraints_version >= clock.constraints_version:
+        if lockstep.answered(sent, clock):
             return None  # answered: a lost plan is repeat_due's business
         if now - since < self.repeat_after or now - self.stall_seen_at < self.repeat_after:
             return None

@@ -8,7 +8,8 @@ This class only wires the parts together: typed triggers (:mod:`.triggers`) for 
 call for a plan; the :class:`~.scheduler.ReplanScheduler` (one replan for a burst); the
 :class:`~.world_cache.WorldCache`; the :class:`~.lockstep.LockstepFollower` (when a lockstep
 simulator has all of a version and waits for a plan: planning only then makes a lockstep mission the
-same on a busy machine as on an idle one; and what to do when it waits for one not being made);
+same on a busy machine as on an idle one; and what to do when it waits for one not being made; the
+rules are :mod:`protocol.lockstep`);
 :class:`~.readiness.Readiness` (enough known to plan after a (re)start); :func:`~.continuation.continued`
 (the plan being executed kept when the news calls for no solve). Every world version is answered
 with a TeamPlan, even if nothing changed. Replanning starts from the plan being executed (IIDP warm
@@ -22,6 +23,7 @@ from __future__ import annotations
 import time
 
 from protocol.clock import SimClock, WallClock
+from protocol.lockstep import in_lockstep
 from protocol.messages import Clock, ConstraintSet, DoorState, Event, RobotPose, RobotStatus
 from protocol.service import Service
 from protocol.site import Site
@@ -235,7 +237,7 @@ class PlannerService(Service):
             self.trigger(NewWorldVersion())
 
     def _lockstep(self) -> bool:
-        return isinstance(self.clock, SimClock) and self.clock.mode == "lockstep"
+        return in_lockstep(self.clock)
 
     def _plan_if_awaited(self) -> None:
         """Plan at once when a lockstep simulator waits for a plan newer than the one published and

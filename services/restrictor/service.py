@@ -14,12 +14,12 @@ I/O (keys under ``arroch/<namespace>/``):
   of the AR client and the tablet page are built from this answer;
 - drops expired constraints (window end reached on the site clock) and publishes the new version.
 
-In a lockstep mission the restrictor's clock lags the simulator's by however many clock messages
-are still on their way, which depends on the machine's load. So there a feedback's window starts at
-the feedback's own stamp (the simulator's time when the human gave it; at most LOCKSTEP_LEAD ahead
-of the clock heard here), and constraints expire only when feedback is handled, never on a timer:
-a ConstraintSet published between two world versions would reach the planner at a moment of the
-machine's choosing, and the same seed would not give the same mission.
+In a lockstep mission (the restrictor's part of the handshake, :mod:`protocol.lockstep`) the
+restrictor's clock lags the simulator's by however many clock messages are still on their way, which
+depends on the machine's load. So there a feedback's window starts at the feedback's own stamp
+(:func:`~protocol.lockstep.feedback_time`), and constraints expire only when feedback is handled,
+never on a timer: a ConstraintSet published between two world versions would reach the planner at a
+moment of the machine's choosing, and the same seed would not give the same mission.
 
 All state changes run on the service's worker thread: query callbacks only hand the query over
 (Zenoh's thread must stay quick), and the worker replies once the feedback is applied.
@@ -43,6 +43,7 @@ from protocol.clock import SimClock, WallClock
 from protocol.codec import ENCODING, decode, encode
 from protocol.constraint_library import encode_library
 from protocol.errors import ProtocolError
+from protocol.lockstep import expires_on_timer, feedback_time, in_lockstep
 from protocol.messages import ConstraintSet, Feedback, FeedbackAck
 from protocol.service import Service
 from protocol.transport import ZenohOptions
@@ -56,7 +57,6 @@ EXPIRY_PERIOD = 0.2  # wall seconds between expiry checks
 QUERY_POLL = 0.02  # wall seconds between looks at pending feedback queries
 MAX_PENDING_QUERIES = 1000
 CLOCK_WAIT = 2.0  # wall seconds feedback may wait for the site clock before it is refused
-LOCKSTEP_LEAD = 120.0  # site s a lockstep feedback's stamp may be ahead of the clock heard here
 
 
 class RestrictorService(Service):
@@ -129,15 +129,12 @@ class RestrictorService(Service):
     def _now(self) -> float | None:
         return self.clock.now() if self.clock.synced else None
 
-    def _lockstep(self) -> bool:
-        return isinstance(self.clock, SimClock) and self.clock.synced and self.clock.mode == "lockstep"
-
     def _feedback_time(self, feedback: Feedback) -> float | None:
         """The site time a feedback takes effect at (see the module docstring)."""
         now = self._now()
-        if now is None or not self._lockstep():
-            return now
-        return feedback.stamp if now <= feedback.stamp <= now + LOCKSTEP_LEAD else now
+        if now is None:
+            return None
+        return feedback_time(now, feedback.stamp, lockstep=in_lockstep(self.clock))
 
     def _on_feedback(self, feedback: Feedback, _key: str) -> None:
         self._take(feedback, None)
@@ -247,7 +244,7 @@ class RestrictorService(Service):
 
     def _expire(self) -> None:
         now = self._now()
-        if now is None or self._lockstep():
+        if now is None or not expires_on_timer(lockstep=in_lockstep(self.clock)):
             return  # lockstep: expiry comes with the next feedback (module docstring)
         gone = self.active.expire(now)
         if gone:

@@ -16,6 +16,9 @@ pacer starts counting again from the paused instant, so site time goes on from t
 ``abort`` ends the mission at once (``mission_done``, ``completed`` false, ``reason`` "aborted by the
 experimenter: ..."); with ``--until-done`` the process then exits with :data:`EXIT_STUDY_ABORTED`.
 
+Lockstep: time advances only while the handshake of :mod:`protocol.lockstep` allows it (this
+process holds its gate, ``self.gate``; a held camera frame and real robots' drivers wait besides).
+
 Order of publication after a tick that changed the world: poses, then statuses and door states,
 then the events, then the clock. A planner woken by an event (or by the new ``world_version`` on
 a status) has therefore already received the poses of that instant.
@@ -55,6 +58,7 @@ from typing import IO, Any
 import zenoh
 
 from protocol.keys import chunk_at
+from protocol.lockstep import OPEN, LockstepGate, Wait, simulator_waits
 from protocol.messages import (
     Clock,
     DoorState,
@@ -76,7 +80,7 @@ from .camfeed import MAX_MISSED
 from .engine import Engine, EngineConfig, FeedbackRequest, SimEvent
 from .feedback import FeedbackSender
 from .human import HumanConfig
-from .pacing import LockstepGate, WallPacer
+from .pacing import WallPacer
 from .participant import ACTS as SIM_ACTS
 
 log = logging.getLogger("arroch.sim")
@@ -559,21 +563,19 @@ class SimService(Service):
             self._events_file.write(json.dumps(event.as_dict(), sort_keys=True) + "\n")
 
     def _blocked(self) -> str:
-        return self._waits_for()[1]
+        return self._waits_for().reason
 
-    def _waits_for(self) -> tuple[str, str]:
-        """In lockstep, what time waits for (the Clock's ``awaiting``: the gate's reason first, then
-        the camera's held frame) and why, in words; ``("", "")`` when it may advance."""
+    def _waits_for(self) -> Wait:
+        """In lockstep, what time waits for (the Clock's ``awaiting``) and why, in words
+        (:func:`protocol.lockstep.simulator_waits`); ``OPEN`` when it may advance."""
         if self.options.mode != "lockstep":
-            return "", ""
-        kind, gate = self.gate.waits_for(
+            return OPEN
+        gate = self.gate.waits_for(
             self.engine.world_version, {rid: r.last_action_id for rid, r in self.engine.robots.items()}
         )
         hold = self._camera.hold.blocker() if self._camera is not None and self._camera.hold is not None else ""
         drivers = self._external.blocker() if self._external is not None else ""
-        return kind or ("camera" if hold else "") or ("command" if drivers else ""), "; ".join(
-            b for b in (gate, hold, drivers) if b
-        )
+        return simulator_waits(gate, hold, drivers)
 
     def _camera_hold(self) -> None:
         """Lockstep with a camera: take the held frame when one is due; end a hold that timed out."""
@@ -616,7 +618,7 @@ class SimService(Service):
         self._last_clock_wall = time.monotonic()
         mode = self.options.mode
         rate = self.options.rate if mode == "rate" else 1.0
-        awaiting, blocker = self._waits_for() if not self.engine.done else ("", "")
+        awaiting, blocker = self._waits_for() if not self.engine.done else OPEN
         self.publish(
             self.keys.clock(),
             Clock(

@@ -6,11 +6,12 @@ import json
 
 import pytest
 
+from protocol.lockstep import LockstepGate
 from protocol.messages import PlanStep, TeamPlan
 from protocol.site import load_site
 from services.sim.engine import Engine
 from services.sim.human import HumanConfig
-from services.sim.pacing import LockstepGate, WallPacer
+from services.sim.pacing import WallPacer
 from tests.sim.helpers import run_mission, small_site
 
 

@@ -25,6 +25,7 @@ from .robots import Robot
 # Overlap below this (m) is touching, not entering: a robot stopped exactly at the guard distance
 # must not count, and neither must float rounding on a robot grazing a jamb.
 TOLERANCE = 1e-3
+BOX_SLACK = 1e-9  # m added to the box test, so float rounding can never skip a robot the exact test counts
 
 
 @dataclass(frozen=True)
@@ -52,8 +53,14 @@ class ClosedDoorWatch:
         for door in self.doors.doors.values():
             if door.passable:
                 continue
-            a, b = door.opening.endpoints
+            a, b = door.gap
+            # The gap is axis-aligned with a <= b: a robot farther than a radius from its bounding
+            # box along either axis cannot reach it (the exact distance below would say the same).
+            reach = self.radius + BOX_SLACK
+            x0, y0, x1, y1 = a[0] - reach, a[1] - reach, b[0] + reach, b[1] + reach
             for robot in robots:
+                if not (x0 < robot.x < x1 and y0 < robot.y < y1):
+                    continue
                 depth = self.radius - segment_distance((robot.x, robot.y), a, b)
                 if depth <= TOLERANCE:
                     continue

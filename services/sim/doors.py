@@ -30,7 +30,7 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from protocol.plane import segment_distance
+from protocol.plane import Point, segment_distance
 from protocol.site.model import DoorLeaf, Opening
 
 
@@ -64,6 +64,11 @@ class Door:
     requests: set[str] = field(default_factory=set)  # robots asking this tick
     sensor: bool = False  # follows its sensor (a real door): open while it says open
     sensor_open: bool = False  # what its sensor said last
+    # The gap's ends (Opening.endpoints), computed once: they are read for every robot every tick.
+    gap: tuple[Point, Point] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self.gap = self.opening.endpoints
 
     @property
     def id(self) -> str:
@@ -146,7 +151,7 @@ class Doors:
         return True
 
     def doorway_clear(self, door: Door, robots: Iterable[tuple[float, float]]) -> bool:
-        a, b = door.opening.endpoints
+        a, b = door.gap
         limit = self.robot_radius + self.config.clear_margin
         leaf = door.leaf
         if leaf is not None:

@@ -45,6 +45,7 @@ from .right_of_way import RightOfWay
 from .walls import WallDepth
 
 QUEUE_DISTANCE = 1.5  # m from the end of its approach within which a robot kept back queues there
+BOX_SLACK = 1e-9  # m: the door guard's quick box test errs on the side of the exact one
 
 
 def _crossing(robot: Robot) -> str:
@@ -188,7 +189,7 @@ class RobotExecutor:
             raise CommandError(problem)
 
     def _crossings(self, path: Path) -> list[tuple[float, str]]:
-        return path_crossings(path, {door.id: door.opening.endpoints for door in self.doors.doors.values()})
+        return path_crossings(path, {door.id: door.gap for door in self.doors.doors.values()})
 
     # ------------------------------------------------------------------ stepping
 
@@ -229,9 +230,7 @@ class RobotExecutor:
         cfg = self.config
         s_limit, blocking = math.inf, ""
         for s_cross, door_id in robot.crossings:
-            if crossing_behind(
-                follower.path, s_cross, self.doors[door_id].opening.endpoints, follower.s, robot.x, robot.y
-            ):
+            if crossing_behind(follower.path, s_cross, self.doors[door_id].gap, follower.s, robot.x, robot.y):
                 continue  # behind the robot's centre already
             if s_cross - follower.s <= cfg.auto_open_distance + cfg.radius:
                 self.doors.request_open(door_id, robot.id)
@@ -466,8 +465,13 @@ class RobotExecutor:
         return after > self.config.wall_tolerance and after > self._walls.depth(robot.x, robot.y) + 1e-9
 
     def _breaks_guard(self, robot: Robot, step: Step, door_id: str, margin: float | None = None) -> bool:
-        a, b = self.doors[door_id].opening.endpoints
+        a, b = self.doors[door_id].gap
         limit = self.config.radius + (self.config.guard_margin if margin is None else margin)
+        # A step farther than ``limit`` from the gap's (axis-aligned) box along an axis is farther
+        # than ``limit`` from the gap: it breaks nothing, without the two exact distances.
+        reach = limit + BOX_SLACK  # so float rounding never skips a step the exact distances refuse
+        if not (a[0] - reach < step.x < b[0] + reach and a[1] - reach < step.y < b[1] + reach):
+            return False
         before = segment_distance((robot.x, robot.y), a, b)
         after = segment_distance((step.x, step.y), a, b)
         return after < limit and after < before

@@ -21,19 +21,33 @@ if TYPE_CHECKING:  # for type hints only: the executor (.robots) imports this mo
     from .robots import Robot
 
 
+KNOWN_POINTS = 4096  # depths remembered (a few ticks of every robot's poses and candidate steps)
+
+
 class WallDepth:
     def __init__(self, site: Site, radius: float) -> None:
         boxes = np.array([w.box for w in site.walls], dtype=np.float64).reshape(-1, 4)
         self._x0, self._y0, self._x1, self._y1 = boxes.T
         self.radius = radius
+        # Depths of points asked lately: a robot's pose is asked again and again (by the watch every
+        # tick, by the guard as "before" after it was the step's "after"), and the depth of a point
+        # never changes. Cleared when full, so it stays small.
+        self._known: dict[tuple[float, float], float] = {}
 
     def depth(self, x: float, y: float) -> float:
         """Metres the disc centred at (x, y) reaches into the nearest wall (<= 0: it touches none)."""
+        known = self._known.get((x, y))
+        if known is not None:
+            return known
         if self._x0.size == 0:
             return -np.inf
         dx = np.maximum(np.maximum(self._x0 - x, x - self._x1), 0.0)
         dy = np.maximum(np.maximum(self._y0 - y, y - self._y1), 0.0)
-        return float(self.radius - np.sqrt(dx * dx + dy * dy).min())
+        depth = float(self.radius - np.sqrt(dx * dx + dy * dy).min())
+        if len(self._known) >= KNOWN_POINTS:
+            self._known.clear()
+        self._known[(x, y)] = depth
+        return depth
 
 
 # A disc reaching less than this (m) into a wall touches it, no more (float rounding at the limit).

@@ -111,10 +111,10 @@ def command(
     )
 
 
-def run_mission(engine: Engine, *, max_time: float = 7200.0) -> list[SimEvent]:
-    """Drive ``engine`` with the scripted planner, answering every world version at once, like a
-    lockstep planner with zero solve time. Returns every event."""
-    planner = ScriptedPlanner(engine.site)
+def run_mission(engine: Engine, *, max_time: float = 7200.0, planner: ScriptedPlanner | None = None) -> list[SimEvent]:
+    """Drive ``engine`` with the scripted planner (or ``planner``), answering every world version at
+    once, like a lockstep planner with zero solve time. Returns every event."""
+    planner = planner or ScriptedPlanner(engine.site)
     engine.start()
     answered, plans, log = 0, 0, []
     while not engine.done and engine.time < max_time:

@@ -23,6 +23,11 @@ Guided second pass (:meth:`TagDetector.detect_regions`): once a pose is known, l
 in view but not found are searched again in a crop around their predicted position (upscaled when
 small). That recovers small or blurred tags for about a millisecond per crop.
 
+Small tags (:mod:`smalltags`): ArUco's rejected quads are read again by correlation with each code,
+except on a frame where ArUco itself already read :data:`SKIP_SMALL_AT_TAGS` tags at least
+:data:`WELL_SEEN_PX` across (a close, many-tag view: the reading would cost time and add nothing the
+pose needs). ``small_tag_passes`` and ``small_tag_skips`` count both outcomes.
+
 Detections whose corners come within :data:`BORDER_MARGIN_PX` of the image edge are dropped: the
 AprilTag library clamps the corners of tags cut by the image edge, and a cut tag's edge fit would
 run off the image too.
@@ -57,6 +62,14 @@ REFINE_PASSES = 2
 DETECTORS = ("opencv", "apriltag")
 #: Crops whose predicted tag is smaller than this (pixels across) are upscaled ×2 before the search.
 UPSCALE_BELOW_PX = 40.0
+#: Small-tag reading is skipped on a frame where ArUco itself already read this many of the site's tags
+#: at least :data:`WELL_SEEN_PX` across (square root of the black square's area): such a frame is a
+#: close, many-tag view whose pose those tags already fix, and a small tag the skip leaves unread is
+#: still searched for by the pipeline's guided second pass (up to 75 deg off its normal). On the close
+#: views the skip leaves ~0.4 % of the tags unread, all 70-78 deg oblique, with no loss of pose accuracy;
+#: the hard set's frames (1-3 tags in view) never reach the count (``benchmarks/ar.py --close``, ``--hard``).
+SKIP_SMALL_AT_TAGS = 4
+WELL_SEEN_PX = 32.0
 
 _pupil_lock = threading.Lock()
 _pupil_detector = None
@@ -136,6 +149,12 @@ def touches_border(corners: np.ndarray, width: int, height: int, margin: float =
     )
 
 
+def tag_side_px(corners: np.ndarray) -> float:
+    """A tag's size in the image: the square root of the area of its (4, 2) corners' quad, in pixels."""
+    x, y = corners[:, 0], corners[:, 1]
+    return float(np.sqrt(abs(0.5 * (np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))))
+
+
 def to_gray(image: np.ndarray) -> np.ndarray:
     """A contiguous uint8 single-channel view of a BGR/BGRA/gray image."""
     if image.ndim == 3:
@@ -161,6 +180,7 @@ class TagDetector:
         max_hamming: int = 1,
         opencv_refine: str = "edges",
         small_tags: bool = True,
+        skip_small_at: int | None = SKIP_SMALL_AT_TAGS,
     ) -> None:
         if method not in DETECTORS:
             raise ValueError(f"unknown detector {method!r} (expected 'apriltag' or 'opencv')")
@@ -172,6 +192,13 @@ class TagDetector:
         self.max_hamming = max_hamming
         self.refine_passes = REFINE_PASSES
         self.small_tags = small_tags  # OpenCV back end: read small tags from ArUco's rejected quads
+        # ... except on frames with this many well-seen tags already (None: on every frame).
+        if skip_small_at is not None and skip_small_at < 1:
+            raise ValueError(f"skip_small_at must be a positive tag count or None, got {skip_small_at!r}")
+        self.skip_small_at = skip_small_at
+        # How often the small-tag reading ran and was skipped (all images searched, crops included).
+        self.small_tag_passes = 0
+        self.small_tag_skips = 0
         self._lock = threading.Lock()  # the pupil detector's decimation is per-call state
         if method == "apriltag":
             self._pupil = apriltag_detector()
@@ -233,8 +260,19 @@ class TagDetector:
                     quads = refine_corners(gray, quads, self.refine_passes, lens)
                 out += [TagDetection(i, q, "opencv") for (i, _), q in zip(kept, quads, strict=True)]
             if self.small_tags and rejected:
-                out += self._small(gray, rejected, out, lens)
+                if self._enough_well_seen(out):
+                    self.small_tag_skips += 1
+                else:
+                    self.small_tag_passes += 1
+                    out += self._small(gray, rejected, out, lens)
         return out
+
+    def _enough_well_seen(self, found: list[TagDetection]) -> bool:
+        """Whether ``found`` (ArUco's own reads) holds :attr:`skip_small_at` tags of :data:`WELL_SEEN_PX` or more."""
+        if self.skip_small_at is None or len(found) < self.skip_small_at:
+            return False
+        well_seen = sum(tag_side_px(d.corners) >= WELL_SEEN_PX for d in found)
+        return well_seen >= self.skip_small_at
 
     def _small(
         self, gray: np.ndarray, rejected: Sequence[np.ndarray], found: list[TagDetection], lens: Lens | None

@@ -22,6 +22,8 @@ original position: a refinement must never make a detection worse.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import cv2
 import numpy as np
 
@@ -127,15 +129,24 @@ def refine_once(gray: np.ndarray, quads: list[np.ndarray], lens: Lens | None = N
     # Point each normal outward (away from the dark square's centre).
     outward = np.einsum("tij,tij->ti", normals, q + edges / 2.0 - q.mean(axis=1, keepdims=True))
     normals = np.where((outward < 0)[..., None], -normals, normals)
-    grid = bases[:, :, :, None, :] + steps[:, None, None, :, None] * normals[:, :, None, None, :]  # (T, 4, K, S, 2)
-    profile = sample_bilinear(gray, grid if lens is None else lens.distort(grid))
+    # Sample points laid out step-major, (S, T, 4, K) per coordinate: every reduction along a profile is
+    # then a handful of whole-array operations instead of numpy's slow short-axis loops (same values).
+    across = (steps[:, None, :, None] * normals[:, :, None, :]).transpose(2, 0, 1, 3)  # (S, T, 4, 2)
+    if lens is None:
+        profile = _sample_profiles(gray, bases, across)
+    else:
+        grid = lens.distort(bases[None] + across[:, :, :, None, :])  # (S, T, 4, K, 2)
+        profile = _remap_points(gray, grid)
     # Crossing of each profile: gradient-weighted mean of its rising (dark inside → light outside) part.
-    grad = np.clip(np.diff(profile, axis=-1), 0.0, None)
-    mids = (steps[:, :-1] + steps[:, 1:]) / 2.0  # (T, S-1)
-    weight = grad.sum(axis=-1)  # (T, 4, K)
+    # On a uint8 frame the rises, their sums and the contrast are exact integers.
+    wide = np.int16 if profile.dtype == np.uint8 else np.float64
+    grad = np.maximum(profile[1:].astype(wide) - profile[:-1], 0)  # (S-1, T, 4, K)
+    weight = grad.sum(axis=0, dtype=np.float64)  # (T, 4, K)
+    # Step midpoints are the unit profile's midpoints scaled by each tag's reach: one matrix-vector product.
+    along = _unit_mids() @ grad.reshape(STEPS - 1, -1).astype(np.float64)
     with np.errstate(invalid="ignore", divide="ignore"):
-        crossing = (grad * mids[:, None, None, :]).sum(axis=-1) / weight
-    contrast = profile.max(axis=-1) - profile.min(axis=-1)
+        crossing = along.reshape(weight.shape) * reach[:, None, None] / weight
+    contrast = profile.max(axis=0).astype(np.float64) - profile.min(axis=0)
     good = np.isfinite(crossing) & (contrast > MIN_CONTRAST)
     w = np.where(good, weight, 0.0)
     pts = bases + np.where(good, crossing, 0.0)[..., None] * normals[:, :, None, :]
@@ -144,9 +155,7 @@ def refine_once(gray: np.ndarray, quads: list[np.ndarray], lens: Lens | None = N
     enough = good.sum(axis=-1) >= 4
     mean = (pts * w[..., None]).sum(axis=2) / np.maximum(wsum, 1e-12)[..., None]
     centred = (pts - mean[:, :, None, :]) * np.sqrt(w)[..., None]
-    cov = np.einsum("teki,tekj->teij", centred, centred)
-    _evals, evecs = np.linalg.eigh(cov)
-    direction = evecs[..., :, 1]  # (T, 4, 2) eigenvector of the largest eigenvalue
+    direction = _principal_directions(centred)  # (T, 4, 2)
     # Corner i is where edge i-1 (ending at it) meets edge i (starting at it).
     p, u = np.roll(mean, 1, axis=1), np.roll(direction, 1, axis=1)
     r, v = mean, direction
@@ -165,16 +174,74 @@ def refine_once(gray: np.ndarray, quads: list[np.ndarray], lens: Lens | None = N
 
 
 def sample_bilinear(gray: np.ndarray, grid: np.ndarray) -> np.ndarray:
-    """Bilinear intensities at ``grid``'s (..., 2) pixel positions, in one ``cv2.remap`` call."""
+    """Bilinear intensities (float64) at ``grid``'s (..., 2) pixel positions, in one ``cv2.remap`` call."""
+    return _remap_points(gray, grid).astype(np.float64)
+
+
+def _remap_points(gray: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    """Bilinear intensities at ``grid``'s (..., 2) pixel positions, in ``gray``'s own dtype (``cv2.remap``).
+
+    The points go to remap as one interleaved x/y float32 map (no split into two maps). Its rows are the
+    longest run of the grid's trailing axes that fits in ``_ROW`` points (remap wants under 32767 on a side,
+    and works row by row: narrow rows cost more), else ``_ROW`` points with the last row padded."""
     shape = grid.shape[:-1]
-    coords = grid.reshape(-1, 2).astype(np.float32)
+    coords = np.ascontiguousarray(grid, dtype=np.float32).reshape(-1, 2)
     total = len(coords)
-    # remap wants 2-D maps under 32767 on a side: lay the samples out in rows of _ROW.
-    rows = -(-total // _ROW)
-    padded = np.zeros((rows * _ROW, 2), np.float32)
-    padded[:total] = coords
-    padded = padded.reshape(rows, _ROW, 2)
+    width = 1
+    for n in reversed(shape):
+        if width * n > _ROW:
+            break
+        width *= n
+    if width < 16 or total // width >= 32767:
+        width = _ROW
+    rows = -(-total // width)
+    if rows * width != total:
+        padded = np.zeros((rows * width, 2), np.float32)
+        padded[:total] = coords
+        coords = padded
     values = cv2.remap(
-        gray, padded[..., 0], padded[..., 1], interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+        gray, coords.reshape(rows, width, 2), None, interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
     )
-    return values.reshape(-1)[:total].astype(np.float64).reshape(shape)
+    return values.reshape(-1)[:total].reshape(shape)
+
+
+def _sample_profiles(gray: np.ndarray, bases: np.ndarray, across: np.ndarray) -> np.ndarray:
+    """Intensities (``gray``'s dtype) at ``bases`` (T, 4, K, 2) plus each of ``across`` (S, T, 4, 2): (S, T, 4, K).
+
+    One remap with a map of S rows, x and y built apart (a broadcast over an innermost axis of two
+    coordinates is several times slower than over the K samples)."""
+    n_steps, n_tags = across.shape[0], bases.shape[0]
+    if n_tags * 4 * bases.shape[2] >= 32767:  # remap's limit on a map side: half the tags at a time
+        half = n_tags // 2
+        return np.concatenate(
+            [
+                _sample_profiles(gray, bases[:half], across[:, :half]),
+                _sample_profiles(gray, bases[half:], across[:, half:]),
+            ],
+            axis=1,
+        )
+    maps = []
+    for c in (0, 1):
+        plane = np.empty((n_steps, *bases.shape[:3]), np.float32)  # added in float64, stored as remap reads it
+        np.add(bases[None, ..., c], across[..., c, None], out=plane, casting="unsafe")
+        maps.append(plane.reshape(n_steps, -1))
+    values = cv2.remap(gray, maps[0], maps[1], interpolation=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return values.reshape(n_steps, *bases.shape[:3])
+
+
+@lru_cache(maxsize=1)
+def _unit_mids() -> np.ndarray:
+    """Midpoints between consecutive steps of a profile of reach 1 (each tag's are these times its reach)."""
+    unit = np.linspace(-1.0, 1.0, STEPS)
+    return (unit[:-1] + unit[1:]) / 2.0
+
+
+def _principal_directions(centred: np.ndarray) -> np.ndarray:
+    """Unit direction of largest spread of each point set in ``centred`` (..., K, 2), already centred.
+
+    The closed form of a 2 x 2 symmetric matrix's leading eigenvector: the angle ½·atan2(2b, a − c) of
+    the scatter [[a, b], [b, c]] (numpy's batched ``eigh`` costs more than the rest of the fit)."""
+    x, y = centred[..., 0], centred[..., 1]
+    a, b, c = (x * x).sum(axis=-1), (x * y).sum(axis=-1), (y * y).sum(axis=-1)
+    angle = 0.5 * np.arctan2(2.0 * b, a - c)
+    return np.stack([np.cos(angle), np.sin(angle)], axis=-1)

@@ -48,43 +48,60 @@ import re
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
+
+import msgspec
+import msgspec.inspect
+import msgspec.structs
+from msgspec import Meta
 
 from .keys import KEY_FORMATS, TopicNaming, full_topic
 from .types import CMD_VEL_TYPES, HASH_NOT_SUPPORTED, POSE_TYPES
 
 DURABILITIES = ("volatile", "transient_local")
+DEFAULT_KEY_FORMAT = "rmw_zenoh"
+DEFAULT_DOMAIN = 0
+
+# The file's vocabulary, for msgspec (the words come from the ROS 2 modules, so each is written once).
+KeyFormat = Literal[KEY_FORMATS]  # type: ignore[valid-type]
+Domain = Annotated[int, Meta(ge=0, le=232)]  # ROS_DOMAIN_ID
+Positive = Annotated[float, Meta(gt=0)]  # finiteness is checked after decoding (Meta has no bound for it)
+PoseType = Literal[tuple(POSE_TYPES)]  # type: ignore[valid-type]
+CmdVelType = Literal[tuple(CMD_VEL_TYPES)]  # type: ignore[valid-type]
+Durability = Literal[DURABILITIES]  # type: ignore[valid-type]
+TypeHash = Literal["", HASH_NOT_SUPPORTED]  # "" : RIHS01 (Jazzy and later); "TypeHashNotSupported": Humble
 
 
 class RosConfigError(ValueError):
     """A robot config file that cannot be used: the message names the file and the key."""
 
 
-@dataclass(frozen=True)
-class RobotLink:
+class RobotLink(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """One ``[ros2.robots.<id>]`` table (its schema: every field but ``robot`` is a key of the table)."""
+
     robot: str
     namespace: str
     cmd_vel: str = "cmd_vel"
     pose_topic: str = "odom"
-    pose_type: str = "odometry"
+    pose_type: PoseType = "odometry"
     map_to_odom: tuple[float, float, float] | None = None  # None: the site start pose
     tf_topic: str = ""
     map_frame: str = "map"
     odom_frame: str = "odom"
     base_frame: str = "base_link"
-    max_speed: float | None = None
-    max_turn_rate: float = 1.5
-    pose_timeout: float = 0.3
-    control_period: float = 0.05
-    key_format: str | None = None  # None: the [ros2] table's
-    domain: int | None = None
-    cmd_vel_type: str = "twist"
-    pose_durability: str = "volatile"
+    max_speed: Positive | None = None
+    max_turn_rate: Positive = 1.5
+    pose_timeout: Positive = 0.3
+    control_period: Positive = 0.05
+    key_format: KeyFormat | None = None  # None: the [ros2] table's
+    domain: Domain | None = None
+    cmd_vel_type: CmdVelType = "twist"
+    pose_durability: Durability = "volatile"
     odom_topic: str = ""  # with pose_type "pose": odometry between localisation updates ("" none)
     scan_topic: str = ""  # "" : no safety field
-    scan_timeout: float = 0.5
-    obstacle_patience: float = 15.0
-    type_hash: str = ""  # "" : RIHS01 (Jazzy and later); "TypeHashNotSupported": Humble
+    scan_timeout: Positive = 0.5
+    obstacle_patience: Positive = 15.0
+    type_hash: TypeHash = ""
 
     @property
     def pose_typename(self) -> str:
@@ -98,9 +115,9 @@ class RobotLink:
         return full_topic(self.namespace, name)
 
 
-@dataclass(frozen=True)
-class DoorLink:
-    """A real door's sensor on ROS 2: ``std_msgs/Bool`` on ``topic`` (true: open)."""
+class DoorLink(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """A real door's sensor on ROS 2: ``std_msgs/Bool`` on ``topic`` (true: open); one ``[ros2.doors.<id>]``
+    table (every field but ``door`` is a key of the table)."""
 
     door: str
     topic: str
@@ -110,10 +127,20 @@ class DoorLink:
         return f"/doors/{door}/open"
 
 
+class _Ros2Table(msgspec.Struct, forbid_unknown_fields=True):
+    """The ``[ros2]`` table; its robot and door tables are decoded one by one, so errors name their id."""
+
+    key_format: KeyFormat = DEFAULT_KEY_FORMAT
+    domain: Domain = DEFAULT_DOMAIN
+    bridge_namespace: str = ""  # ros2dds only: the bridge's `namespace` setting
+    robots: dict[str, Any] = {}
+    doors: dict[str, Any] = {}
+
+
 @dataclass(frozen=True)
 class Ros2Config:
-    key_format: str = "rmw_zenoh"
-    domain: int = 0
+    key_format: str = DEFAULT_KEY_FORMAT
+    domain: int = DEFAULT_DOMAIN
     bridge_namespace: str = ""
     robots: dict[str, RobotLink] = field(default_factory=dict)
     source: str = "<defaults>"
@@ -133,7 +160,7 @@ class Ros2Config:
     def with_overrides(self, *, key_format: str | None = None, domain: int | None = None) -> Ros2Config:
         """The command line's key format and domain, for every robot."""
         robots = {
-            rid: replace(
+            rid: msgspec.structs.replace(
                 link, key_format=key_format or link.key_format, domain=link.domain if domain is None else domain
             )
             for rid, link in self.robots.items()
@@ -146,31 +173,6 @@ class Ros2Config:
         )
         changed.naming()  # checks them
         return changed
-
-
-_FLOATS = ("max_speed", "max_turn_rate", "pose_timeout", "control_period", "scan_timeout", "obstacle_patience")
-_STRINGS = (
-    "namespace",
-    "cmd_vel",
-    "pose_topic",
-    "pose_type",
-    "tf_topic",
-    "map_frame",
-    "odom_frame",
-    "base_frame",
-    "cmd_vel_type",
-    "pose_durability",
-    "odom_topic",
-    "scan_topic",
-    "type_hash",
-)
-# Keys whose string value is one of a few words, and those words.
-_CHOICES = {
-    "pose_type": tuple(POSE_TYPES),
-    "cmd_vel_type": tuple(CMD_VEL_TYPES),
-    "pose_durability": DURABILITIES,
-    "type_hash": ("", HASH_NOT_SUPPORTED),
-}
 
 
 def load_ros2_config(path: str | Path | None) -> Ros2Config:
@@ -188,52 +190,92 @@ def load_ros2_config(path: str | Path | None) -> Ros2Config:
 
 
 def parse_ros2_config(table: Any, name: str = "<config>") -> Ros2Config:
-    def fail(key: str, problem: str) -> RosConfigError:
-        return RosConfigError(f"{name}: ros2.{key}: {problem}")
-
-    if not isinstance(table, dict):
-        raise fail("", "must be a table")
-    key_format = table.get("key_format", "rmw_zenoh")
-    if key_format not in KEY_FORMATS:
-        raise fail("key_format", f"expected one of {', '.join(KEY_FORMATS)}, got {key_format!r}")
-    domain = table.get("domain", 0)
-    if not _is_domain(domain):
-        raise fail("domain", f"expected an integer 0..232, got {domain!r}")
-    bridge_ns = table.get("bridge_namespace", "")
-    if not isinstance(bridge_ns, str):
-        raise fail("bridge_namespace", "expected a string")
-    robots: dict[str, RobotLink] = {}
-    for rid, entry in (table.get("robots") or {}).items():
-        robots[rid] = _parse_link(rid, entry, lambda key, problem, rid=rid: fail(f"robots.{rid}.{key}", problem))
-    doors_table = table.get("doors", {})
-    if not isinstance(doors_table, dict):
-        raise fail("doors", "must be a table of [ros2.doors.<door id>] tables")
-    doors = {
-        did: _parse_door(did, entry, lambda key, problem, did=did: fail(f"doors.{did}{key}", problem))
-        for did, entry in doors_table.items()
-    }
-    return Ros2Config(key_format, domain, bridge_ns, robots, name, doors)
+    """The ``[ros2]`` table (as tomllib reads it) of the file ``name``; RosConfigError naming file and key."""
+    ros2 = _decode(table, _Ros2Table, name, "ros2")
+    robots = {rid: _parse_link(rid, entry, name) for rid, entry in ros2.robots.items()}
+    doors = {did: _parse_door(did, entry, name) for did, entry in ros2.doors.items()}
+    return Ros2Config(ros2.key_format, ros2.domain, ros2.bridge_namespace, robots, name, doors)
 
 
 _DOOR_ID = re.compile(r"^[A-Za-z_][A-Za-z0-9_\-]{0,63}$")
 
 
-def _parse_door(did: str, entry: Any, fail: Any) -> DoorLink:
+def _parse_door(did: str, entry: Any, name: str) -> DoorLink:
+    where = f"ros2.doors.{did}"
     if not _DOOR_ID.match(did):
-        raise fail("", "not a door id (letters, digits, '_' or '-', at most 64)")
-    if not isinstance(entry, dict):
-        raise fail("", 'must be a table (topic = "/doors/<door>/open")')
-    for key in entry:
-        if key != "topic":
-            raise fail(f".{key}", "unknown key (known: topic)")
-    topic = entry.get("topic", DoorLink.default_topic(did))
-    if not isinstance(topic, str):
-        raise fail(".topic", f"expected a string, got {topic!r}")
+        raise RosConfigError(f"{name}: {where}: not a door id (letters, digits, '_' or '-', at most 64)")
+    door = _decode(entry, DoorLink, name, where, given={"door": did}, defaults={"topic": DoorLink.default_topic(did)})
     try:
-        full_topic("/", topic)
+        full_topic("/", door.topic)
     except ValueError as exc:
-        raise fail(".topic", str(exc)) from None
-    return DoorLink(did, topic)
+        raise RosConfigError(f"{name}: {where}.topic: {exc}") from None
+    return door
+
+
+def _parse_link(rid: str, entry: Any, name: str) -> RobotLink:
+    where = f"ros2.robots.{rid}"
+    link = _decode(entry, RobotLink, name, where, given={"robot": rid}, defaults={"namespace": f"/{rid}"})
+
+    def fail(key: str, problem: str) -> RosConfigError:
+        return RosConfigError(f"{name}: {where}.{key}: {problem}")
+
+    for key in msgspec.structs.fields(link):  # TOML has inf and nan; no time, speed or offset may be either
+        value = getattr(link, key.name)
+        numbers = value if isinstance(value, tuple) else (value,)
+        if any(isinstance(v, float) and not math.isfinite(v) for v in numbers):
+            expected = "finite numbers" if len(numbers) > 1 else "a finite number"
+            raise fail(key.name, f"expected {expected}, got {value!r}")
+    if link.odom_topic and link.pose_type != "pose":
+        raise fail("odom_topic", 'odometry between localisation updates goes with pose_type = "pose"')
+    optional = tuple(key for key in ("tf_topic", "odom_topic", "scan_topic") if getattr(link, key))
+    for key in ("cmd_vel", "pose_topic") + optional:
+        try:
+            link.topic(getattr(link, key))
+        except ValueError as exc:
+            raise fail(key, str(exc)) from None
+    return link
+
+
+def _decode(
+    value: Any,
+    schema: type[msgspec.Struct],
+    name: str,
+    where: str,
+    *,
+    given: dict[str, Any] | None = None,
+    defaults: dict[str, Any] | None = None,
+) -> Any:
+    """``value`` (a TOML table) as ``schema``, with ``given`` (what the table's name says: not a key of it)
+    and ``defaults`` (keys the table may set) added; RosConfigError naming the file and the key."""
+    given, defaults = given or {}, defaults or {}
+    known = sorted(f.name for f in msgspec.structs.fields(schema) if f.name not in given)
+    if isinstance(value, dict):
+        if named := sorted(value.keys() & given.keys()):
+            raise RosConfigError(f"{name}: {where}.{named[0]}: unknown key (known: {', '.join(known)})")
+        value = {**defaults, **value, **given}
+    try:
+        return msgspec.convert(value, schema)
+    except msgspec.ValidationError as exc:
+        problem, _, at = str(exc).partition(" - at `$")
+        path = at.removesuffix("`")
+        if unknown := re.fullmatch(r"Object contains unknown field `(.*)`", problem):
+            path, problem = f"{path}.{unknown.group(1)}", f"unknown key (known: {', '.join(known)})"
+        elif problem.startswith("Invalid enum value ") and (choices := _choices(schema, path.lstrip("."))):
+            got = problem.removeprefix("Invalid enum value ")
+            problem = f"expected one of {', '.join(repr(c) for c in choices)}, got {got}"
+        else:  # msgspec's words, in TOML's: a table, not an object
+            problem = problem.replace("`object`", "a table")
+            problem = problem[0].lower() + problem[1:]
+        raise RosConfigError(f"{name}: {where}{path}: {problem}") from None
+
+
+def _choices(schema: type[msgspec.Struct], key: str) -> tuple[Any, ...]:
+    """The words a key of ``schema`` may take (its Literal's values), or () when it is not one of a few words."""
+    for info in msgspec.inspect.type_info(schema).fields:  # type: ignore[union-attr]
+        if info.name == key:
+            kinds = info.type.types if isinstance(info.type, msgspec.inspect.UnionType) else (info.type,)
+            return next((kind.values for kind in kinds if isinstance(kind, msgspec.inspect.LiteralType)), ())
+    return ()
 
 
 def check_doors(config: Ros2Config, site: Any) -> None:
@@ -248,61 +290,6 @@ def check_doors(config: Ros2Config, site: Any) -> None:
                 f"{config.source}: ros2.doors.{did}: {problem} site {site.name} "
                 f"(its human-operated doors: {', '.join(human) or 'none'})"
             )
-
-
-def _is_domain(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= 232
-
-
-def _parse_link(rid: str, entry: Any, fail: Any) -> RobotLink:
-    if not isinstance(entry, dict):
-        raise fail("", "must be a table")
-    known = set(_FLOATS) | set(_STRINGS) | {"map_to_odom", "key_format", "domain"}
-    for key in entry:
-        if key not in known:
-            raise fail(key, f"unknown key (known: {', '.join(sorted(known))})")
-    values: dict[str, Any] = {"namespace": f"/{rid}"}
-    for key in _STRINGS:
-        if key in entry:
-            if not isinstance(entry[key], str):
-                raise fail(key, f"expected a string, got {entry[key]!r}")
-            values[key] = entry[key]
-    for key in _FLOATS:
-        if key in entry:
-            value = entry[key]
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-                raise fail(key, f"expected a number > 0, got {value!r}")
-            values[key] = float(value)
-    if "map_to_odom" in entry:
-        value = entry["map_to_odom"]
-        if (
-            not isinstance(value, list)
-            or len(value) != 3
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
-        ):
-            raise fail("map_to_odom", f"expected [x, y, yaw] (metres, radians), got {value!r}")
-        values["map_to_odom"] = tuple(float(v) for v in value)
-    if "key_format" in entry:
-        if entry["key_format"] not in KEY_FORMATS:
-            raise fail("key_format", f"expected one of {', '.join(KEY_FORMATS)}, got {entry['key_format']!r}")
-        values["key_format"] = entry["key_format"]
-    if "domain" in entry:
-        if not _is_domain(entry["domain"]):
-            raise fail("domain", f"expected an integer 0..232, got {entry['domain']!r}")
-        values["domain"] = entry["domain"]
-    for key, words in _CHOICES.items():
-        if key in values and values[key] not in words:
-            raise fail(key, f"expected one of {', '.join(repr(w) for w in words)}, got {values[key]!r}")
-    if values.get("odom_topic") and values.get("pose_type", "odometry") != "pose":
-        raise fail("odom_topic", 'odometry between localisation updates goes with pose_type = "pose"')
-    link = RobotLink(rid, **values)
-    optional = tuple(key for key in ("tf_topic", "odom_topic", "scan_topic") if getattr(link, key))
-    for key in ("cmd_vel", "pose_topic") + optional:
-        try:
-            link.topic(getattr(link, key))
-        except ValueError as exc:
-            raise fail(key, str(exc)) from None
-    return link
 
 
 def add_ros2_link_arguments(parser: Any) -> None:

@@ -24,10 +24,10 @@ import cv2
 import numpy as np
 import pytest
 
-from services.ar_client.web.headless import Browser, chromium_path
+from services.demo import WATCHED_CAMERA_EVERY
 from services.recorder.reading import channel_stats
-from services.sim.camfeed import CameraOptions
 from tests.procs import Proc, arroch
+from tests.tablet.browser import Browser, chromium_path
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
@@ -108,12 +108,9 @@ def demo(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Demo]:
 
 def _robots_drawn(page: Browser) -> list[dict]:
     """The overlays the page received that draw a robot over a localised camera frame (its WebSocket
-    traffic, as DevTools reports it; the page draws what it receives)."""
+    traffic, as the browser reports it; the page draws what it receives)."""
     found = []
-    for event in list(page.events):
-        if event.get("method") != "Network.webSocketFrameReceived":
-            continue
-        text = event["params"]["response"].get("payloadData", "")
+    for text in list(page.ws_frames_received):
         if '"overlay"' not in text[:200]:
             continue
         message = json.loads(text)
@@ -126,7 +123,6 @@ def test_after_the_mission_the_page_shows_the_robots_over_the_replayed_camera(de
     if chromium_path() is None:
         pytest.skip("no Chromium on this machine (sudo apt-get install chromium)")
     with Browser(window=(1280, 800)) as page:
-        page.call("Network.enable")
         page.navigate(demo.url)
         state = page.wait_for(
             "window.arroch && window.arroch.state().stream_frames > 5 && window.arroch.state().overlay"
@@ -136,9 +132,8 @@ def test_after_the_mission_the_page_shows_the_robots_over_the_replayed_camera(de
         assert state["mode"] == "viewer" and sorted(state["robots"]) == ["r0", "r1", "r2"], state
         deadline = time.monotonic() + 60
         while not _robots_drawn(page) and time.monotonic() < deadline:
-            time.sleep(0.5)
-        frames = [e for e in page.events if e.get("method") == "Network.webSocketFrameReceived"]
-        assert frames, "DevTools reported none of the page's WebSocket traffic"
+            page.pause(0.5)
+        assert page.ws_frames_received, "the browser reported none of the page's WebSocket traffic"
         assert _robots_drawn(page), "no overlay with a robot drawn on the camera image reached the page"
         # Drawn on screen: the overlay canvas over the stream has the robots' pixels.
         painted = page.wait_for(
@@ -210,7 +205,7 @@ def test_demo_runs_the_mission_serves_the_tablet_page_and_keeps_overlay_frames(d
         times.append(record["time"])
     assert drawn >= 3, f"only {drawn} frames with solid lines drawn"
     # Every one a frame taken on the site clock (held or not): at a multiple of the frame interval.
-    every = CameraOptions().every
+    every = WATCHED_CAMERA_EVERY  # what the demo asks for (--camera-every)
     assert all(abs(t - every * round(t / every)) < 1e-6 for t in times), times
     # Spread over the mission: from its first minute to the deliveries after the human's first focus
     # interval (the camera shows little else in between: the robots wait behind her door).

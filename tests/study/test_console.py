@@ -233,8 +233,8 @@ def test_the_consoles_buttons_reach_the_world_and_abort_ends_the_trial(tmp_path:
 @pytest.mark.integration
 def test_the_console_renders_the_trial_and_its_buttons_send_commands_in_chromium() -> None:
     from protocol.messages import HumanState, ParticipantAction, RobotStatus
-    from services.ar_client.web.headless import Browser, chromium_path
     from services.study.progress import TrialProgress
+    from tests.tablet.browser import Browser, chromium_path
 
     if chromium_path() is None:
         pytest.skip("no Chromium on this machine (Debian: apt-get install chromium)")
@@ -266,11 +266,11 @@ def test_the_console_renders_the_trial_and_its_buttons_send_commands_in_chromium
             assert browser.evaluate("document.getElementById('door-controls').hidden") is False  # a real world
             assert browser.evaluate("getComputedStyle(document.getElementById('paused')).display") == "none"
             browser.evaluate("document.getElementById('mark-note').value = 'she stands up'")
-            browser.click(*browser.center_of("#mark-form button"))
+            browser.click("#mark-form button")
             browser.wait_for("document.getElementById('answer').textContent === 'mark: done'", timeout=10)
-            browser.click(*browser.center_of("#door-controls button"))
+            browser.click("#door-controls button")
             browser.wait_for("document.getElementById('answer').textContent === 'door: done'", timeout=10)
-            browser.click(*browser.center_of("#pause"))
+            browser.click("#pause")
             browser.wait_for("document.getElementById('answer').textContent === 'pause: done'", timeout=10)
     finally:
         server.stop()

@@ -6,7 +6,7 @@ from collections.abc import Callable, Iterator
 
 import pytest
 
-from services.ar_client.web.headless import Browser, chromium_path
+from tests.tablet.browser import Browser, chromium_path
 
 
 @pytest.fixture

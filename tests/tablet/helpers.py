@@ -13,6 +13,7 @@ import asyncio
 import math
 import re
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
@@ -155,7 +156,10 @@ def start_tablet(
 
 
 def run(coro) -> Any:  # noqa: ANN001
-    return asyncio.run(coro)
+    """The coroutine run to its end on a thread of its own: while a browser is open, Playwright's sync
+    API keeps an event loop running in the test's thread, and asyncio.run refuses to start inside it."""
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        return pool.submit(asyncio.run, coro).result()
 
 
 def insecure() -> aiohttp.TCPConnector:

@@ -16,19 +16,19 @@ each step, so a test (or a whole scripted study) can chain the steps:
     driver.wait_for_questionnaire()
     driver.answer_questionnaire({"arroch-q": {"Q1": 5, "Q2": 4, "Q3": 4, "Q4": 3, "Q5": 5}})
 
-Every wait raises :class:`~services.ar_client.web.headless.BrowserError` with the page's last state
+Every wait raises :class:`~tests.tablet.browser.BrowserError` with the page's last state
 when it times out.
 """
 
 from __future__ import annotations
 
 import json
-import time
 from typing import Any
 
 import numpy as np
+from playwright.sync_api import Page
 
-from services.ar_client.web.headless import Browser, BrowserError
+from tests.tablet.browser import Browser, BrowserError
 
 #: Blocks a side when a piece is compared with the picture (mean colour per block).
 GRID = 6
@@ -108,21 +108,14 @@ class StudyPageDriver:
 
     def tap(self, selector: str) -> None:
         """Bring the element into view and touch its centre (a click)."""
-        self.browser.evaluate(
-            f"document.querySelector({json.dumps(selector)}).scrollIntoView({{block: 'center', inline: 'center'}})"
-        )
-        x, y = self.browser.center_of(selector)
         # A click (press and release), not a touch tap: the page's buttons act on "click", which
         # Chromium makes of a touch only when it ends within its long-press time, and on a loaded
         # machine the two dispatches of a tap can be further apart than that (a long press: no click).
-        self.browser.click(x, y)
+        self.browser.click(selector)
 
     def press(self, selector: str, seconds: float) -> None:
         """Touch the element's centre, keep the finger there ``seconds``, lift it."""
-        x, y = self.browser.center_of(selector)
-        self.browser.call("Input.dispatchTouchEvent", type="touchStart", touchPoints=[{"x": x, "y": y}])
-        time.sleep(seconds)
-        self.browser.call("Input.dispatchTouchEvent", type="touchEnd", touchPoints=[])
+        self.browser.hold_touch(selector, seconds)
 
     # ------------------------------------------------------------------ the steps of a trial
 
@@ -215,16 +208,16 @@ class StudyPageDriver:
         self.tap("#turn-back")
         self.wait("s.human && (s.human.place === 'back' || s.human.place === 'desk')")
 
-    def hide_page(self) -> str:
+    def hide_page(self) -> Page:
         """Another tab comes in front (she leaves the page for another app): the page is hidden.
-        Returns that tab's id, for :meth:`show_page`."""
-        target = self.browser.call("Target.createTarget", url="about:blank")["targetId"]
+        Returns that tab, for :meth:`show_page`."""
+        other = self.browser.context.new_page()
         self.browser.wait_for("document.visibilityState === 'hidden'")
-        return target
+        return other
 
-    def show_page(self, target: str) -> None:
+    def show_page(self, other: Page) -> None:
         """Close the tab :meth:`hide_page` opened: the page is in front again."""
-        self.browser.call("Target.closeTarget", targetId=target)
+        other.close()
         self.browser.wait_for("document.visibilityState === 'visible'")
 
     def send_feedback(self, kind: str, **params: Any) -> dict[str, Any]:

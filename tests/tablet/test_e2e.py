@@ -178,7 +178,7 @@ def test_ar_page_overlays_where_the_robot_is_and_feedback_round_trips(
         "(() => { const s = document.getElementById('param-door_unavailable-minutes'); s.value = '30';"
         " s.dispatchEvent(new Event('change')); })()"
     )
-    page.click(*page.center_of("#send-door_unavailable"))
+    page.click("#send-door_unavailable")
     sent = feedback_seen.get(timeout=15)
     assert sent.kind == "door_unavailable" and sent.params == {"door": "d_storage", "minutes": 30}
     ack = wait_for_message(acks, lambda a: a.to == sent.src and a.feedback_seq == sent.seq, timeout=15)

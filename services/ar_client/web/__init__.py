@@ -13,8 +13,8 @@ sees the robots, their plans and the doors over the live camera image, and taps 
 - :mod:`.intrinsics` the camera model of a browser stream (calibration file or default field of view);
 - :mod:`.calibrate` ``arroch ar calibrate`` (chessboard or ChArUco images → intrinsics file);
 - :mod:`.announce` the URLs to open, printed and as a QR code in the terminal;
-- :mod:`.fakecam` and :mod:`.headless` a camera video file for Chromium's fake capture device and a
-  small Chrome DevTools Protocol driver, for the end-to-end tests and the latency benchmark.
+- :mod:`.fakecam` a camera video file for Chromium's fake capture device, for the end-to-end tests
+  and the latency benchmark (which drive Chromium with Playwright: ``tests/tablet/browser.py``).
 
 Study mode (``arroch tablet --study-trial FILE``, the page a study participant uses during a trial):
 

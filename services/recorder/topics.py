@@ -12,28 +12,9 @@ optical frame), so a Foxglove recording, a ROS 2 bag and the live bridge line up
 
 from __future__ import annotations
 
+from protocol.graph import RECORDED
 from protocol.keys import Keys
-from protocol.messages import (
-    CameraFrame,
-    CameraTruth,
-    Clock,
-    ConstraintSet,
-    DoorState,
-    Event,
-    Feedback,
-    FeedbackAck,
-    HumanState,
-    Intent,
-    Message,
-    Overlay,
-    ParticipantAction,
-    QuestionnaireAnswers,
-    RobotCommand,
-    RobotPose,
-    RobotStatus,
-    StudyControl,
-    TeamPlan,
-)
+from protocol.messages import Message
 from protocol.ros2.markers import MAP_FRAME, robot_frame
 from protocol.site import Site
 
@@ -66,28 +47,9 @@ def camera_frame(camera: str) -> str:
 
 
 def recorded_keys(keys: Keys) -> list[tuple[str, type[Message]]]:
-    """Every key expression a recorder subscribes to, with its message type."""
-    return [
-        (keys.clock(), Clock),
-        (keys.robot_pose(), RobotPose),
-        (keys.robot_status(), RobotStatus),
-        (keys.robot_command(), RobotCommand),
-        (keys.door_state(), DoorState),
-        (keys.door_sensor(), DoorState),
-        (keys.plan(), TeamPlan),
-        (keys.intent(), Intent),
-        (keys.feedback(), Feedback),
-        (keys.feedback_ack(), FeedbackAck),
-        (keys.constraints(), ConstraintSet),
-        (keys.camera_frame(), CameraFrame),
-        (keys.camera_truth(), CameraTruth),
-        (keys.overlay(), Overlay),
-        (keys.event(), Event),
-        (keys.human_state(), HumanState),
-        (keys.participant_action(), ParticipantAction),
-        (keys.questionnaire(), QuestionnaireAnswers),
-        (keys.study_control(), StudyControl),
-    ]
+    """Every key expression a recorder subscribes to, with its message type (the service graph's
+    list, :data:`protocol.graph.RECORDED`, under this namespace)."""
+    return [(f"{keys.prefix}/{key}", msg_type) for key, msg_type in RECORDED]
 
 
 def expected_keys(keys: Keys, site: Site) -> list[tuple[str, type[Message]]]:

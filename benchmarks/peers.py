@@ -244,7 +244,8 @@ def run_asp(inst: Instance, planner: TaskPlanner, world: World, method: str, lim
     constraints = windows = None
     if inst.window:
         item = unavailable(*inst.window, "window")
-        constraints, windows = ConstraintProgram.build([item]), Windows.from_asp([item.asp])
+        constraints = ConstraintProgram.build([item])
+        windows = Windows.of(constraints.facts())
     if method == "iidp":
         t0, c0 = time.perf_counter(), time.process_time()
         result = planner.plan(world, constraints, time_limit=limit)

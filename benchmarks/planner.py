@@ -177,7 +177,7 @@ def run_size(
             cpu_times.append(cpu)
             replan_work.append((took, work))
             solves.append(constrained.solves)
-            if validate and validate_result(site, w, constrained, Windows.from_asp([item.asp])):
+            if validate and validate_result(site, w, constrained, Windows.of(program.facts())):
                 invalid += 1
             current, current_world = nxt, w
         if robots <= 3 and joint_limit > 0:

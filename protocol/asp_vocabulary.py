@@ -22,20 +22,17 @@ from typing import Any
 import clingo
 import clingo.ast as ast
 
-# (name, arity) -> meaning. The planner defines the first three for the plan being solved;
-# the restrictor states the last three as facts that the planner's encoding interprets.
-VOCABULARY: dict[tuple[str, int], str] = {
-    ("human_opens", 2): "human_opens(D, T): the plan asks the human to open door D at second T",
-    ("robot_in", 4): "robot_in(R, Room, S, E): robot R is in Room during [S, E)",
-    ("goes_through", 3): "goes_through(R, X, T): robot R goes through opening X starting at second T",
-    ("human_unavailable", 3): "human_unavailable(D, T0, T1): the human will not open D in [T0, T1)",
-    ("room_forbidden", 3): "room_forbidden(Room, T0, T1): no robot in Room during [T0, T1)",
-    ("human_available", 3): "human_available(D, T0, T1): the human offers to open D in [T0, T1)",
-}
+from .asp_terms import ASP_INT_MAX, ASP_INT_MIN, INTERPRETED_NAMES, VOCABULARY, ConstraintTerms, InterpretedFact
 
-# ASP integers are 32-bit signed in clingo.
-ASP_INT_MIN = -(2**31)
-ASP_INT_MAX = 2**31 - 1
+__all__ = [
+    "ASP_INT_MAX",
+    "ASP_INT_MIN",
+    "VOCABULARY",
+    "UnsafeProgram",
+    "check_program",
+    "is_asp_constant",
+    "read_program",
+]
 
 # A symbol the restrictor may write: a lower-case ASP constant. ``not`` is a keyword, not a constant.
 ASP_CONSTANT = re.compile(r"^[a-z][A-Za-z0-9_]{0,63}$")
@@ -65,6 +62,18 @@ def check_program(text: str) -> set[tuple[str, int]]:
 
     Returns the predicate signatures it uses.
     """
+    return _checked(text)[1]
+
+
+def read_program(text: str) -> tuple[list[ast.AST], ConstraintTerms]:
+    """Check ``text`` as :func:`check_program` does (raising :class:`UnsafeProgram`) and return its
+    statements (the implicit ``#program base.`` left out) and what it states, as fields."""
+    statements, used = _checked(text)
+    return statements, _terms(statements, used)
+
+
+def _checked(text: str) -> tuple[list[ast.AST], set[tuple[str, int]]]:
+    """The statements of a checked program and the predicate signatures it uses."""
     _lexical_screen(text)
     statements: list[ast.AST] = []
     messages: list[str] = []
@@ -92,7 +101,72 @@ def check_program(text: str) -> set[tuple[str, int]]:
         names = ", ".join(f"{name}/{arity}" for name, arity in unknown)
         allowed = ", ".join(f"{name}/{arity}" for name, arity in VOCABULARY)
         raise UnsafeProgram(f"predicate(s) {names} are not in the shared vocabulary ({allowed})")
-    return used
+    return [s for s in statements if s.ast_type != ast.ASTType.Program], used
+
+
+# ---------------------------------------------------------------------------- a program's terms
+
+
+def _terms(statements: list[ast.AST], used: set[tuple[str, int]]) -> ConstraintTerms:
+    """The interpreted facts, watched rooms and integers of checked ``statements``."""
+    terms = ConstraintTerms(predicates=sorted({name for name, _ in used}))
+    rooms: set[str] = set()
+    numbers: set[int] = set()
+    for statement in statements:
+        fact = _interpreted_fact(statement)
+        if fact is not None:
+            terms.facts.append(fact)
+        _walk_terms(statement, rooms, numbers, terms)
+    terms.rooms, terms.numbers = sorted(rooms), sorted(numbers)
+    return terms
+
+
+def _interpreted_fact(statement: ast.AST) -> InterpretedFact | None:
+    """``human_unavailable(d, 10, 70).`` as a fact, for a bodiless rule stating one with constant arguments."""
+    if statement.ast_type != ast.ASTType.Rule or len(statement.body):
+        return None
+    head = statement.head
+    if head.ast_type != ast.ASTType.Literal or head.sign != ast.Sign.NoSign:
+        return None
+    atom = head.atom.symbol if head.atom.ast_type == ast.ASTType.SymbolicAtom else None
+    if atom is None or atom.ast_type != ast.ASTType.Function or atom.name not in INTERPRETED_NAMES:
+        return None
+    values = [_constant(arg) for arg in atom.arguments]
+    if len(values) != 3 or not isinstance(values[0], str) or not all(isinstance(v, int) for v in values[1:]):
+        return None
+    return InterpretedFact(predicate=atom.name, subject=values[0], start=values[1], end=values[2])
+
+
+def _constant(term: ast.AST) -> str | int | None:
+    """A constant (name) or an integer written in place; None for anything else."""
+    if term.ast_type != ast.ASTType.SymbolicTerm:
+        return None
+    symbol = term.symbol
+    if symbol.type == clingo.SymbolType.Number:
+        return symbol.number
+    if symbol.type == clingo.SymbolType.Function and not symbol.arguments and symbol.positive:
+        return symbol.name
+    return None
+
+
+def _walk_terms(node: Any, rooms: set[str], numbers: set[int], terms: ConstraintTerms) -> None:
+    """Record the room of every ``robot_in/4`` atom and every integer written."""
+    if isinstance(node, ast.AST):
+        kind = node.ast_type
+        if kind == ast.ASTType.SymbolicTerm and node.symbol.type == clingo.SymbolType.Number:
+            numbers.add(abs(node.symbol.number))  # as written: a sign is an operation on it
+        if kind == ast.ASTType.Function and node.name == "robot_in" and len(node.arguments) == 4:
+            room = node.arguments[1]
+            if room.ast_type == ast.ASTType.Variable:
+                terms.any_room = True
+            elif isinstance(name := _constant(room), str):
+                rooms.add(name)
+        for key in node.keys():
+            if key != "location":
+                _walk_terms(getattr(node, key), rooms, numbers, terms)
+    elif isinstance(node, ast.ASTSequence):
+        for child in node:
+            _walk_terms(child, rooms, numbers, terms)
 
 
 def _lexical_screen(text: str) -> None:

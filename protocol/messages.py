@@ -13,11 +13,15 @@ Trajectories travel as rows ``[t, x, y, theta]`` rather than maps: about 3x chea
 encode, and the row length is checked on decode.
 """
 
-from typing import Annotated, ClassVar
+from typing import Annotated, Any, ClassVar
 
-from msgspec import Meta, Struct, field
+from msgspec import UNSET, Meta, Struct, UnsetType, field
 
-from .schema import Choice, Float, Ident, Int, Json, List, Map, Rows, Scalar, Str
+from .actions import Action
+from .asp_terms import ConstraintTerms
+from .errors import ProtocolError
+from .events import EVENT_KINDS, EventData, event_data
+from .schema import Choice, Float, Ident, Int, List, Map, Rows, Scalar, Str
 
 # Bounds shared by several messages. Site coordinates are metres; 10 km covers any building.
 COORD = 10_000.0
@@ -25,6 +29,7 @@ ANGLE = 1_000.0  # radians; unwrapped headings stay far below this
 TIME = 1e10  # seconds on the site clock (sim time from 0, or Unix time)
 MAX_TRAJECTORY = 20_000
 
+ACTIONS = tuple(a.value for a in Action)  # the domain's actions, as robots, planner and simulator name them
 ROBOT_STATES = ("idle", "moving", "waiting_at_door", "loading", "unloading", "done", "failed")
 PRIMITIVE_KINDS = ("line", "polyline", "polygon", "circle", "text", "arrow")
 LINE_STYLES = ("solid", "xray", "dashed")
@@ -70,7 +75,7 @@ class Message(Struct, kw_only=True, tag_field="type", tag=True):
 class PlanStep(Struct, kw_only=True):
     """One action of a robot's plan, with its planned start and end on the site clock."""
 
-    action: Choice("approach", "opendoor", "gothrough", "load", "unload")
+    action: Choice(*ACTIONS)
     args: List(Ident, 8) = []
     start: Float(-TIME, TIME)
     end: Float(-TIME, TIME)
@@ -87,7 +92,9 @@ class PlannedOpening(Struct, kw_only=True):
 
 
 class Constraint(Struct, kw_only=True):
-    """One active constraint: the library entry and its validated parameters, its window, its ASP."""
+    """One active constraint: the library entry and its validated parameters, its window, its ASP,
+    and what that ASP states as fields (``terms``: the planner reads them, never the text; None
+    from a sender older than them)."""
 
     id: Ident
     kind: Ident
@@ -96,6 +103,54 @@ class Constraint(Struct, kw_only=True):
     end: Float(-TIME, TIME)
     asp: Str(65536)
     origin: Str(128) = ""  # who asked for it (Feedback src)
+    terms: ConstraintTerms | None = None
+
+
+LIBRARY_MAX_ENTRIES = 100
+LIBRARY_MAX_PARAMS = 16
+LIBRARY_MAX_CHOICES = 1000
+LIBRARY_MAX_LABEL = 80
+LIBRARY_MAX_HELP = 300
+LIBRARY_PARAM_TYPES = ("int", "door", "room", "opening", "constraint")
+LIBRARY_EFFECTS = ("add", "cancel")
+LibraryId = Ident  # an entry's, a parameter's or a choice's id
+Label = Str(LIBRARY_MAX_LABEL)
+
+
+class LibraryParam(Struct, kw_only=True):
+    """A parameter of a library entry: ``min``/``max`` for an int, the site's ``choices`` for a
+    door/room/opening (``source`` "site"), none for a constraint id (``source`` "constraints", the
+    choices are the live ConstraintSet's ids)."""
+
+    name: LibraryId
+    type: Choice(*LIBRARY_PARAM_TYPES)
+    label: Label
+    help: Str(LIBRARY_MAX_HELP) = ""
+    min: int | UnsetType = UNSET
+    max: int | UnsetType = UNSET
+    choices: List(LibraryId, LIBRARY_MAX_CHOICES) | None | UnsetType = UNSET
+    source: Choice("site", "constraints") | UnsetType = UNSET
+
+
+class LibraryWindow(Struct, kw_only=True):
+    """An entry's window: the int parameter ``param`` gives its minutes, or it lasts ``minutes``
+    (one of the two: the restrictor's library loader checks that, and that an int parameter's range
+    is ordered, when it reads the file)."""
+
+    param: LibraryId | UnsetType = UNSET
+    minutes: int | UnsetType = UNSET
+
+
+class LibraryEntry(Struct, kw_only=True):
+    """One entry as a client shows it; ``usable``: every symbol parameter has a choice on the site."""
+
+    id: LibraryId
+    label: Label
+    help: Str(LIBRARY_MAX_HELP) = ""
+    effect: Choice(*LIBRARY_EFFECTS)
+    window: LibraryWindow | None = None
+    usable: bool
+    params: List(LibraryParam, LIBRARY_MAX_PARAMS) = []
 
 
 class Primitive(Struct, kw_only=True):
@@ -158,7 +213,7 @@ class RobotCommand(Message):
     robot: Ident
     plan_id: Int(0, 2**63 - 1)
     action_id: Int(0, 2**31)
-    action: Choice("approach", "opendoor", "gothrough", "load", "unload", "stop")
+    action: Choice(*ACTIONS, "stop")
     args: List(Ident, 8) = []
     trajectory: Rows(4, MAX_TRAJECTORY, -TIME, TIME) = []
     duration: Float(0.0, 1e6) = 0.0  # for load/unload: time spent in place after the path
@@ -218,6 +273,15 @@ class ConstraintSet(Message):
     asp: Str(1024 * 1024) = ""  # all active constraints' ASP, ready for the solver
 
 
+class ConstraintLibrary(Message):
+    """A restrictor's answer on ``constraints/library``: which site its choices are for, and its
+    entries (:mod:`protocol.constraint_library`)."""
+
+    MAX_SIZE: ClassVar[int] = 256 * 1024  # the packaged library for the office site is ~2 kB
+    site: Str(64)
+    entries: List(LibraryEntry, LIBRARY_MAX_ENTRIES) = []
+
+
 class CameraFrame(Message):
     MAX_SIZE: ClassVar[int] = 16 * 1024 * 1024
     camera: Ident
@@ -256,13 +320,23 @@ class Overlay(Message):
 class Event(Message):
     """Something that happened: ``door_opened``, ``delivered``, ``mission_done``, ``plan_conflict``, ...
 
-    ``data`` carries kind-specific details (e.g. the metrics of ``mission_done``)."""
+    ``data`` is the kind's record (:mod:`protocol.events`): built with one, the Event takes its
+    ``kind`` from it (``Event(data=Delivered(...), robot="r0")``); decoded or built with a map, the
+    map is checked and turned into that record."""
 
-    kind: Ident
+    kind: Choice(*EVENT_KINDS) = ""
     robot: Str(64) = ""
     door: Str(64) = ""
     object: Str(64) = ""
-    data: Json = None
+    data: Any = None
+
+    def __post_init__(self) -> None:
+        if isinstance(self.data, EventData):
+            if self.kind and self.kind != self.data.KIND:
+                raise ProtocolError("kind", f"{self.kind!r} does not match its data, a {self.data.KIND!r}")
+            self.kind = self.data.KIND
+        else:
+            self.data = event_data(self.kind, self.data)
 
 
 class ParticipantAction(Message):
@@ -344,6 +418,7 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     Feedback,
     FeedbackAck,
     ConstraintSet,
+    ConstraintLibrary,
     CameraFrame,
     CameraTruth,
     Overlay,

@@ -30,7 +30,7 @@ from functools import lru_cache
 from typing import Any
 
 from protocol.feedback_client import send_feedback
-from protocol.messages import ConstraintSet, FeedbackAck, Primitive
+from protocol.messages import ConstraintSet, FeedbackAck, LibraryEntry, LibraryParam, Primitive
 
 from .draw import text_width
 
@@ -93,11 +93,11 @@ class FeedbackPanel:
     ``entries`` None: the library is not known yet (no restrictor has answered); the panel says so
     until :meth:`set_entries` gives it."""
 
-    def __init__(self, entries: list[dict[str, Any]] | None = None, sender: Sender | None = None) -> None:
+    def __init__(self, entries: list[LibraryEntry] | None = None, sender: Sender | None = None) -> None:
         self.sender = sender
         self._lock = threading.Lock()
         self._constraint_ids: list[str] = []
-        self.entries: list[dict[str, Any]] = []
+        self.entries: list[LibraryEntry] = []
         self._values: dict[str, dict[str, Any]] = {}
         self.waiting = entries is None
         if entries is not None:
@@ -106,29 +106,29 @@ class FeedbackPanel:
         self._thread: threading.Thread | None = None
         self._buttons: list[Button] = []
 
-    def set_entries(self, entries: list[dict[str, Any]]) -> None:
+    def set_entries(self, entries: list[LibraryEntry]) -> None:
         """Show ``entries`` (the library as the restrictor serves it); values start at their defaults."""
-        usable = [e for e in entries if e.get("usable", True)]
+        usable = [e for e in entries if e.usable]
         with self._lock:
             self.entries = usable
-            self._values = {e["id"]: {p["name"]: self._default(p) for p in e["params"]} for e in usable}
+            self._values = {e.id: {p.name: self._default(p) for p in e.params} for e in usable}
             self.waiting = False
 
     # ------------------------------------------------------------------ parameters
 
-    def _choices(self, param: dict[str, Any]) -> list[Any]:
-        if param["type"] == "int":
-            lo, hi = int(param.get("min") or 1), int(param.get("max") or 240)
+    def _choices(self, param: LibraryParam) -> list[Any]:
+        if param.type == "int":
+            lo, hi = int(param.min or 1), int(param.max or 240)
             return sorted({min(max(v, lo), hi) for v in INT_PRESETS})
-        if param["type"] == "constraint":
+        if param.type == "constraint":
             return list(self._constraint_ids)
-        return list(param.get("choices") or [])
+        return list(param.choices or [])
 
-    def _default(self, param: dict[str, Any]) -> Any:
+    def _default(self, param: LibraryParam) -> Any:
         choices = self._choices(param)
         if not choices:
             return None
-        if param["type"] == "int":
+        if param.type == "int":
             return min(choices, key=lambda v: abs(v - DEFAULT_INT))
         return choices[0]
 
@@ -143,7 +143,7 @@ class FeedbackPanel:
     def cycle(self, entry_id: str, name: str) -> Any:
         """Advance a parameter to its next choice; returns the new value."""
         entry = self._entry(entry_id)
-        param = next(p for p in entry["params"] if p["name"] == name)
+        param = next(p for p in entry.params if p.name == name)
         choices = self._choices(param)
         with self._lock:
             current = self._values[entry_id].get(name)
@@ -161,13 +161,13 @@ class FeedbackPanel:
         with self._lock:
             self._constraint_ids = ids
             for e in self.entries:
-                for p in e["params"]:
-                    if p["type"] == "constraint" and self._values[e["id"]].get(p["name"]) not in ids:
-                        self._values[e["id"]][p["name"]] = ids[0] if ids else None
+                for p in e.params:
+                    if p.type == "constraint" and self._values[e.id].get(p.name) not in ids:
+                        self._values[e.id][p.name] = ids[0] if ids else None
 
-    def _entry(self, entry_id: str) -> dict[str, Any]:
+    def _entry(self, entry_id: str) -> LibraryEntry:
         for e in self.entries:
-            if e["id"] == entry_id:
+            if e.id == entry_id:
                 return e
         raise KeyError(f"no usable library entry {entry_id!r}")
 
@@ -250,29 +250,25 @@ class FeedbackPanel:
         for e in self.entries:
             if y + 2 * row > height - 2 * row:
                 break  # no room for more entries on a small frame
-            ready = self.ready(e["id"])
-            bg = (
-                BG_PENDING
-                if pending and self.result and self.result.entry == e["id"]
-                else (BG if ready else BG_DISABLED)
-            )
+            ready = self.ready(e.id)
+            bg = BG_PENDING if pending and self.result and self.result.entry == e.id else (BG if ready else BG_DISABLED)
             rect = (x0, y, x0 + panel_w, y + row)
             prims += _box(rect, bg)
-            prims.append(_label(rect, _fit(e["label"], panel_w - 2 * pad, text_px), text_px, FG if ready else FG_DIM))
-            buttons.append(Button(rect, ("send", e["id"])))
+            prims.append(_label(rect, _fit(e.label, panel_w - 2 * pad, text_px), text_px, FG if ready else FG_DIM))
+            buttons.append(Button(rect, ("send", e.id)))
             y += row + pad * 0.5
-            chips = e["params"]
+            chips = e.params
             if chips:
                 chip_w = (panel_w - pad * (len(chips) - 1)) / len(chips)
-                values = self.values(e["id"])
+                values = self.values(e.id)
                 for k, p in enumerate(chips):
                     cx0 = x0 + k * (chip_w + pad)
                     crect = (cx0, y, cx0 + chip_w, y + row * 0.85)
-                    value = values.get(p["name"])
-                    text = f"{p['label']}: {'-' if value is None else value} >"
+                    value = values.get(p.name)
+                    text = f"{p.label}: {'-' if value is None else value} >"
                     prims += _box(crect, BG)
                     prims.append(_label(crect, _fit(text, chip_w - 2 * pad, text_px * 0.9), text_px * 0.9, FG))
-                    buttons.append(Button(crect, ("cycle", e["id"], p["name"])))
+                    buttons.append(Button(crect, ("cycle", e.id, p.name)))
                 y += row * 0.85
             y += pad * 1.5
         if self.result is not None and (

@@ -9,7 +9,14 @@ diagnostic - all without grounding the program again.
 
 Text from the wire is untrusted: it must pass the restrictor's vocabulary check (no directives
 such as ``#script``/``#include``, only rules and weak constraints, only vocabulary predicates).
-A constraint that fails it is left out and reported, never added.
+A constraint that fails it is left out and reported, never added. That check and clingo's parse are
+one pass (:func:`protocol.asp_vocabulary.read_program`).
+
+What the planner needs to know of a constraint besides its rules (the rooms whose stays it
+watches, the integers where a wait may end, the windows the validator checks) it reads from the
+constraint's terms (:class:`protocol.asp_terms.ConstraintTerms`), which the restrictor sends beside
+the text; only a text that came without them (a file given to the CLI, a recording made before
+constraints carried them) has them read off its own parse.
 """
 
 from __future__ import annotations
@@ -21,20 +28,18 @@ from pathlib import Path
 import clingo
 import clingo.ast as ast
 
-from protocol.asp_vocabulary import UnsafeProgram, check_program
+from protocol.asp_terms import ConstraintTerms, InterpretedFact
+from protocol.asp_vocabulary import UnsafeProgram, read_program
 from protocol.messages import ConstraintSet
 
 GUARD = "cactive"
-_ROOM_ATOMS = re.compile(r"\b(robot_in|room_forbidden)\s*\(")
-_ROBOT_IN = re.compile(r"\brobot_in\s*\(\s*[^,()]+,\s*([A-Za-z_][A-Za-z0-9_]*)\s*,")
-_INTERPRETED = re.compile(r"\b(human_unavailable|room_forbidden|human_available)\s*\(")
-_NUMBER = re.compile(r"(?<![A-Za-z0-9_])\d{1,10}(?![A-Za-z0-9_])")
 
 
 @dataclass(frozen=True)
 class ConstraintText:
     id: str
     asp: str
+    terms: ConstraintTerms | None = None  # what the text states, as its sender says; None: read off the parse
 
 
 @dataclass
@@ -43,6 +48,7 @@ class ConstraintProgram:
 
     items: list[ConstraintText]
     statements: dict[int, list[ast.AST]] = field(default_factory=dict)
+    terms: dict[int, ConstraintTerms] = field(default_factory=dict)
     invalid: dict[str, str] = field(default_factory=dict)  # id -> why it was left out
     _admits: dict[tuple[str, int], bool] = field(default_factory=dict, repr=False)
 
@@ -51,13 +57,12 @@ class ConstraintProgram:
         prog = cls(items=list(items))
         for index, item in enumerate(prog.items):
             try:
-                check_program(item.asp)
-                stmts: list[ast.AST] = []
-                ast.parse_string(item.asp, stmts.append, logger=lambda _c, _m: None)
-            except (UnsafeProgram, RuntimeError) as exc:
+                stmts, read = read_program(item.asp)
+            except UnsafeProgram as exc:
                 prog.invalid[item.id] = str(exc) or "not valid ASP"
                 continue
-            prog.statements[index] = [_guard(s, index) for s in stmts if s.ast_type != ast.ASTType.Program]
+            prog.statements[index] = [_guard(s, index) for s in stmts]
+            prog.terms[index] = item.terms if item.terms is not None else read
         return prog
 
     @property
@@ -70,7 +75,11 @@ class ConstraintProgram:
     @property
     def mentions_rooms(self) -> bool:
         """True when robot_in/room_forbidden appear (the encoding then grounds rooms.lp)."""
-        return any(_ROOM_ATOMS.search(self.items[i].asp) for i in self.statements)
+        return any(terms.mentions_rooms for terms in self.terms.values())
+
+    def facts(self) -> list[InterpretedFact]:
+        """The interpreted facts the active constraints state."""
+        return [fact for i in self.active for fact in self.terms[i].facts]
 
     def add_to(self, ctl: clingo.Control, only: set[int] | None = None) -> None:
         """Add the guarded statements and their ``#external`` switches to ``ctl`` (before grounding)."""
@@ -93,6 +102,10 @@ class ConstraintProgram:
         constraint arrived): a robot may only share an opening the constraints still allow."""
         key = (door, t)
         hit = self._admits.get(key)
+        if hit is None and any(
+            f.predicate == "human_unavailable" and f.subject == door and f.start <= t < f.end for f in self.facts()
+        ):
+            hit = self._admits[key] = False  # the encoding's reading of the fact (vocabulary.lp), not in this program
         if hit is None:
             ctl = clingo.Control(["--warn=none"])
             ctl.add("base", [], f"human_opens({door},{t}).\n")
@@ -109,12 +122,9 @@ class ConstraintProgram:
         room when one uses a variable there)."""
         out: set[str] = set()
         for i in self.active:
-            for match in _ROBOT_IN.finditer(self.items[i].asp):
-                arg = match.group(1)
-                if arg[:1].islower():
-                    out.add(arg)
-                else:
-                    return set(rooms)
+            if self.terms[i].any_room:
+                return set(rooms)
+            out.update(self.terms[i].rooms)
         return out & set(rooms)
 
     def numbers(self) -> set[int]:
@@ -122,9 +132,8 @@ class ConstraintProgram:
         interprets (those say themselves where a wait may end, see vocabulary.lp)."""
         out: set[int] = set()
         for i in self.active:
-            text = self.items[i].asp
-            if not _INTERPRETED.search(text):
-                out |= {int(m) for m in _NUMBER.findall(text)}
+            if not self.terms[i].states_interpreted:
+                out.update(self.terms[i].numbers)
         return out
 
 
@@ -142,17 +151,17 @@ def _guard(stmt: ast.AST, index: int) -> ast.AST:
 
 def from_constraint_set(cs: ConstraintSet) -> list[ConstraintText]:
     """One item per active constraint; a set with only its combined ``asp`` becomes one item."""
-    items = [ConstraintText(c.id, c.asp) for c in cs.constraints if c.asp.strip()]
+    items = [ConstraintText(c.id, c.asp, c.terms) for c in cs.constraints if c.asp.strip()]
     if not items and cs.asp.strip():
         items = [ConstraintText(f"set_v{cs.version}", cs.asp)]
     return items
 
 
 def unavailable(door: str, t0: int, t1: int, cid: str) -> ConstraintText:
-    """The restrictor's ``door_unavailable`` form (docs/architecture.md) for the one-shot CLI."""
-    return ConstraintText(
-        cid, f"human_unavailable({door}, {t0}, {t1}).\n:- human_opens({door}, T), T >= {t0}, T < {t1}.\n"
-    )
+    """The human will not open ``door`` in [t0, t1), for the one-shot CLI: the fact alone, which
+    the encoding interprets (vocabulary.lp forbids the openings it covers)."""
+    fact = InterpretedFact(predicate="human_unavailable", subject=door, start=t0, end=t1)
+    return ConstraintText(cid, fact.asp, ConstraintTerms(predicates=[fact.predicate], facts=[fact]))
 
 
 def parse_unavailable(spec: str, index: int) -> ConstraintText:

@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from protocol.events import PlanConflict
 from protocol.keys import Keys
 from protocol.messages import Event, RobotStatus, TeamPlan
 
@@ -143,8 +144,8 @@ class PlanOutputs:
         self.reported_conflicts.add(key)
         self.count("plan_conflicts")
         self.log.warning("constraints %s: %s", ", ".join(ids) or "(none)", reason)
-        data = {"constraints": list(ids), "constraints_version": constraints_version, "reason": reason[:1000]}
-        self.publish(self.keys.event(), Event(kind="plan_conflict", data=data))
+        data = PlanConflict(constraints=list(ids), constraints_version=constraints_version, reason=reason[:1000])
+        self.publish(self.keys.event(), Event(data=data))
 
 
 def adopted(status: RobotStatus, sent: dict[str, Dispatched], finished_states: tuple[str, ...]) -> Dispatched | None:

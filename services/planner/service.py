@@ -23,6 +23,7 @@ from __future__ import annotations
 import time
 
 from protocol.clock import SimClock, WallClock
+from protocol.events import RobotOutcome
 from protocol.lockstep import in_lockstep
 from protocol.messages import Clock, ConstraintSet, DoorState, Event, RobotPose, RobotStatus
 from protocol.service import Service
@@ -199,12 +200,13 @@ class PlannerService(Service):
 
     def on_event(self, msg: Event, _key: str) -> None:
         if msg.kind in ("action_done", "action_failed") and msg.robot in self.site.robots:
-            data = msg.data if isinstance(msg.data, dict) else {}
+            data = msg.data
+            assert isinstance(data, RobotOutcome)  # the Event's kind says so
             # The pose that goes with the event travels in it: poses come on another key, which may
             # be delivered later than the event.
-            self.cache.set_pose_from(msg.robot, data.get("pose"))
+            self.cache.set_pose_from(msg.robot, data.pose)
             sent = self.dispatcher.current.get(msg.robot)
-            if sent is not None and data.get("action_id") == sent.action_id:
+            if sent is not None and data.action_id == sent.action_id:
                 self._finished.add(msg.robot)
             self.trigger(ActionEnded(msg.robot, failed=msg.kind == "action_failed"))
 

@@ -26,9 +26,8 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from itertools import pairwise
 
-import clingo
-
 from protocol.actions import STEPS, Action, EndsAt, Fluents
+from protocol.asp_terms import InterpretedFact
 from protocol.site import Opening, Site
 
 from .key_points import BESIDE_MARGIN, wait_offset
@@ -55,22 +54,15 @@ class Windows:
     forbidden: list[tuple[str, int, int]] = field(default_factory=list)  # (room, t0, t1)
 
     @classmethod
-    def from_asp(cls, texts: Iterable[str]) -> Windows:
-        """The ``human_unavailable/3`` and ``room_forbidden/3`` facts stated in constraint texts."""
+    def of(cls, facts: Iterable[InterpretedFact]) -> Windows:
+        """The windows the ``human_unavailable`` and ``room_forbidden`` facts of constraints state
+        (:meth:`services.planner.constraints.ConstraintProgram.facts`)."""
         out = cls()
-        for text in texts:
-            ctl = clingo.Control(["--warn=none"])
-            ctl.add("base", [], "\n".join(line for line in text.splitlines() if not line.strip().startswith(":-")))
-            ctl.ground([("base", [])])
-            for atom in ctl.symbolic_atoms:
-                sym = atom.symbol
-                if not atom.is_fact or len(sym.arguments) != 3:
-                    continue
-                args = sym.arguments
-                if sym.name == "human_unavailable":
-                    out.unavailable.append((args[0].name, args[1].number, args[2].number))
-                elif sym.name == "room_forbidden":
-                    out.forbidden.append((args[0].name, args[1].number, args[2].number))
+        for fact in facts:
+            if fact.predicate == "human_unavailable":
+                out.unavailable.append((fact.subject, fact.start, fact.end))
+            elif fact.predicate == "room_forbidden":
+                out.forbidden.append((fact.subject, fact.start, fact.end))
         return out
 
 

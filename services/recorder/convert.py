@@ -34,6 +34,7 @@ from foxglove.messages import (
     Vector3,
 )
 
+from protocol.events import data_to_wire
 from protocol.messages import (
     CameraFrame,
     CameraTruth,
@@ -191,7 +192,8 @@ def describe(msg: Feedback | FeedbackAck | Event) -> tuple[str, str]:
             "INFO" if msg.accepted else "WARNING"
         ), f"feedback {msg.feedback_seq} of {msg.to} {what} (constraints v{msg.constraints_version})"
     who = " ".join(f"{k}={v}" for k, v in (("robot", msg.robot), ("door", msg.door), ("object", msg.object)) if v)
-    data = "" if msg.kind == "mission_done" or not msg.data else f" {_short(msg.data)}"
+    wire = data_to_wire(msg.data)
+    data = "" if msg.kind == "mission_done" or not wire else f" {_short(wire)}"
     return ("WARNING" if msg.kind in WARNING_EVENTS else "INFO"), f"{msg.kind} {who}{data}".strip()
 
 

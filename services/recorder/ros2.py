@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from protocol.events import Delivered
 from protocol.messages import (
     CameraFrame,
     CameraTruth,
@@ -194,8 +195,8 @@ class Ros2Profile:
     def _event(self, msg: Event, at: int) -> None:
         self._described(msg, at)
         if msg.kind == "delivered" and msg.object:
-            pose = msg.data.get("pose") if isinstance(msg.data, dict) else None
-            where = (float(pose[0]), float(pose[1])) if isinstance(pose, list) and len(pose) >= 2 else None
+            pose = msg.data.pose if isinstance(msg.data, Delivered) else None
+            where = (float(pose[0]), float(pose[1])) if isinstance(pose, list) else None
             if self.state.delivered_at(msg.object, where or self.poses.get(msg.robot)):
                 self._markers(at)
 

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from protocol.events import FeedbackSent, MissionDone, data_to_wire
 from protocol.messages import DoorState, Event, Feedback, RobotStatus
 from protocol.palette import robot_colors
 
@@ -62,13 +63,14 @@ def build_timeline(path: Path) -> Timeline:
         elif isinstance(msg, Feedback):
             params = ", ".join(f"{k}={v}" for k, v in msg.params.items())
             tl.declarations.append((t, f"{msg.kind}({params})"))
-        elif isinstance(msg, Event) and msg.kind == "feedback_sent" and isinstance(msg.data, dict):
+        elif isinstance(msg, Event) and isinstance(msg.data, FeedbackSent):
             # The simulated human's declarations go out as queries, which no subscriber hears: her event says them.
-            params = ", ".join(f"{k}={v}" for k, v in (msg.data.get("params") or {}).items())
-            tl.declarations.append((t, f"{msg.data.get('kind', '?')}({params})"))
-        elif isinstance(msg, Event) and msg.kind == "mission_done" and isinstance(msg.data, dict):
-            tl.metrics = msg.data
-            tl.focus = [(float(f["start"]), float(f["end"])) for f in (msg.data.get("human") or {}).get("focus", [])]
+            params = ", ".join(f"{k}={v}" for k, v in msg.data.params.items())
+            tl.declarations.append((t, f"{msg.data.kind}({params})"))
+        elif isinstance(msg, Event) and isinstance(msg.data, MissionDone):
+            tl.metrics = data_to_wire(msg.data)
+            human = msg.data.human or {}
+            tl.focus = [(float(f["start"]), float(f["end"])) for f in human.get("focus", [])]
     for rid, (since, state, door) in current.items():
         tl.robots.setdefault(rid, []).append((since, tl.end, state, door))
     for did, (since, by) in opened.items():

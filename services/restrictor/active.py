@@ -135,6 +135,7 @@ class ActiveSet:
                     end=float(compiled.end),
                     asp=compiled.asp,
                     origin=feedback.src,
+                    terms=compiled.terms,
                 )
             )
             reason = (

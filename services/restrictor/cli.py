@@ -14,6 +14,7 @@ import sys
 from typing import Any
 
 from protocol.clock import make_clock
+from protocol.constraint_library import entries_to_wire
 from protocol.messages import Constraint, ConstraintSet, FeedbackAck
 from protocol.runner import add_common_arguments, run_service
 from protocol.schema import record_to_wire
@@ -281,23 +282,23 @@ def _constraints_library(args: argparse.Namespace) -> int:
         return _config_error(exc)
     entries = library_for_site(site, library)
     if args.json:
-        print(json.dumps(entries, indent=2))
+        print(json.dumps(entries_to_wire(entries), indent=2))
         return 0
     print(f"constraint library {library.source} on site {site.name}:")
     for entry in entries:
-        usable = "" if entry["usable"] else "  (not usable on this site: no choices)"
-        print(f"\n{entry['id']}: {entry['label']}{usable}\n  {entry['help']}")
-        for param in entry["params"]:
-            if param["type"] == INT:
-                values = f"{param['min']}..{param['max']}"
-            elif param["type"] == CONSTRAINT:
+        usable = "" if entry.usable else "  (not usable on this site: no choices)"
+        print(f"\n{entry.id}: {entry.label}{usable}\n  {entry.help}")
+        for param in entry.params:
+            if param.type == INT:
+                values = f"{param.min}..{param.max}"
+            elif param.type == CONSTRAINT:
                 values = "an active constraint id (see `arroch constraints show`)"
             else:
-                values = ", ".join(param["choices"]) or "(none on this site)"
-            print(f"  --{param['name']} ({param['type']}): {values}  {param['label']}")
-        window = entry["window"]
+                values = ", ".join(param.choices or []) or "(none on this site)"
+            print(f"  --{param.name} ({param.type}): {values}  {param.label}")
+        window = entry.window
         if window:
-            minutes = f"--{window['param']}" if "param" in window else str(window["minutes"])
+            minutes = f"--{window.param}" if window.param else str(window.minutes)
             print(f"  window: {minutes} minutes from now")
     return 0
 

@@ -1,8 +1,9 @@
 """Templates → ASP: a validated choice and the time "now" become one constraint's ASP and window.
 
 Only :class:`validate.Validated` values reach a template, and the result is checked again with
-:func:`protocol.asp_vocabulary.check_program` (defence in depth: a library template was checked at load with
-sample values, this checks the real text). No client text is ever substituted.
+:func:`protocol.asp_vocabulary.read_program` (defence in depth: a library template was checked at load with
+sample values, this checks the real text), which also gives what the text states as fields
+(:class:`protocol.asp_terms.ConstraintTerms`). No client text is ever substituted.
 
 Windows are absolute integer seconds on the site clock. The human means "from now on, for N
 minutes", i.e. the real interval [now, now + 60·N). ASP needs integers, so the window is
@@ -20,7 +21,8 @@ from collections.abc import Collection
 from dataclasses import dataclass
 from typing import Any
 
-from protocol.asp_vocabulary import ASP_INT_MAX, ASP_INT_MIN, UnsafeProgram, check_program
+from protocol.asp_terms import ConstraintTerms
+from protocol.asp_vocabulary import ASP_INT_MAX, ASP_INT_MIN, UnsafeProgram, read_program
 
 from .library import ADD, INT, Library, SiteLike
 from .validate import Refusal, Validated, validate
@@ -30,12 +32,14 @@ log = logging.getLogger("arroch.restrictor")
 
 @dataclass(frozen=True)
 class Compiled:
-    """One constraint ready for the active set: its validated choice, window and ASP."""
+    """One constraint ready for the active set: its validated choice, window, ASP and what the ASP
+    states (the planner reads these fields, not the text)."""
 
     validated: Validated
     start: int
     end: int
     asp: str
+    terms: ConstraintTerms
 
     @property
     def kind(self) -> str:
@@ -71,12 +75,12 @@ def render(validated: Validated, now: float) -> Compiled:
     text = string.Template(entry.asp).substitute(mapping)
     asp = "".join(line.strip() + "\n" for line in text.splitlines() if line.strip())
     try:
-        check_program(asp)
+        _, terms = read_program(asp)
     except UnsafeProgram as exc:
         # Cannot happen with a library that loaded; if it does, nothing unchecked goes out.
         log.error("compiled %s failed the ASP check: %s", entry.id, exc)
         raise Refusal(f"{entry.id}: the compiled constraint failed the ASP safety check") from None
-    return Compiled(validated=validated, start=start, end=end, asp=asp)
+    return Compiled(validated=validated, start=start, end=end, asp=asp, terms=terms)
 
 
 def compile_feedback(

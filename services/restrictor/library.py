@@ -30,7 +30,15 @@ from msgspec import Meta, Struct
 from protocol.asp_vocabulary import ASP_INT_MAX, ASP_INT_MIN, UnsafeProgram, check_program, is_asp_constant
 
 # The limits of a library as the wire carries it: a file the restrictor loads must fit in one.
-from protocol.constraint_library import MAX_ENTRIES, MAX_HELP, MAX_LABEL, MAX_PARAMS
+from protocol.constraint_library import (
+    MAX_ENTRIES,
+    MAX_HELP,
+    MAX_LABEL,
+    MAX_PARAMS,
+    LibraryEntry,
+    LibraryParam,
+    LibraryWindow,
+)
 from protocol.errors import ProtocolError
 from protocol.schema import Says
 from protocol.validation import Words, field_error
@@ -439,14 +447,13 @@ def site_choices(param: Param, site: SiteLike) -> list[str] | None:
     return sorted(i for i in ids if is_asp_constant(i))
 
 
-def library_for_site(site: SiteLike, library: Library | None = None) -> list[dict[str, Any]]:
-    """The library with the site's choices resolved, as plain JSON-able data.
+def library_for_site(site: SiteLike, library: Library | None = None) -> list[LibraryEntry]:
+    """The library with the site's choices resolved, as it goes on the wire (``constraints/library``).
 
-    One dict per entry: ``id``, ``label``, ``help``, ``effect`` ("add"/"cancel"), ``window``
-    (``{"param": name}``, ``{"minutes": n}`` or ``None``), ``usable`` (every symbol parameter has
-    at least one choice on this site) and ``params``, each with ``name``, ``type``, ``label``,
-    ``help`` and: ``min``/``max`` (int), ``choices`` (door/room/opening: the site's ids), or
-    ``choices: None`` with ``source: "constraints"`` (constraint: an id from the live ConstraintSet).
+    Each entry's ``window`` is ``{param: name}``, ``{minutes: n}`` or None; ``usable`` says every
+    symbol parameter has at least one choice on this site; each parameter carries ``min``/``max``
+    (int), ``choices`` (door/room/opening: the site's ids) with ``source`` "site", or ``choices``
+    None with ``source`` "constraints" (constraint: an id from the live ConstraintSet).
     """
     library = library or load_library()
     out = []
@@ -454,31 +461,31 @@ def library_for_site(site: SiteLike, library: Library | None = None) -> list[dic
         params = []
         usable = True
         for param in entry.params:
-            item: dict[str, Any] = {"name": param.name, "type": param.type, "label": param.label, "help": param.help}
+            what: dict[str, Any]
             if param.type == INT:
-                item.update(min=param.min, max=param.max)
+                what = {"min": param.min, "max": param.max}
             elif param.type == CONSTRAINT:
-                item.update(choices=None, source="constraints")
+                what = {"choices": None, "source": "constraints"}
             else:
                 choices = site_choices(param, site) or []
-                item.update(choices=choices, source="site")
+                what = {"choices": choices, "source": "site"}
                 usable = usable and bool(choices)
-            params.append(item)
+            params.append(LibraryParam(name=param.name, type=param.type, label=param.label, help=param.help, **what))
         if entry.window_param is not None:
-            window: dict[str, Any] | None = {"param": entry.window_param}
+            window: LibraryWindow | None = LibraryWindow(param=entry.window_param)
         elif entry.window_minutes is not None:
-            window = {"minutes": entry.window_minutes}
+            window = LibraryWindow(minutes=entry.window_minutes)
         else:
             window = None
         out.append(
-            {
-                "id": entry.id,
-                "label": entry.label,
-                "help": entry.help,
-                "effect": entry.effect,
-                "window": window,
-                "usable": usable,
-                "params": params,
-            }
+            LibraryEntry(
+                id=entry.id,
+                label=entry.label,
+                help=entry.help,
+                effect=entry.effect,
+                window=window,
+                usable=usable,
+                params=params,
+            )
         )
     return out

@@ -23,7 +23,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from protocol.asp_vocabulary import UnsafeProgram, check_program
+from protocol.asp_vocabulary import UnsafeProgram, read_program
 from protocol.errors import ProtocolError
 from protocol.messages import Constraint
 from protocol.schema import record_from_wire, record_to_wire
@@ -152,7 +152,9 @@ class StateStore:
         for ord_, body in rows:
             try:
                 constraint = record_from_wire(Constraint, json.loads(body))
-                check_program(constraint.asp)
+                _, terms = read_program(constraint.asp)
+                if constraint.terms is None:  # stored before constraints carried their terms
+                    constraint.terms = terms
             except (ValueError, ProtocolError, UnsafeProgram) as exc:
                 raise StoreError(
                     f"state database {self.where}: constraints row {ord_} is not a valid constraint: {exc}"

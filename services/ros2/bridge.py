@@ -28,6 +28,7 @@ import queue
 import threading
 from typing import Any
 
+from protocol.events import Delivered
 from protocol.messages import DoorState, Event, Intent, RobotPose, RobotStatus
 from protocol.ros2 import types as ros
 from protocol.ros2.keys import TopicNaming
@@ -121,8 +122,8 @@ class BridgeService(Service):
 
     def _on_event(self, event: Event, key: str) -> None:
         if event.kind == "delivered" and event.object:
-            pose = event.data.get("pose") if isinstance(event.data, dict) else None
-            where = (float(pose[0]), float(pose[1])) if isinstance(pose, list) and len(pose) >= 2 else None
+            pose = event.data.pose if isinstance(event.data, Delivered) else None
+            where = (float(pose[0]), float(pose[1])) if isinstance(pose, list) else None
             if self.state.delivered_at(event.object, where):
                 self._markers_dirty = True
 

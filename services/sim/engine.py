@@ -24,9 +24,25 @@ openings count as hers. :meth:`Engine.abort` ends the mission at once, not compl
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
+from protocol.events import (
+    ActionFailed,
+    ClosedDoorCrossing,
+    DoorClosed,
+    DoorOpened,
+    EventData,
+    FeedbackAnswered,
+    FeedbackSent,
+    HumanDone,
+    HumanOpensDoor,
+    MissionDone,
+    MissionStarted,
+    RobotOverlap,
+    WallContact,
+    data_to_wire,
+)
 from protocol.messages import RobotCommand, TeamPlan
 from protocol.pursuit import ControllerConfig
 from protocol.site.model import Site
@@ -69,20 +85,24 @@ class EngineConfig:
 @dataclass(frozen=True)
 class SimEvent:
     time: float
-    kind: str
+    data: EventData  # its type says the kind (protocol.events)
     robot: str = ""
     door: str = ""
     object: str = ""
-    data: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def kind(self) -> str:
+        return self.data.KIND
 
     def as_dict(self) -> dict[str, Any]:
+        """The line of ``events.jsonl``: the Event's fields and ``time``."""
         return {
             "time": self.time,
             "kind": self.kind,
             "robot": self.robot,
             "door": self.door,
             "object": self.object,
-            "data": self.data,
+            "data": data_to_wire(self.data),
         }
 
 
@@ -209,9 +229,7 @@ class Engine:
     def start(self) -> None:
         """The mission starts: the first state the planner must answer."""
         self._new_world()
-        self._emit(
-            "mission_started", data={"method": self.method, "seed": self.seed, "world_version": self.world_version}
-        )
+        self._emit(MissionStarted(method=self.method, seed=self.seed, world_version=self.world_version))
 
     def step(self) -> None:
         """Advance one tick."""
@@ -228,36 +246,32 @@ class Engine:
         for crossing in self.closed_doors.check(self.robots.values()):
             self.metrics.closed_door_crossings += 1
             self._emit(
-                "closed_door_crossing",
+                ClosedDoorCrossing(depth=crossing.depth, fraction=crossing.fraction, pose=list(crossing.pose)),
                 robot=crossing.robot,
                 door=crossing.door,
-                data={"depth": crossing.depth, "fraction": crossing.fraction, "pose": list(crossing.pose)},
             )
         for overlap in self.overlaps.check(self.robots.values()):
             self.metrics.overlap(overlap.robots, overlap.place)
             self._emit(
-                "robot_overlap",
+                RobotOverlap(
+                    robots=list(overlap.robots),
+                    place=overlap.place,
+                    depth=overlap.depth,
+                    poses=[list(p) for p in overlap.poses],
+                    actions=[self._doing(rid) for rid in overlap.robots],
+                ),
                 robot=overlap.robots[0],
-                data={
-                    "robots": list(overlap.robots),
-                    "place": overlap.place,
-                    "depth": overlap.depth,
-                    "poses": [list(p) for p in overlap.poses],
-                    # what each was doing: says whether the plan or the execution let them meet
-                    "actions": [self._doing(rid) for rid in overlap.robots],
-                },
             )
         for contact in self.wall_contacts.check(self.robots.values()):
             self.metrics.wall_contact(contact.place)
             self._emit(
-                "wall_contact",
+                WallContact(
+                    place=contact.place,
+                    depth=contact.depth,
+                    pose=list(contact.pose),
+                    action=self._doing(contact.robot),
+                ),
                 robot=contact.robot,
-                data={
-                    "place": contact.place,
-                    "depth": contact.depth,
-                    "pose": list(contact.pose),
-                    "action": self._doing(contact.robot),
-                },
             )
         self._track_waiting(t1)
         waiting: dict[str, dict[str, float]] = {d: {} for d in self.human_doors}
@@ -277,15 +291,14 @@ class Engine:
         robot = self.robots.get(cmd.robot)
         if robot is None:
             self._emit(
-                "action_failed",
+                ActionFailed(
+                    plan_id=cmd.plan_id,
+                    action_id=cmd.action_id,
+                    action=cmd.action,
+                    args=list(cmd.args),
+                    reason=f"no robot {cmd.robot!r} on this site",
+                ),
                 robot=cmd.robot,
-                data={
-                    "plan_id": cmd.plan_id,
-                    "action_id": cmd.action_id,
-                    "action": cmd.action,
-                    "args": list(cmd.args),
-                    "reason": f"no robot {cmd.robot!r} on this site",
-                },
             )
             return "unknown_robot"
         if robot.id in self.external:
@@ -329,7 +342,7 @@ class Engine:
             self.door_changed.add(door)
             if isinstance(self.human, ParticipantHuman) and door in self.human_doors:
                 self.human.sensor_opening(door, self.time)  # a real door of hers opened: her opening
-            self._emit("human_opens_door", door=door, data={"opening": self.human.counters.door_openings, "by": by})
+            self._emit(HumanOpensDoor(opening=self.human.counters.door_openings, by=by), door=door)
         return ""
 
     def abort(self, reason: str) -> None:
@@ -339,7 +352,7 @@ class Engine:
         self.done = True
         self.completed = False
         self.end_reason = reason
-        self._emit("mission_done", data=self.summary())
+        self._emit(MissionDone(**self.summary()))
 
     def feedback_answered(
         self, request: FeedbackRequest, *, accepted: bool | None, reason: str = "", constraints_version: int = 0
@@ -347,15 +360,14 @@ class Engine:
         """The restrictor's answer to the human's feedback (``accepted=None``: none came)."""
         self.metrics.feedback_answer(accepted)
         self._emit(
-            "feedback_answered",
+            FeedbackAnswered(
+                request=request.id,
+                sent=request.time,
+                accepted=accepted,
+                reason=reason,
+                constraints_version=constraints_version,
+            ),
             door=str(request.params.get("door", "")),
-            data={
-                "request": request.id,
-                "sent": request.time,
-                "accepted": accepted,
-                "reason": reason,
-                "constraints_version": constraints_version,
-            },
         )
 
     # ------------------------------------------------------------------ outputs
@@ -393,16 +405,9 @@ class Engine:
         return f"{action} {robot.phase}"
 
     def _emit(
-        self,
-        kind: str,
-        *,
-        robot: str = "",
-        door: str = "",
-        object: str = "",
-        data: dict[str, Any] | None = None,
-        at: float | None = None,
+        self, data: EventData, *, robot: str = "", door: str = "", object: str = "", at: float | None = None
     ) -> None:
-        self._events.append(SimEvent(self.time if at is None else at, kind, robot, door, object, data or {}))
+        self._events.append(SimEvent(self.time if at is None else at, data, robot, door, object))
 
     def _new_world(self) -> int:
         self.world_version += 1
@@ -410,16 +415,16 @@ class Engine:
 
     def _report(self, outcomes: list[Outcome], t: float) -> None:
         for out in outcomes:
-            data = dict(out.data)
+            data = out.data
             if out.new_world:
-                data["world_version"] = self._new_world()
+                data.world_version = self._new_world()
             if out.kind == "action_done":
                 self.metrics.actions_done += 1
             elif out.kind == "action_failed":
                 self.metrics.actions_failed += 1
             elif out.kind == "delivered":
                 self._robot_progress(out.robot, t)
-            self._emit(out.kind, robot=out.robot, door=out.door, object=out.object, data=data, at=t)
+            self._emit(data, robot=out.robot, door=out.door, object=out.object, at=t)
 
     def _robot_progress(self, rid: str, t: float) -> None:
         mine = self.objects.of_robot(rid)
@@ -428,16 +433,16 @@ class Engine:
 
     def _door_change(self, change: DoorChange, t: float) -> None:
         self.door_changed.add(change.door)
-        data: dict[str, Any] = {"by": change.by}
+        data = (DoorOpened if change.opened else DoorClosed)(by=change.by)
         if self.doors[change.door].human_operated:
-            data["world_version"] = self._new_world()
+            data.world_version = self._new_world()
         if change.opened:
             self.door_by[change.door] = change.by
             # A real door's opening is the human's (or the experimenter's), whatever its sensor calls it.
             self.metrics.opened(change.door, "human" if self.doors[change.door].sensor else change.by)
             if change.until:
-                data["until"] = change.until
-        self._emit("door_opened" if change.opened else "door_closed", door=change.door, data=data, at=t)
+                data.until = change.until
+        self._emit(data, door=change.door, at=t)
 
     def _track_waiting(self, t: float) -> None:
         for rid, robot in self.robots.items():
@@ -452,7 +457,7 @@ class Engine:
         if isinstance(action, OpenDoor):
             self.doors.human_open(action.door, t)
             self.door_changed.add(action.door)
-            self._emit("human_opens_door", door=action.door, data={"opening": self.human.counters.door_openings})
+            self._emit(HumanOpensDoor(opening=self.human.counters.door_openings), door=action.door)
         elif isinstance(action, Declare):
             self._feedback_ids += 1
             request = FeedbackRequest(
@@ -461,13 +466,11 @@ class Engine:
             self._feedback.append(request)
             self.metrics.feedback_sent += 1
             self._emit(
-                "feedback_sent",
-                door=action.door,
-                data={"request": request.id, "kind": request.kind, "params": dict(request.params)},
+                FeedbackSent(request=request.id, kind=request.kind, params=dict(request.params)), door=action.door
             )
         else:
             self.metrics.human_done = action.time
-            self._emit("human_done", data={"task_duration": self.human.task_duration}, at=action.time)
+            self._emit(HumanDone(task_duration=self.human.task_duration), at=action.time)
 
     def _check_end(self, t: float) -> None:
         finished = self.objects.all_delivered and self.human.done
@@ -476,7 +479,7 @@ class Engine:
             return
         self.done = True
         self.completed = finished
-        self._emit("mission_done", data=self.summary())
+        self._emit(MissionDone(**self.summary()))
 
     def summary(self) -> dict[str, Any]:
         robots = {

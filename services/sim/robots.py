@@ -30,6 +30,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from protocol.events import ActionDone, ActionFailed, Delivered, Loaded, RobotOutcome, WaitingAtDoor
 from protocol.execution import REACH, START_TOLERANCE, command_problem, dwell_problem
 from protocol.messages import RobotCommand
 from protocol.plane import segment_distance
@@ -74,12 +75,15 @@ class RobotConfig:
 class Outcome:
     """Something a robot did that the engine reports (and maybe answers with a new world version)."""
 
-    kind: str  # action_done, action_failed, waiting_at_door, loaded, delivered
+    data: RobotOutcome  # its type is the event's kind: ActionDone, ActionFailed, WaitingAtDoor, Loaded, Delivered
     robot: str
     door: str = ""
     object: str = ""
-    data: dict[str, Any] = field(default_factory=dict)
     new_world: bool = False  # the planner must answer it (world_version increments)
+
+    @property
+    def kind(self) -> str:
+        return self.data.KIND
 
 
 class CommandError(Exception):
@@ -155,7 +159,7 @@ class RobotExecutor:
             robot.phase = "idle"
             self._set(robot, state="idle", detail="stopped")
             # Nothing the planner did not ask for: no new world version (a stop per plan would loop).
-            return [self._outcome(robot, "action_done")]
+            return [self._outcome(robot, ActionDone)]
         try:
             self._check(robot, cmd)
         except CommandError as exc:
@@ -307,7 +311,7 @@ class RobotExecutor:
             robot.wait_time += dt
             if robot.state != "waiting_at_door" or robot.waiting_door != blocking:
                 self._set(robot, state="waiting_at_door", waiting_door=blocking)
-                return [self._outcome(robot, "waiting_at_door", door=blocking)]
+                return [self._outcome(robot, WaitingAtDoor, door=blocking)]
             return []
         if robot.state == "waiting_at_door":
             self._set(robot, state="moving", waiting_door="")
@@ -509,7 +513,7 @@ class RobotExecutor:
         robot.wait_time += dt
         if robot.state != "waiting_at_door":
             self._set(robot, state="waiting_at_door", waiting_door=door_id)
-            return [self._outcome(robot, "waiting_at_door", door=door_id)]
+            return [self._outcome(robot, WaitingAtDoor, door=door_id)]
         return []
 
     def _dwell(self, robot: Robot, now: float, dt: float) -> list[Outcome]:
@@ -525,12 +529,12 @@ class RobotExecutor:
         if cmd.action == "load":
             self.objects.pick(oid, robot.id)
             robot.carrying.append(oid)
-            first = self._outcome(robot, "loaded", object=oid)
+            first = self._outcome(robot, Loaded, object=oid)
         else:
             robot.carrying.remove(oid)
             robot.delivered.append(oid)
             self.objects.place(oid, robot.x, robot.y, delivered_at=t)
-            first = self._outcome(robot, "delivered", object=oid)
+            first = self._outcome(robot, Delivered, object=oid)
         return [first, *self._done(robot)]
 
     # ------------------------------------------------------------------ reporting
@@ -539,27 +543,36 @@ class RobotExecutor:
         robot.phase = "done"
         robot.progress = 1.0
         self._set(robot, state="done", waiting_door="")
-        return [self._outcome(robot, "action_done", new_world=True)]
+        return [self._outcome(robot, ActionDone, new_world=True)]
 
     def _fail(self, robot: Robot, reason: str) -> list[Outcome]:
         robot.phase = "failed"
         robot.v = robot.omega = 0.0
         self._set(robot, state="failed", waiting_door="", detail=reason)
-        return [self._outcome(robot, "action_failed", new_world=True, reason=reason)]
+        return [self._outcome(robot, ActionFailed, new_world=True, reason=reason)]
 
     def _outcome(
-        self, robot: Robot, kind: str, *, door: str = "", object: str = "", new_world: bool = False, reason: str = ""
+        self,
+        robot: Robot,
+        kind: type[RobotOutcome],
+        *,
+        door: str = "",
+        object: str = "",
+        new_world: bool = False,
+        reason: str = "",
     ) -> Outcome:
         cmd = robot.command
-        data: dict[str, Any] = {}
-        if cmd is not None:
-            data = {"plan_id": cmd.plan_id, "action_id": cmd.action_id, "action": cmd.action, "args": list(cmd.args)}
+        data = (
+            kind()
+            if cmd is None
+            else kind(plan_id=cmd.plan_id, action_id=cmd.action_id, action=cmd.action, args=list(cmd.args))
+        )
         # Where the robot is as it happens: a consumer can plan from this without relying on the
         # pose stream having arrived first (subscriptions on different keys are not ordered).
-        data["pose"] = [round(robot.x, 6), round(robot.y, 6), round(robot.theta, 6)]
+        data.pose = [round(robot.x, 6), round(robot.y, 6), round(robot.theta, 6)]
         if reason:
-            data["reason"] = reason
-        return Outcome(kind, robot.id, door=door, object=object, data=data, new_world=new_world)
+            data.reason = reason
+        return Outcome(data, robot.id, door=door, object=object, new_world=new_world)
 
     @staticmethod
     def _set(robot: Robot, **changes: Any) -> None:

@@ -29,6 +29,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+from protocol.events import ActionDone, ActionFailed, Delivered, Loaded, RobotOutcome, WaitingAtDoor
 from protocol.messages import RobotCommand, RobotPose, RobotStatus
 from protocol.plane import wrap
 from protocol.pursuit import Path, integrate, path_crossings
@@ -129,11 +130,11 @@ class ExternalRobot:
         for oid in st.carrying:
             if oid not in robot.carrying and oid in objects:
                 objects.pick(oid, self.id)
-                self._pending.append(self._outcome(st, "loaded", object=oid))
+                self._pending.append(self._outcome(st, Loaded, object=oid))
         for oid in st.delivered:
             if oid not in robot.delivered and oid in objects:
                 objects.place(oid, robot.x, robot.y, delivered_at=self.engine.time)
-                self._pending.append(self._outcome(st, "delivered", object=oid))
+                self._pending.append(self._outcome(st, Delivered, object=oid))
         robot.carrying, robot.delivered = list(st.carrying), list(st.delivered)
         robot.state, robot.waiting_door, robot.detail, robot.progress = (
             st.state,
@@ -144,16 +145,16 @@ class ExternalRobot:
         robot.last_action_id = max(robot.last_action_id, st.action_id)
         if st.state == "waiting_at_door" and (st.action_id, st.waiting_door) != self.waiting_reported:
             self.waiting_reported = (st.action_id, st.waiting_door)
-            self._pending.append(self._outcome(st, "waiting_at_door", door=st.waiting_door))
+            self._pending.append(self._outcome(st, WaitingAtDoor, door=st.waiting_door))
         if st.action_id > self.reported_action and (
             st.state in ("done", "failed") or (st.state == "idle" and st.action == "stop")
         ):
             self.reported_action = st.action_id
             if st.state == "failed":
-                self._pending.append(self._outcome(st, "action_failed", new_world=True, reason=st.detail or "failed"))
+                self._pending.append(self._outcome(st, ActionFailed, new_world=True, reason=st.detail or "failed"))
             else:
                 # A stop is what the planner asked for: no new world version (as the simulator's robots).
-                self._pending.append(self._outcome(st, "action_done", new_world=st.action != "stop"))
+                self._pending.append(self._outcome(st, ActionDone, new_world=st.action != "stop"))
 
     def on_pose(self, pose: RobotPose) -> None:
         self.pose = pose
@@ -200,19 +201,26 @@ class ExternalRobot:
                 engine.doors.request_open(door_id, self.id)
 
     def _outcome(
-        self, st: RobotStatus, kind: str, *, door: str = "", object: str = "", new_world: bool = False, reason: str = ""
+        self,
+        st: RobotStatus,
+        kind: type[RobotOutcome],
+        *,
+        door: str = "",
+        object: str = "",
+        new_world: bool = False,
+        reason: str = "",
     ) -> Outcome:
         robot = self.engine.robots[self.id]
-        data: dict[str, Any] = {
-            "plan_id": st.plan_id,
-            "action_id": st.action_id,
-            "action": st.action,
-            "args": list(st.args),
-            "pose": [round(robot.x, 6), round(robot.y, 6), round(robot.theta, 6)],
-        }
+        data = kind(
+            plan_id=st.plan_id,
+            action_id=st.action_id,
+            action=st.action,
+            args=list(st.args),
+            pose=[round(robot.x, 6), round(robot.y, 6), round(robot.theta, 6)],
+        )
         if reason:
-            data["reason"] = reason
-        return Outcome(kind, self.id, door=door, object=object, data=data, new_world=new_world)
+            data.reason = reason
+        return Outcome(data, self.id, door=door, object=object, new_world=new_world)
 
 
 class ExternalRobots:

@@ -555,7 +555,7 @@ class SimService(Service):
             self._publish_human(force=True)
 
     def _publish_event(self, event: SimEvent) -> None:
-        msg = Event(kind=event.kind, robot=event.robot, door=event.door, object=event.object, data=event.data)
+        msg = Event(data=event.data, robot=event.robot, door=event.door, object=event.object)
         # Stamped with the instant it happened (may fall within the tick), not the tick's end.
         msg.src, msg.seq, msg.stamp = self.src, self.next_seq(), event.time
         self.publish(self.keys.event(), msg, stamp=False)

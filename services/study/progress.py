@@ -9,6 +9,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from protocol.events import data_to_wire
 from protocol.messages import DoorState, Event, HumanState, ParticipantAction, QuestionnaireAnswers, RobotStatus
 
 RECENT = 40  # lines of recent happenings the console lists
@@ -96,7 +97,7 @@ class TrialProgress:
         with self._lock:
             if msg.kind == "mission_done":
                 self.mission_done = True
-                self.mission = msg.data if isinstance(msg.data, dict) else {}
+                self.mission = data_to_wire(msg.data)
                 if self.phase in ("running", "consent", "starting"):
                     self.phase = "mission done"
             what = " ".join(part for part in (msg.kind, msg.robot, msg.door, msg.object) if part)

@@ -32,6 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from protocol.events import data_to_wire
 from protocol.messages import (
     ConstraintSet,
     DoorState,
@@ -141,7 +142,7 @@ class TrialRun:
             self.progress.on_event(msg)
             if msg.kind == "mission_done" and not self.mission_done:
                 self.mission_done = True
-                self.mission = msg.data if isinstance(msg.data, dict) else {}
+                self.mission = data_to_wire(msg.data)
                 log.info("mission done at t=%.1f s%s", msg.stamp, self._waiting_for())
         elif isinstance(msg, HumanState):
             self.log.record(msg, key)

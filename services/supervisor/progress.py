@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from protocol.events import DoorOpened, data_to_wire
 from protocol.messages import Event, RobotStatus
 
 from .metrics_table import metrics_table
@@ -57,13 +58,13 @@ class MissionProgress:
             self._robot(msg.robot).delivered.add(msg.object or f"#{len(self._robot(msg.robot).delivered)}")
         elif msg.kind == "door_opened":
             self.door_openings += 1
-            self.human_door_openings += isinstance(msg.data, dict) and msg.data.get("by") == "human"
+            self.human_door_openings += isinstance(msg.data, DoorOpened) and msg.data.by == "human"
             if msg.door:
                 self.doors[msg.door] = self.doors.get(msg.door, 0) + 1
         elif msg.kind == "plan_conflict":
             self.conflicts += 1
         elif msg.kind == "mission_done":
-            self.metrics = dict(msg.data) if isinstance(msg.data, dict) else {"result": msg.data}
+            self.metrics = data_to_wire(msg.data)
 
     def on_time(self, now: float) -> None:
         self.sim_time = max(self.sim_time, now)

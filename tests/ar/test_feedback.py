@@ -39,7 +39,7 @@ def test_every_usable_library_entry_becomes_a_button_with_parameter_chips():
     assert {p.layer for p in prims} == {"ui"}
     texts = [p.text for p in prims if p.kind == "text"]
     for entry in panel.entries:
-        assert any(t.startswith(entry["label"][:10]) for t in texts), entry["id"]
+        assert any(t.startswith(entry.label[:10]) for t in texts), entry.id
     assert any(t.startswith("Door: ") for t in texts) and any(t.startswith("Minutes: 15") for t in texts)
     # Tapping a chip cycles its value; tapping the cancel button does nothing without a live constraint.
     chip = next(b for b in panel._buttons if b.action == ("cycle", "door_unavailable", "minutes"))

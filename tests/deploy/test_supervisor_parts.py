@@ -101,8 +101,8 @@ def test_progress_counts_each_delivery_once_whether_heard_from_status_or_event()
     assert "t=21.0s delivered 1/3" in line and "r0 1/2 moving" in line and "r1 0/1 waiting at d1" in line
     assert "door openings 1 (by the human 0)" in line
     assert progress.bar(width=6).startswith("[##....] 1/3 delivered")
-    progress.on_event(Event(kind="mission_done", data={"makespan": 99.25}))
-    assert progress.done and "other figures:\n  makespan: 99.250" in progress.metrics_text()
+    progress.on_event(Event(kind="mission_done", data={"reason": "stopped by hand"}))
+    assert progress.done and "other figures:\n  reason: stopped by hand" in progress.metrics_text()
 
 
 def test_on_a_terminal_a_log_line_goes_above_the_progress_bar():

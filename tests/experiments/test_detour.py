@@ -55,7 +55,7 @@ def test_the_planner_reorders_the_deliveries_around_a_declared_window() -> None:
     assert result.status == "ok"
     order = [destination[s.args[0]] for s in result.plans["r0"].steps if s.action == "unload"]
     assert order[-1] == "storage" and order[0] != "storage"
-    assert validate_result(site, world, result, Windows.from_asp([window.asp])) == []
+    assert validate_result(site, world, result, Windows.of(program.facts())) == []
     # The other errand was done inside the window: the robot waits at her door less than the window is long, and it
     # finishes sooner than the free order would under the window (wait until 200 s, then everything from the door on).
     steps = result.plans["r0"].steps

@@ -40,7 +40,7 @@ def test_door_unavailable_moves_every_opening_out_of_the_window():
     result = planner_for("office").plan(world, program(c))
     assert result.status == "ok"
     assert storage_openings(result) and all(not (40 <= t < 200) for t in storage_openings(result))
-    assert validate_result(site, world, result, Windows.from_asp([c.asp])) == []
+    assert validate_result(site, world, result, Windows.of(program(c).facts())) == []
 
 
 def test_times_are_absolute_site_clock_seconds():
@@ -52,7 +52,7 @@ def test_times_are_absolute_site_clock_seconds():
     starts = [result.absolute(s.start) for p in result.plans.values() for s in p.steps]
     assert min(starts) >= 1000
     assert storage_openings(result) and all(not (1030 <= t < 1160) for t in storage_openings(result))
-    assert validate_result(site, world, result, Windows.from_asp([c.asp])) == []
+    assert validate_result(site, world, result, Windows.of(program(c).facts())) == []
 
 
 def test_while_the_door_is_unavailable_the_robot_does_other_work_first():
@@ -65,7 +65,7 @@ def test_while_the_door_is_unavailable_the_robot_does_other_work_first():
     result = planner_for("errand").plan(world, program(c))
     plan = result.plans["r0"]
     assert [s.args[0] for s in plan.steps if s.action == "unload"] == ["o_office", "o_store"]
-    assert validate_result(site, world, result, Windows.from_asp([c.asp])) == []
+    assert validate_result(site, world, result, Windows.of(program(c).facts())) == []
     # the office delivery fills the wait: the robot is done soon after the door may open again
     door_part = free.makespan - next(
         s.start for s in free.plans["r0"].steps if s.action == "approach" and s.args == ("d_storage",)
@@ -85,7 +85,7 @@ def test_a_forbidden_room_is_kept_clear_for_its_window():
     c = forbid_room("office_b", 0, until, "c2")
     result = planner_for("office").plan(world, program(c))
     assert result.status == "ok", result.diagnostic
-    assert validate_result(site, world, result, Windows.from_asp([c.asp])) == []
+    assert validate_result(site, world, result, Windows.of(program(c).facts())) == []
     for p in result.plans.values():
         for room, s, e in p.visits:
             assert not (room == "office_b" and s < until and e > 0)
@@ -121,7 +121,7 @@ def test_a_warm_replan_does_not_reuse_openings_a_new_constraint_forbids():
     before = planner_for("office").plan(world)
     c = unavailable("d_storage", 40, 200, "c1")
     after = planner_for("office").plan(world, program(c), warm=before)
-    assert validate_result(site, world, after, Windows.from_asp([c.asp])) == []
+    assert validate_result(site, world, after, Windows.of(program(c).facts())) == []
 
 
 def test_unsatisfiable_constraints_are_named():

@@ -135,7 +135,7 @@ def test_unsatisfiable_constraints_give_a_conflict_event_and_the_planner_keeps_g
     )
     client.publish(client.keys.constraints(), bad)
     event = wait_for_message(events, lambda e: e.kind == "plan_conflict", timeout=30)
-    assert event.data["constraints"] == ["keep_out_lab"]
+    assert event.data.constraints == ["keep_out_lab"]
     after = wait_for_message(plans, lambda p: p.constraints_version == 5, timeout=30)
     assert "keep_out_lab" in after.diagnostic
     assert {r: [(s.action, s.args) for s in v] for r, v in after.robots.items()} == {

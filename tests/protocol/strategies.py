@@ -22,7 +22,8 @@ import msgspec
 from hypothesis import strategies as st
 
 from protocol.codec import decode
-from protocol.messages import Message
+from protocol.events import EVENT_DATA
+from protocol.messages import Event, Message
 from protocol.schema import (
     ID_PATTERN,
     ID_REGEX,
@@ -39,6 +40,10 @@ from protocol.schema import (
 
 class Json:
     """Stands for a JSON-like tree field (``protocol.schema.Json``) in the plain hints below."""
+
+
+class KindData:
+    """Stands for an Event's ``data``, whose type its ``kind`` chooses (:data:`protocol.events.EVENT_DATA`)."""
 
 
 @dataclass(frozen=True)
@@ -90,7 +95,11 @@ def describe(hint: Any) -> tuple[Any, dict[str, Any]]:
         value, value_meta = describe(args[1])
         return dict[str, value], meta | _item_limits(value_meta)
     if origin in (types.UnionType, typing.Union):
-        return functools.reduce(operator.or_, (describe(a)[0] for a in args)), meta
+        described = [describe(a) for a in args]
+        present = [m for a, (_, m) in zip(args, described, strict=True) if a not in (type(None), msgspec.UnsetType)]
+        if len(present) == 1:  # X | None, X | UnsetType: X's limits hold
+            meta |= present[0]
+        return functools.reduce(operator.or_, (plain for plain, _ in described)), meta
     return hint, meta
 
 
@@ -106,6 +115,9 @@ def fields_of(cls: type) -> list[tuple[Field, Any]]:
     for info in msgspec.inspect.type_info(cls).fields:
         if info.name == "v" and issubclass(cls, Message):
             continue
+        if cls is Event and info.name == "data":
+            out.append((Field(info.name, info.required, {}), KindData))
+            continue
         plain, meta = describe(hints[info.name])
         out.append((Field(info.name, info.required, meta), plain))
     return out
@@ -116,10 +128,10 @@ def is_required(f: Field) -> bool:
 
 
 def _optional_inner(hint: Any) -> Any | None:
-    """``X`` for ``X | None``, else None."""
+    """``X`` for ``X | None`` (or ``X | UnsetType``: a field that may be absent), else None."""
     if typing.get_origin(hint) in (types.UnionType, typing.Union):
         args = typing.get_args(hint)
-        members = [a for a in args if a is not type(None)]
+        members = [a for a in args if a not in (type(None), msgspec.UnsetType)]
         if len(members) == 1 and len(members) < len(args):
             return members[0]
     return None
@@ -144,7 +156,7 @@ def value_strategy(hint: Any, meta: typing.Mapping[str, Any]) -> st.SearchStrate
     lo, hi, max_len = meta.get("lo"), meta.get("hi"), meta.get("max_len")
     inner = _optional_inner(hint)
     if inner is not None:
-        return st.none() | value_strategy(inner, meta)
+        return _absent(hint) | value_strategy(inner, meta)
     origin, args = typing.get_origin(hint), typing.get_args(hint)
     if hint is bool:
         return st.booleans()
@@ -166,8 +178,9 @@ def value_strategy(hint: Any, meta: typing.Mapping[str, Any]) -> st.SearchStrate
         return _json(min(3, MAX_JSON_DEPTH))
     if isinstance(hint, type) and issubclass(hint, msgspec.Struct):
         return strategy_for(hint)
-    if origin in (types.UnionType, typing.Union):  # a union of scalars (Scalar)
-        return st.one_of([value_strategy(a, {}) for a in args])
+    if origin in (types.UnionType, typing.Union):  # a union of scalars (Scalar), perhaps None or absent
+        scalars = [a for a in args if a not in (type(None), msgspec.UnsetType)]
+        return _absent(hint) | st.one_of([value_strategy(a, {}) for a in scalars])
     if origin is list:
         item_meta = {k: meta.get(k) for k in ("lo", "hi", "choices", "ident")}
         item = value_strategy(args[0], item_meta)
@@ -185,9 +198,25 @@ def value_strategy(hint: Any, meta: typing.Mapping[str, Any]) -> st.SearchStrate
     raise TypeError(f"no strategy for {hint!r}")
 
 
+def _absent(hint: Any) -> st.SearchStrategy:
+    """None and UNSET when the union ``hint`` admits them."""
+    args = typing.get_args(hint)
+    none = st.none() if type(None) in args else st.nothing()
+    return none | (st.just(msgspec.UNSET) if msgspec.UnsetType in args else st.nothing())
+
+
 def strategy_for(cls: type) -> st.SearchStrategy:
-    """Valid instances of a record class: every field drawn within its declared limits."""
-    return st.builds(cls, **{f.name: value_strategy(hint, f.metadata) for f, hint in fields_of(cls)})
+    """Valid instances of a record class: every field drawn within its declared limits (an Event's
+    data drawn as the type its kind chooses)."""
+    fields = {f.name: value_strategy(hint, f.metadata) for f, hint in fields_of(cls) if hint is not KindData}
+    if cls is Event:
+        fields.pop("kind")
+        return st.sampled_from(sorted(EVENT_DATA)).flatmap(
+            lambda kind: st.builds(
+                cls, kind=st.just(kind), data=value_strategy(describe(EVENT_DATA[kind])[0], {}), **fields
+            )
+        )
+    return st.builds(cls, **fields)
 
 
 # ---------------------------------------------------------------------------- sample values
@@ -212,6 +241,8 @@ def sample_value(hint: Any, meta: typing.Mapping[str, Any]) -> Any:
         return b"\x00\x01"
     if hint is Json:
         return {"k": [1, 2.5, "x", None]}
+    if hint is KindData:  # the first kind's (as the kind's sample is the first choice)
+        return sample_value(describe(EVENT_DATA[next(iter(EVENT_DATA))])[0], {})
     if isinstance(hint, type) and issubclass(hint, msgspec.Struct):
         return minimal_wire(hint, envelope=False)
     if origin in (types.UnionType, typing.Union):
@@ -248,7 +279,7 @@ def wrong_type_value(hint: Any) -> Any:
         return 1
     if hint is bytes:
         return "not bytes"
-    if hint is Json:
+    if hint in (Json, KindData):
         return b"bytes are not JSON"
     if isinstance(hint, type) and issubclass(hint, msgspec.Struct):
         return 5

@@ -349,9 +349,10 @@ def test_a_prepared_sender_publishes_like_publish(make_service, peer):
 
 def test_serve_and_query(make_service, peer):
     probe = make_service(Probe).service
-    probe.serve(probe.keys.plan(), lambda query: Event(kind="plan_reply"))
+    probe.serve(probe.keys.plan(), lambda query: Event(kind="human_done", data={"task_duration": 1.5}))
     probe.serve(
-        probe.keys.door_state("*"), lambda query: Event(kind="door_reply", door=str(query.key_expr).split("/")[3])
+        probe.keys.door_state("*"),
+        lambda query: Event(kind="door_opened", data={"by": "human"}, door=str(query.key_expr).split("/")[3]),
     )
     probe.serve(probe.keys.constraints(), lambda query: None)  # nothing to say
 
@@ -362,7 +363,7 @@ def test_serve_and_query(make_service, peer):
             if replies or time.monotonic() > deadline:
                 return replies
 
-    assert [r.kind for r in ask(peer.keys.plan())] == ["plan_reply"]
+    assert [r.kind for r in ask(peer.keys.plan())] == ["human_done"]
     [door] = ask(peer.keys.door_state("d7"))
     assert door.door == "d7"
     assert peer.query(peer.keys.constraints(), Event, timeout=0.5) == []

@@ -8,6 +8,7 @@ from typing import Any
 
 import pytest
 
+from protocol.constraint_library import entries_to_wire
 from protocol.site import loads_site
 from services.restrictor.library import (
     CONSTRAINT,
@@ -94,7 +95,7 @@ def test_a_valid_minimal_library_parses() -> None:
 def test_a_site_specific_library_loads_from_its_path(lab_site) -> None:
     lib = load_library(HERE / "lab_library.toml")
     assert lib.source.endswith("lab_library.toml")
-    shown = {e["id"]: e for e in library_for_site(lab_site, lib)}
+    shown = {e["id"]: e for e in entries_to_wire(library_for_site(lab_site, lib))}
     assert shown["avoid_opening"]["params"][0]["choices"] == ["d_lab", "d_storage", "p_corridor_room_a"]
     # human_operated = false: automatic doors are offered too
     assert shown["door_unavailable"]["params"][0]["choices"] == ["d_lab", "d_storage"]
@@ -266,7 +267,7 @@ def test_a_broken_library_on_disk_is_named_by_its_file(tmp_path) -> None:
 
 
 def test_library_for_site_resolves_the_sites_choices(lab_site, library) -> None:
-    shown = {entry["id"]: entry for entry in library_for_site(lab_site, library)}
+    shown = {entry["id"]: entry for entry in entries_to_wire(library_for_site(lab_site, library))}
     json.dumps(shown)  # plain JSON data
     door, minutes = shown["door_unavailable"]["params"]
     assert door == {
@@ -295,7 +296,7 @@ def test_library_for_site_resolves_the_sites_choices(lab_site, library) -> None:
 
 def test_entries_without_choices_on_a_site_are_marked_unusable(library) -> None:
     site = loads_site(LAB.read_text().replace("human_operated = true", "human_operated = false"), "no_human_doors.toml")
-    shown = {entry["id"]: entry for entry in library_for_site(site, library)}
+    shown = {entry["id"]: entry for entry in entries_to_wire(library_for_site(site, library))}
     assert shown["door_unavailable"]["params"][0]["choices"] == []
     assert not shown["door_unavailable"]["usable"] and not shown["door_available_now"]["usable"]
     assert shown["forbid_room"]["usable"] and shown["cancel"]["usable"]
@@ -310,7 +311,7 @@ def test_the_library_command_prints_the_same_json(lab_site, library) -> None:
         timeout=60,
     )
     assert out.returncode == 0, out.stderr
-    assert json.loads(out.stdout) == library_for_site(lab_site, library)
+    assert json.loads(out.stdout) == entries_to_wire(library_for_site(lab_site, library))
     text = subprocess.run(
         arroch("constraints", "library", "--site", str(LAB), "--library", str(HERE / "lab_library.toml")),
         cwd=ROOT,

@@ -263,6 +263,6 @@ def test_simulated_bases_publish_a_scan_the_driver_goes_by(spawn, router, namesp
         timeout=40,
     )
     assert done.kind == "action_done", done
-    assert done.data["pose"][1] < SITE.doors["d_lab"].center[1] - RADIUS
+    assert done.data.pose[1] < SITE.doors["d_lab"].center[1] - RADIUS
     (stats,) = [e.data for e in client.query(client.keys.stats("robot"), Event)]
     assert stats["scans"] > 10, stats

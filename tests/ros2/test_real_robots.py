@@ -34,14 +34,14 @@ def test_a_real_robot_goes_through_an_automatic_door(spawn, router, namespace, c
             RobotCommand(robot=robot, plan_id=1, action_id=1, action="gothrough", args=["d_lab"], trajectory=rows),
         )
         opened = wait_for_message(events, lambda e: e.kind == "door_opened" and e.door == "d_lab", timeout=15)
-        assert opened.data["by"] == robot
+        assert opened.data.by == robot
         done = wait_for_message(
             events,
             lambda e: e.kind in ("action_done", "action_failed", "closed_door_crossing") and e.robot == robot,
             timeout=20,
         )
-        assert done.kind == "action_done" and done.data["action_id"] == 1 and done.data["world_version"] >= 2, done
-        assert done.data["pose"][1] < SITE.doors["d_lab"].center[1] - SITE.params.robot_radius
+        assert done.kind == "action_done" and done.data.action_id == 1 and done.data.world_version >= 2, done
+        assert done.data.pose[1] < SITE.doors["d_lab"].center[1] - SITE.params.robot_radius
         seen = []
         while not poses.empty():
             seen.append(poses.get_nowait()[0])

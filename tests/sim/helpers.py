@@ -121,7 +121,7 @@ def run_mission(engine: Engine, *, max_time: float = 7200.0, planner: ScriptedPl
         for event in engine.take_events():
             log.append(event)
             if event.kind in ("action_done", "action_failed") and event.robot in planner.todo:
-                planner.finished(event.robot, int(event.data["action_id"]), event.kind == "action_done")
+                planner.finished(event.robot, int(event.data.action_id), event.kind == "action_done")
         for request in engine.take_feedback():
             engine.feedback_answered(request, accepted=True, constraints_version=request.id)
         if engine.world_version > answered:

@@ -54,7 +54,7 @@ def test_a_robot_forced_through_a_closed_door_is_one_crossing_and_pybullet_sees_
     assert len(events) == 1
     (event,) = events
     assert (event.robot, event.door) == ("r0", DOOR)
-    assert event.data["fraction"] == 0.0 and 0.0 < event.data["depth"] <= 0.05
+    assert event.data.fraction == 0.0 and 0.0 < event.data.depth <= 0.05
     assert engine.metrics.closed_door_crossings == 1
     assert engine.summary()["closed_door_crossings"] == 1
     # The watch and pybullet's exact overlap of the robot's cylinder with the closed leaf agree:
@@ -97,8 +97,8 @@ def test_a_whole_mission_has_no_closed_door_crossing(method):
     engine = Engine(load_site(None), method=method, seed=2)
     events = run_mission(engine)
     done = events[-1]
-    assert done.kind == "mission_done" and done.data["completed"] is True
-    assert done.data["closed_door_crossings"] == 0
+    assert done.kind == "mission_done" and done.data.completed is True
+    assert done.data.closed_door_crossings == 0
     assert not [e for e in events if e.kind == "closed_door_crossing"]
     # the doors really were used: the watch had closed doors with robots near them to look at
-    assert sum(n for per in done.data["door_openings"].values() for n in per.values()) > 5
+    assert sum(n for per in done.data.door_openings.values() for n in per.values()) > 5

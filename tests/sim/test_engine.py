@@ -49,7 +49,7 @@ def test_mission_metrics_are_the_papers():
     sent = [e for e in events if e.kind == "feedback_sent"]
     assert m["feedback"]["sent"] == len(sent) and m["feedback"]["accepted"] == len(sent)
     for e in sent:
-        assert e.data["kind"] == "door_unavailable" and e.data["params"]["door"] == "d_storage"
+        assert e.data.kind == "door_unavailable" and e.data.params["door"] == "d_storage"
     assert m["params"]["method"] == "arroch" and m["params"]["seed"] == 3
     assert m["params"]["human"]["no_comm_probability"] == 0.6
     assert m["params"]["human"]["declare_probability"] == 0.9
@@ -69,10 +69,10 @@ def test_without_a_planner_the_mission_ends_unfinished_at_the_time_limit():
     while not engine.done:
         engine.step()
     done = engine.take_events()[-1]
-    assert done.kind == "mission_done" and done.data["completed"] is False
+    assert done.kind == "mission_done" and done.data.completed is False
     assert done.time == pytest.approx(60.0)
-    assert done.data["team_completion_time"] is None
-    assert done.data["agent_completion_times"]["human"] == pytest.approx(30.0, abs=10.0)
+    assert done.data.team_completion_time is None
+    assert done.data.agent_completion_times["human"] == pytest.approx(30.0, abs=10.0)
 
 
 def plan(plan_id: int, world: int, constraints: int = 0, fronts: dict[str, int] | None = None) -> TeamPlan:

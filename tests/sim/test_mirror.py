@@ -29,7 +29,7 @@ def test_no_robot_overlaps_a_closed_or_closing_leaf_nor_goes_deeper_into_a_wall_
             for event in engine.take_events():
                 if event.kind in ("action_done", "action_failed"):
                     assert event.kind == "action_done", event
-                    planner.finished(event.robot, event.data["action_id"], True)
+                    planner.finished(event.robot, event.data.action_id, True)
             if engine.world_version > answered:
                 answered, plans = engine.world_version, plans + 1
                 for cmd in planner.commands(

@@ -38,15 +38,15 @@ def test_two_bodies_that_intersect_are_one_overlap_each_time_they_meet():
     for _ in range(5):
         e.step()  # however long they stay so, one overlap
     (event,) = overlaps(e)
-    assert event.data["robots"] == ["r0", "r1"] and event.data["place"] == "corridor"
-    assert abs(event.data["depth"] - 0.05) < 1e-6
+    assert event.data.robots == ["r0", "r1"] and event.data.place == "corridor"
+    assert abs(event.data.depth - 0.05) < 1e-6
     r1.x = 9.0  # apart ...
     e.step()
     r1.x, r1.y = 3.0, 5.9  # ... and again, in d_office's doorway this time
     r0.x, r0.y = 3.0, 6.3
     e.step()
     (again,) = overlaps(e)
-    assert again.data["place"] == "d_office"
+    assert again.data.place == "d_office"
     summary = e.summary()
     assert summary["robot_overlaps"] == 2
     assert summary["robot_overlaps_by_pair"] == {"r0-r1": 2}
@@ -178,7 +178,7 @@ def test_a_robot_wedged_for_long_never_pushes_through_its_action_fails_for_a_new
         assert math.dist((r0.x, r0.y), (r1.x, r1.y)) >= 0.5  # never touches r1
     assert not [ev for ev in events if ev.kind == "robot_overlap"] and e.summary()["robot_overlaps"] == 0
     (failed,) = [ev for ev in events if ev.kind == "action_failed"]
-    assert failed.robot == "r0" and failed.data["reason"] == "kept back by robots for 12 s"
+    assert failed.robot == "r0" and failed.data.reason == "kept back by robots for 12 s"
     assert 12.0 <= failed.time <= 30.0  # given up 12 s after it last got 0.5 m anywhere
     assert r0.phase == "failed" and r0.y < 5.5  # where it was kept back, waiting for a new plan
 
@@ -208,8 +208,8 @@ def test_a_disc_reaching_into_a_wall_is_one_wall_contact_each_time_and_the_deepe
     r0.y = wall[1] - 0.25 + 0.02  # ... and back, 2 cm in
     e.step()
     contacts = [ev for ev in e.take_events() if ev.kind == "wall_contact"]
-    assert [(c.robot, c.data["place"]) for c in contacts] == [("r0", "corridor"), ("r0", "corridor")]
-    assert abs(contacts[0].data["depth"] - 0.04) < 1e-6 and abs(contacts[1].data["depth"] - 0.02) < 1e-6
+    assert [(c.robot, c.data.place) for c in contacts] == [("r0", "corridor"), ("r0", "corridor")]
+    assert abs(contacts[0].data.depth - 0.04) < 1e-6 and abs(contacts[1].data.depth - 0.02) < 1e-6
     summary = e.summary()
     assert summary["wall_contacts"] == 2 and summary["wall_contacts_by_place"] == {"corridor": 2}
     assert abs(summary["wall_depth_max"] - 0.04) < 1e-6

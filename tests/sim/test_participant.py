@@ -12,7 +12,9 @@ import queue
 import time
 
 import pytest
+from msgspec import UNSET
 
+from protocol.events import data_to_wire
 from protocol.launch.catalog import SERVICES, Launch, MissionOptions, service_argv
 from protocol.messages import Clock, DoorState, Event, HumanState, ParticipantAction, StudyControl
 from protocol.site import load_site
@@ -166,7 +168,7 @@ def test_her_opening_opens_the_door_for_the_robots():
     assert opened_now == ["human_opens_door"]
     events = run_until(e, lambda e: e.doors.passable("d_storage"))
     (opened,) = [ev for ev in events if ev.kind == "door_opened"]
-    assert opened.data["by"] == "human" and opened.data["world_version"] == version + 1 and opened.data["until"] > 0
+    assert opened.data.by == "human" and opened.data.world_version == version + 1 and opened.data.until > 0
     run_until(e, lambda e: e.human_place() == ("desk", ""))
     assert e.human_act("open_door", "d_storage").startswith("act: open_door d_storage: she is not at that door")
 
@@ -180,7 +182,7 @@ def test_the_mission_ends_when_everything_is_delivered_and_she_says_her_task_is_
         for event in e.take_events():
             log.append(event)
             if event.kind in ("action_done", "action_failed") and event.robot in planner.todo:
-                planner.finished(event.robot, int(event.data["action_id"]), event.kind == "action_done")
+                planner.finished(event.robot, int(event.data.action_id), event.kind == "action_done")
         if e.world_version > answered:
             answered = e.world_version
             plans += 1
@@ -206,7 +208,7 @@ def test_the_mission_ends_when_everything_is_delivered_and_she_says_her_task_is_
     log += e.take_events()
     assert e.done and e.completed
     (done,) = [ev for ev in log if ev.kind == "mission_done"]
-    m = done.data
+    m = data_to_wire(done.data)
     assert m["completed"] and m["agent_completion_times"]["human"] == t == m["team_completion_time"]
     assert m["human"]["participant"] is True and m["human"]["doors"] == "sim" and m["human"]["focus"] == []
     assert m["human"]["door_openings"] >= 1 and m["human"]["door_trips"] == m["human"]["door_openings"]
@@ -219,10 +221,10 @@ def test_a_real_door_follows_its_sensor():
     e = engine(door_sensors=True)
     d = e.doors["d_storage"]
     assert e.door_sensor("d_storage", True, "sensor") == ""
-    assert [(ev.kind, ev.data["by"]) for ev in e.take_events()] == [("human_opens_door", "sensor")]
+    assert [(ev.kind, ev.data.by) for ev in e.take_events()] == [("human_opens_door", "sensor")]
     events = run_until(e, lambda e: d.passable)
     (opened,) = [ev for ev in events if ev.kind == "door_opened"]
-    assert opened.data["by"] == "sensor" and "until" not in opened.data and d.open_until == 0.0
+    assert opened.data.by == "sensor" and opened.data.until is UNSET and d.open_until == 0.0
     assert e.door_sensor("d_storage", True, "sensor") == ""  # a sensor repeating itself: nothing new
     assert not [ev for ev in e.take_events() if ev.kind == "human_opens_door"]
     hold = SITE.params.door_hold_time
@@ -293,8 +295,8 @@ def test_an_abort_ends_the_mission_not_completed():
     e.abort("aborted by the experimenter: fire alarm")
     (done,) = e.take_events()
     assert done.kind == "mission_done" and done.time == 1.0
-    assert done.data["completed"] is False and done.data["reason"] == "aborted by the experimenter: fire alarm"
-    assert done.data["team_completion_time"] is None
+    assert done.data.completed is False and done.data.reason == "aborted by the experimenter: fire alarm"
+    assert done.data.team_completion_time is None
     e.abort("again")
     e.step()
     assert e.take_events() == [] and e.time == 1.0
@@ -456,8 +458,8 @@ def test_a_participant_drives_the_sim_over_zenoh(spawn, router, namespace, clien
 
     client.publish(client.keys.study_control(), StudyControl(command="abort", reason="the participant left"))
     done = latest(events, lambda e: e.kind == "mission_done")
-    assert done.data["completed"] is False
-    assert done.data["reason"] == "aborted by the experimenter: the participant left"
+    assert done.data.completed is False
+    assert done.data.reason == "aborted by the experimenter: the participant left"
     assert sim.wait(15) == 4
     m = json.loads(metrics.read_text())
     assert m["human"]["participant"] is True and m["human"]["door_openings"] == 1

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from msgspec import UNSET
 
 from protocol.plane import segment_distance
 from services.sim.engine import Engine
@@ -70,11 +71,11 @@ def test_robot_stops_before_a_closed_door_and_goes_on_once_it_opens(engine):
     engine.doors.human_open("d_storage", engine.time)
     events = run_until(engine, lambda ev: kinds(ev, "action_done"))
     opened = kinds(events, "door_opened")[0]
-    assert opened.door == "d_storage" and opened.data["by"] == "human"
-    assert opened.data["world_version"] == version + 1  # a human door's change is a new world
+    assert opened.door == "d_storage" and opened.data.by == "human"
+    assert opened.data.world_version == version + 1  # a human door's change is a new world
     done = kinds(events, "action_done")[0]
     assert done.time > opened.time
-    assert done.data["action"] == "gothrough" and done.data["action_id"] == 1
+    assert done.data.action == "gothrough" and done.data.action_id == 1
     assert math.dist((r0.x, r0.y), (6.0, 3.0)) <= 0.02
     assert engine.site.room_at(r0.x, r0.y).id == "storage"
 
@@ -106,8 +107,8 @@ def test_automatic_door_opens_for_the_approaching_robot_and_closes_after_it(engi
     engine.apply_command(command("r0", 1, "approach", ["d_office"], [(1.0, 5.0), (3.0, 5.4)]))
     events = run_until(engine, lambda ev: kinds(ev, "action_done"))
     opened = kinds(events, "door_opened")
-    assert opened and opened[0].door == "d_office" and opened[0].data["by"] == "r0"
-    assert "world_version" not in opened[0].data  # automatic doors do not make the planner replan
+    assert opened and opened[0].door == "d_office" and opened[0].data.by == "r0"
+    assert opened[0].data.world_version is UNSET  # automatic doors do not make the planner replan
     # Through, and on beyond the leaf's reach (a leaf never closes onto a robot in its sweep).
     engine.apply_command(command("r0", 2, "gothrough", ["d_office"], [(3.0, 5.4), (3.0, 7.5)], now=engine.time))
     crossed, clear_at_close = [], []
@@ -186,7 +187,7 @@ def test_a_robot_in_the_doorway_may_be_given_the_rest_of_its_passage(engine):
     assert kinds(events, "action_done") and r0.y == pytest.approx(7.0, abs=0.02)
     engine.apply_command(command("r0", 2, "gothrough", ["d_office"], [(3.0, 7.0), (3.0, 7.5)], now=engine.time))
     failed = kinds(run_until(engine, lambda ev: kinds(ev, "action_failed")), "action_failed")
-    assert "does not cross" in failed[0].data["reason"]
+    assert "does not cross" in failed[0].data.reason
 
 
 def test_human_door_stays_open_while_the_doorway_is_occupied(engine):
@@ -203,7 +204,7 @@ def test_human_door_stays_open_while_the_doorway_is_occupied(engine):
     engine.apply_command(command("r1", 2, "approach", ["d_storage"], [(6.0, 4.0), (6.0, 5.5)], now=engine.time))
     events = run_until(engine, lambda ev: kinds(ev, "door_closed"))
     closed = kinds(events, "door_closed")[0]
-    assert closed.data["world_version"] > 0
+    assert closed.data.world_version > 0
     assert gap_distance(engine, "d_storage", "r1") > RADIUS + 0.1
 
 
@@ -212,7 +213,7 @@ def test_human_door_closes_after_the_hold_time(engine):
     events = run_until(engine, lambda ev: kinds(ev, "door_closed"))
     opened, closed = kinds(events, "door_opened")[0], kinds(events, "door_closed")[0]
     assert closed.time - opened.time == pytest.approx(engine.site.params.door_hold_time, abs=0.06)
-    assert opened.data["until"] == pytest.approx(closed.time, abs=0.06)
+    assert opened.data.until == pytest.approx(closed.time, abs=0.06)
 
 
 def test_load_and_unload_take_load_time_and_the_object_rides_along(engine):
@@ -264,8 +265,8 @@ def test_commands_that_cannot_be_executed_fail_with_a_reason(engine, cmd, reason
     version = engine.world_version
     assert engine.apply_command(cmd) == "applied"
     failed = kinds(engine.take_events(), "action_failed")
-    assert len(failed) == 1 and reason in failed[0].data["reason"]
-    assert failed[0].data["action_id"] == 1 and failed[0].data["world_version"] == version + 1
+    assert len(failed) == 1 and reason in failed[0].data.reason
+    assert failed[0].data.action_id == 1 and failed[0].data.world_version == version + 1
     assert engine.robots["r0"].state == "failed"
     engine.step()  # and the engine goes on
 
@@ -273,12 +274,12 @@ def test_commands_that_cannot_be_executed_fail_with_a_reason(engine, cmd, reason
 def test_load_out_of_reach_and_unload_in_the_wrong_room_fail_on_arrival(engine):
     engine.apply_command(command("r0", 1, "load", ["o0"], [(1.0, 5.0), (2.0, 5.0)]))
     events = run_until(engine, lambda ev: kinds(ev, "action_failed"))
-    assert "reach" in kinds(events, "action_failed")[0].data["reason"]
+    assert "reach" in kinds(events, "action_failed")[0].data.reason
     engine.apply_command(command("r1", 1, "load", ["o1"], [(10.0, 5.0), (10.8, 5.0)]))
     run_until(engine, lambda ev: kinds(ev, "action_done"))
     engine.apply_command(command("r1", 2, "unload", ["o1"], [(10.8, 5.0), (9.0, 5.0)], now=engine.time))
     events = run_until(engine, lambda ev: kinds(ev, "action_failed"))
-    assert "goes to 'storage'" in kinds(events, "action_failed")[0].data["reason"]
+    assert "goes to 'storage'" in kinds(events, "action_failed")[0].data.reason
     assert engine.robots["r1"].carrying == ["o1"]  # still has it
 
 
@@ -291,7 +292,7 @@ def test_stale_commands_are_ignored_and_new_ones_preempt(engine):
     r0 = engine.robots["r0"]
     assert engine.apply_command(command("r0", 6, "stop", [], [])) == "applied"
     done = kinds(engine.take_events(), "action_done")
-    assert done and done[0].data["action"] == "stop" and "world_version" not in done[0].data
+    assert done and done[0].data.action == "stop" and done[0].data.world_version is UNSET
     x, y = r0.x, r0.y
     for _ in range(20):
         engine.step()
@@ -353,7 +354,7 @@ def test_a_drive_the_shut_door_guard_holds_for_30_s_fails_so_the_planner_plans_a
 
     events = run_until(engine, lambda ev: kinds(ev, "action_failed"), limit=60.0, on_step=note_held)
     failed = kinds(events, "action_failed")[0]
-    assert failed.robot == "r0" and "shut door" in failed.data["reason"]
+    assert failed.robot == "r0" and "shut door" in failed.data.reason
     assert not kinds(events, "waiting_at_door") and not kinds(events, "action_done")
     assert failed.time - held_from[0] == pytest.approx(30.0, abs=0.5)
     assert gap_distance(engine, "d_storage", "r0") >= RADIUS - 1e-9  # its disc never entered the gap

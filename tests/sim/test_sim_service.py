@@ -134,9 +134,7 @@ def test_two_seeded_lockstep_runs_give_identical_event_logs(router, client, spaw
     # What went over the wire is what was logged, and mission_done carries the metrics.
     assert [(e.kind, e.stamp) for e in wire[1]] == [(e["kind"], e["time"]) for e in events]
     assert (
-        wire[1][-1].data["team_completion_time"]
-        == events[-1]["data"]["team_completion_time"]
-        == m["team_completion_time"]
+        wire[1][-1].data.team_completion_time == events[-1]["data"]["team_completion_time"] == m["team_completion_time"]
     )
     assert m["run"]["realtime_factor"] > 1.0
 
@@ -174,12 +172,12 @@ def test_human_feedback_reaches_the_real_restrictor(router, client, spawn, tmp_p
     with Running(StandInPlanner(site, namespace, router, restrictor=False)):
         assert sim.wait(60) == 0, sim.output
     answered = wait_for_message(events, lambda e: e.kind == "feedback_answered", timeout=5)
-    assert answered.data["accepted"] is True and answered.data["constraints_version"] >= 1
+    assert answered.data.accepted is True and answered.data.constraints_version >= 1
     cs = wait_for_message(sets, lambda s: any(c.kind == "door_unavailable" for c in s.constraints), timeout=5)
     (c,) = [c for c in cs.constraints if c.kind == "door_unavailable"]
     assert c.params == {"door": "d_storage", "minutes": 2}
     assert c.end - c.start == pytest.approx(120.0, abs=1.0)
-    assert c.start == pytest.approx(answered.data["sent"], abs=1.0)  # on the sim's clock
+    assert c.start == pytest.approx(answered.data.sent, abs=1.0)  # on the sim's clock
 
 
 def test_bad_input_is_refused_counted_and_survived_then_sigterm_exits_cleanly(router, client, spawn):
@@ -192,7 +190,7 @@ def test_bad_input_is_refused_counted_and_survived_then_sigterm_exits_cleanly(ro
     wait_for_message(statuses, lambda s: s.robot == "r0", timeout=10)
     key = client.keys.robot_command("r0")
     client.session.put(key, b"\x93not msgpack at all")
-    client.session.put(key, encode(Event(kind="oops")))
+    client.session.put(key, encode(Event(kind="human_done", data={"task_duration": None})))
     client.publish(
         key,
         RobotCommand(
@@ -205,7 +203,7 @@ def test_bad_input_is_refused_counted_and_survived_then_sigterm_exits_cleanly(ro
         ),
     )
     failed = wait_for_message(events, lambda e: e.kind == "action_failed", timeout=10)
-    assert failed.robot == "r0" and "d_nowhere" in failed.data["reason"] and failed.data["action_id"] == 1
+    assert failed.robot == "r0" and "d_nowhere" in failed.data.reason and failed.data.action_id == 1
     status = wait_for_message(statuses, lambda s: s.robot == "r0" and s.state == "failed", timeout=10)
     assert "d_nowhere" in status.detail and status.world_version >= 2
     client.publish(client.keys.robot_command("r9"), RobotCommand(robot="r9", plan_id=1, action_id=1, action="stop"))

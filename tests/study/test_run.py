@@ -322,7 +322,9 @@ def test_the_log_writes_each_message_once_per_change_in_the_layout_format(tmp_pa
     assert trial_log.record(stamped(StudyControl(command="pause", reason="x"), 6.5), "study/control")
     assert not trial_log.record(stamped(StudyControl(command="pause", reason="x"), 6.6), "study/control")  # said again
     trial_log.close()
-    assert trial_log.record(stamped(Event(kind="late"), 7.0), "event") is False  # closed: counted, not raised
+    assert (
+        trial_log.record(stamped(Event(kind="human_done", data={"task_duration": None}), 7.0), "event") is False
+    )  # closed: counted, not raised
     assert trial_log.failed == 1
 
     lines = list(read_jsonl(tmp_path / "log.jsonl"))

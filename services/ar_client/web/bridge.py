@@ -31,6 +31,7 @@ from collections.abc import Callable
 from typing import Any
 
 from protocol.clock import SimClock, WallClock
+from protocol.constraint_library import entries_to_wire
 from protocol.feedback_client import newest_constraints, send_feedback, wait_for_library
 from protocol.messages import (
     CameraFrame,
@@ -119,8 +120,9 @@ class TabletBridge(Service):
     def _fetch_library(self) -> None:
         library = wait_for_library(self, retry=LIBRARY_RETRY, what="feedback buttons on the tablet pages")
         if library is not None:
-            self.library = library.entries
-            self.on_library(library.entries)
+            # The page's script reads the entries as JSON maps.
+            self.library = entries_to_wire(library.entries)
+            self.on_library(self.library)
 
     def now(self) -> float:
         """Site-clock time for drawing (before the sim's first clock message: wall time)."""

@@ -16,6 +16,8 @@ import threading
 from collections import deque
 from dataclasses import dataclass
 
+import msgspec
+
 from protocol.messages import Clock, ConstraintSet, Event, Feedback, FeedbackAck, PlanStep, RobotCommand, TeamPlan
 from protocol.service import Service
 from protocol.site.model import Site
@@ -205,7 +207,8 @@ class StandInPlanner(Service):
                     self._publish_plan(cs.stamp)  # replan on new constraints, as the planner does
 
     def _on_event(self, event: Event, key: str) -> None:
-        data = event.data if isinstance(event.data, dict) else {}
+        # the kind's fields as a map (a Struct per kind; counters of `stats` are a map already)
+        data = event.data if isinstance(event.data, dict) else msgspec.to_builtins(event.data)
         with self.lock:
             pose = data.get("pose")
             if event.robot in self.poses and isinstance(pose, list) and len(pose) == 3:

@@ -209,7 +209,7 @@ def _complete(world: FakeWorld, run_dir: Path) -> None:
     world.act("open_door", door="d1")
     for _ in range(2):  # a door state repeated (as the sim does once a second): logged once
         world.publish(world.keys.door_state("d1"), DoorState(door="d1", open=True, by="human"))
-    world.event("door_opened", door="d1")
+    world.event("door_opened", door="d1", data={"by": "human"})
     world.tick()
     world.event("delivered", robot="r0", object="o1")
     world.human("back", "d1")
@@ -226,7 +226,7 @@ def _complete(world: FakeWorld, run_dir: Path) -> None:
     world.act("puzzle_move", piece=5, correct=True, placed=16, total=16)
     world.act("task_done")
     world.human("desk", task_done=True)
-    world.event("human_done")
+    world.event("human_done", data={"task_duration": 250.0})
     world.tick()
     world.event("mission_done", data=METRICS)
     (run_dir / "metrics.json").write_text(json.dumps(METRICS))

@@ -68,10 +68,10 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.lib.stdio import c_stdout_to_stderr  # noqa: E402
-from protocol.apriltag import apriltag_corners  # noqa: E402
-from protocol.frames import CameraPose, gravity_in_camera, rotation_angle  # noqa: E402
 from protocol.messages import DoorState, Intent, RobotPose  # noqa: E402
 from protocol.site import load_site  # noqa: E402
+from runtime.apriltag import apriltag_corners  # noqa: E402
+from runtime.frames import CameraPose, gravity_in_camera, rotation_angle  # noqa: E402
 from services.ar_client.detect import TagDetector, apriltag_detector, tag_side_px  # noqa: E402
 from services.ar_client.feedback import FeedbackPanel  # noqa: E402
 from services.ar_client.localize import Localizer  # noqa: E402

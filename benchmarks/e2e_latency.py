@@ -73,11 +73,11 @@ sys.path.insert(0, str(ROOT))
 
 from benchmarks.lib import figures  # noqa: E402
 from benchmarks.lib.figures import log  # noqa: E402
-from protocol.clock import WallClock  # noqa: E402
 from protocol.codec import decode  # noqa: E402
 from protocol.messages import ConstraintSet, Overlay, RobotPose, TeamPlan  # noqa: E402
-from protocol.service import Service  # noqa: E402
-from protocol.transport import ZenohOptions, free_tcp_port  # noqa: E402
+from runtime.clock import WallClock  # noqa: E402
+from runtime.service import Service  # noqa: E402
+from runtime.transport import ZenohOptions, free_tcp_port  # noqa: E402
 from tests.procs import Proc, arroch  # noqa: E402
 from tests.tablet.helpers import start_tablet  # noqa: E402
 
@@ -222,7 +222,7 @@ class Probe:
         raise RuntimeError(f"no plan and localised overlay within {timeout:.0f} s")
 
     def press(self, kind: str, params: dict[str, Any], via_page: bool = False) -> dict[str, Any]:
-        from protocol.feedback_client import send_feedback
+        from runtime.feedback_client import send_feedback
 
         via = "page" if via_page and self.page is not None else "direct"
         pressed = time.time()

@@ -42,7 +42,8 @@ import clingo
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from protocol.site import generate_site, loads_site  # noqa: E402
+from protocol.site import loads_site  # noqa: E402
+from runtime.site.generate import generate_site  # noqa: E402
 from services.planner import single  # noqa: E402
 from services.planner.facts import Context, closed_facts, context_facts, door_facts, throughs  # noqa: E402
 from services.planner.planner import PlannerSettings, TaskPlanner  # noqa: E402

@@ -52,10 +52,10 @@ sys.path.insert(0, str(ROOT))
 
 from benchmarks.lib import figures  # noqa: E402
 from benchmarks.lib.figures import log  # noqa: E402
-from protocol.clock import WallClock  # noqa: E402
 from protocol.messages import CameraFrame, Event, RobotPose  # noqa: E402
-from protocol.service import Service  # noqa: E402
-from protocol.transport import ZenohOptions, free_tcp_port  # noqa: E402
+from runtime.clock import WallClock  # noqa: E402
+from runtime.service import Service  # noqa: E402
+from runtime.transport import ZenohOptions, free_tcp_port  # noqa: E402
 from tests.procs import Proc, arroch  # noqa: E402
 
 CAMERA = "tablet"

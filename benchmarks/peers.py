@@ -2,7 +2,7 @@
 pick (through ``unified-planning``: TAMER, Aries, LPG, ENHSP), against IIDP and the joint program.
 
 Problems: the packaged office site (the paper's building; its first 2 and all 3 robots) and
-generated sites (``protocol.site.generate_site``, seed ``--seed``) with ``--robots`` robots, each
+generated sites (``runtime.site.generate.generate_site``, seed ``--seed``) with ``--robots`` robots, each
 with ``--objects`` objects per robot; every one without and with a window in which the human opens
 no door (``--window``, on the storage door). Each is planned by IIDP and, up to
 ``--joint-max-robots`` robots, the joint program (both with ``--time-limit``), and encoded for
@@ -59,9 +59,10 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from benchmarks.lib.figures import log  # noqa: E402
-from protocol.site import Site, generate_site, loads_site  # noqa: E402
+from protocol.site import Site, loads_site  # noqa: E402
 from protocol.site.load import parse_toml, read_text  # noqa: E402
-from protocol.site.tomlw import dump_site  # noqa: E402
+from runtime.site.generate import generate_site  # noqa: E402
+from runtime.site.tomlw import dump_site  # noqa: E402
 from services.planner.constraints import ConstraintProgram, unavailable  # noqa: E402
 from services.planner.planner import PlannerSettings, TaskPlanner  # noqa: E402
 from services.planner.validator import Windows, validate, validate_result  # noqa: E402

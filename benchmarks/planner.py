@@ -1,6 +1,6 @@
 """Planner figures: replanning wall time, plan quality, IIDP against the joint optimum.
 
-For each team size (robots x 3 objects, on sites from ``protocol.site.generate_site``) and seed:
+For each team size (robots x 3 objects, on sites from ``runtime.site.generate.generate_site``) and seed:
 
 - the first plan, IIDP from scratch (every robot alone, then rounds): wall time, makespan, human
   door openings, IIDP rounds;
@@ -45,7 +45,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from protocol.site import generate_site, loads_site  # noqa: E402
+from protocol.site import loads_site  # noqa: E402
+from runtime.site.generate import generate_site  # noqa: E402
 from services.planner.constraints import ConstraintProgram, unavailable  # noqa: E402
 from services.planner.dispatcher import Dispatcher  # noqa: E402
 from services.planner.planner import PlannerSettings, TaskPlanner  # noqa: E402

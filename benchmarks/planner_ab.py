@@ -42,7 +42,8 @@ from typing import Any
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from protocol.site import generate_site, loads_site  # noqa: E402
+from protocol.site import loads_site  # noqa: E402
+from runtime.site.generate import generate_site  # noqa: E402
 
 BEFORE = "before_services"  # the name the --before tree's services package is loaded under
 

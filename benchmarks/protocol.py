@@ -6,7 +6,7 @@ Prints one JSON object on stdout (progress goes to stderr):
   200-point trajectory (median of many timed loops);
 - ``latency``: RobotPose round trips between this process and echo processes over loopback TCP:
   - ``protocol``: ``arroch ping serve`` (a Service relaying inline, on Zenoh's thread: each pose is
-    validated, then the bytes received go back out), timed by :class:`protocol.ping.PingSender`
+    validated, then the bytes received go back out), timed by :class:`runtime.ping.PingSender`
     (encode → Zenoh → validate → Zenoh → decode and validate, then the hand-off to the waiting
     thread; the pose is stamped before the clock starts, as the raw side's bytes are made before);
   - ``protocol_worker``: the same through the Service's worker thread (``ping serve --worker``,
@@ -16,10 +16,10 @@ Prints one JSON object on stdout (progress goes to stderr):
     ``protocol_sender`` is the PingSender against the raw echo (the pinger's encoding, decoding and
     hand-off); ``protocol_echo`` is the raw pinger against ``arroch ping serve`` (the relay's check).
   Like is compared with like: the raw side uses the Service's publisher options
-  (:func:`protocol.service.publisher_options`), its session options (the same command-line and
+  (:func:`runtime.service.publisher_options`), its session options (the same command-line and
   environment path, shared memory off in every process; the raw and protocol pingers even share
   one session), and its subscriber mode (callbacks on Zenoh's own thread,
-  :func:`protocol.transport.on_zenoh_thread`).
+  :func:`runtime.transport.on_zenoh_thread`).
 
   The figures come from ``--runs`` runs, each with freshly started echo processes (a process's
   luck with the machine, worth ±10-15 % here, does not carry over), and within a run from small
@@ -69,10 +69,10 @@ import zenoh  # noqa: E402
 from protocol.codec import decode, encode  # noqa: E402
 from protocol.keys import Keys  # noqa: E402
 from protocol.messages import Intent, RobotPose  # noqa: E402
-from protocol.ping import PingSender, summarize  # noqa: E402
-from protocol.service import publisher_options  # noqa: E402
-from protocol.signals import StopSignals  # noqa: E402
-from protocol.transport import ZenohOptions, build_config, free_tcp_port, on_zenoh_thread, options_from  # noqa: E402
+from runtime.ping import PingSender, summarize  # noqa: E402
+from runtime.service import publisher_options  # noqa: E402
+from runtime.signals import StopSignals  # noqa: E402
+from runtime.transport import ZenohOptions, build_config, free_tcp_port, on_zenoh_thread, options_from  # noqa: E402
 
 FLOOR_RATIO = 1.1
 FLOOR_POSE_CODEC_US = 20.0

@@ -28,10 +28,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from protocol.ros2 import types as ros  # noqa: E402
-from protocol.ros2.config import Ros2Config  # noqa: E402
 from protocol.site import load_site  # noqa: E402
-from protocol.transport import free_tcp_port  # noqa: E402
+from runtime.ros2 import types as ros  # noqa: E402
+from runtime.ros2.config import Ros2Config  # noqa: E402
+from runtime.transport import free_tcp_port  # noqa: E402
 from tests.conftest import TestClient  # noqa: E402
 from tests.procs import Proc, arroch  # noqa: E402
 from tests.ros2.harness import FakeBase, straight_command  # noqa: E402
@@ -42,7 +42,7 @@ def micro(fn, number: int = 200) -> float:  # noqa: ANN001
 
 
 def codec_figures() -> dict:
-    from protocol.ros2.markers import SiteState, site_markers
+    from runtime.ros2.markers import SiteState, site_markers
 
     site = load_site()
     PoseStamped = ros.t("geometry_msgs/msg/PoseStamped")

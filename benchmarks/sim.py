@@ -38,8 +38,9 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # the stand-in builds on the test suite's scripted planner
 
 from benchmarks.lib.coordinated import CoordinatedPlanner, CoordinatedStandIn  # noqa: E402
-from protocol.site import generate_site, loads_site  # noqa: E402
-from protocol.transport import free_tcp_port  # noqa: E402
+from protocol.site import loads_site  # noqa: E402
+from runtime.site.generate import generate_site  # noqa: E402
+from runtime.transport import free_tcp_port  # noqa: E402
 from services.sim.engine import Engine  # noqa: E402
 from tests.procs import Proc, arroch  # noqa: E402
 from tests.sim.helpers import run_mission  # noqa: E402

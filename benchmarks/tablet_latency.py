@@ -40,8 +40,8 @@ sys.path.insert(0, str(ROOT))
 from benchmarks.lib import figures  # noqa: E402
 from benchmarks.lib.figures import log  # noqa: E402
 from protocol.messages import Intent, RobotPose  # noqa: E402
-from protocol.service import Service  # noqa: E402
-from protocol.transport import ZenohOptions, free_tcp_port  # noqa: E402
+from runtime.service import Service  # noqa: E402
+from runtime.transport import ZenohOptions, free_tcp_port  # noqa: E402
 from tests.procs import Proc, arroch  # noqa: E402
 from tests.tablet.browser import Browser, chromium_path  # noqa: E402
 from tests.tablet.helpers import ROBOT_XY, fake_camera, snapshots, start_tablet  # noqa: E402

@@ -8,9 +8,9 @@ and checks what each declares on Zenoh against it. Change a service's I/O, chang
 Keys are written relative to the namespace (``arroch/<namespace>/``) as the builders of
 :class:`protocol.keys.Keys` make them, with ``*`` where a service uses one concrete chunk of its
 own (its robot, its camera, a feedback's sender). Keys starting with ``/`` are ROS 2 topics reached
-through rmw_zenoh (:mod:`protocol.ros2`), which carry ROS 2 types rather than ARROCH messages.
+through rmw_zenoh (:mod:`runtime.ros2`), which carry ROS 2 types rather than ARROCH messages.
 
-Every :class:`protocol.service.Service` also serves ``stats/<name>/<instance>`` (its counters, as an
+Every :class:`runtime.service.Service` also serves ``stats/<name>/<instance>`` (its counters, as an
 ``Event`` of kind ``stats``) and holds a liveliness token ``@liveliness/<name>/<instance>``; those are
 listed once here (:data:`FRAMEWORK`), not in each service. Who *may* publish a key in the secure
 profile is the access-control table's business (services/supervisor/deployment/acl.py); a test
@@ -120,13 +120,13 @@ def query(key: str, payload: type[Message] | str, purpose: str, when: str = "") 
 
 # Conditions (Endpoint.when) that several services share or tests name.
 SIM_CLOCK = "--clock sim"  # the site clock follows the simulator's Clock messages (SimClock)
-SENDING_FEEDBACK = "while a feedback awaits its ack"  # protocol.feedback_client.send_feedback
+SENDING_FEEDBACK = "while a feedback awaits its ack"  # runtime.feedback_client.send_feedback
 WITH_FEEDBACK = "without --no-feedback"
 STUDY = "--study-trial"
 ON_CONFLICT = "on a plan conflict"
 
 
-# The restrictor's client side (protocol.feedback_client), as every feedback giver uses it.
+# The restrictor's client side (runtime.feedback_client), as every feedback giver uses it.
 _GIVE_FEEDBACK = (
     query(_keys.feedback(), FeedbackAck, "give feedback: the query carries the Feedback, the reply is its ack"),
     sub(_keys.feedback_ack(), FeedbackAck, "the ack of its feedback, if it comes as a publication", SENDING_FEEDBACK),
@@ -428,7 +428,7 @@ SERVICES: tuple[ServiceNode, ...] = (
 )
 BY_NAME: dict[str, ServiceNode] = {s.name: s for s in SERVICES}
 
-#: What every Service declares besides its own keys (protocol/service.py), ``<service>`` its name.
+#: What every Service declares besides its own keys (runtime/service.py), ``<service>`` its name.
 FRAMEWORK: tuple[Endpoint, ...] = (
     Endpoint("serve", "stats/<service>/*", Event, "its counters (an Event of kind stats), also for stats/**"),
     Endpoint("pub", "@liveliness/<service>/*", "liveliness token", "it is up (gone when it stops or dies)"),

@@ -3,7 +3,7 @@
 Every message carries the envelope ``v`` (schema major version), ``type``, ``src`` (sender id),
 ``seq`` (per-sender counter) and ``stamp`` (seconds on the site clock). ``src``, ``seq`` and
 ``stamp`` default to empty values so code can build a message and let the publisher
-(:class:`protocol.service.Service`) stamp it.
+(:class:`runtime.service.Service`) stamp it.
 
 Messages are ``msgspec`` Structs: each field's type carries its limits (:mod:`protocol.schema`),
 which msgspec checks as it decodes (:mod:`protocol.codec`). ``type`` is the Struct's tag (the

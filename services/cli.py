@@ -11,14 +11,14 @@ import argparse
 import importlib
 import sys
 
-from protocol.runner import setup_logging
+from runtime.runner import setup_logging
 
 #: Each module and the top-level commands its ``register`` adds (``ar`` is extended by the tablet's
 #: module with ``ar calibrate``). tests/test_cli_registry.py checks this against the modules.
 COMMANDS: dict[str, tuple[str, ...]] = {
-    "protocol.site.cli": ("site",),  # arroch site check|show|generate
-    "protocol.router_cli": ("router",),
-    "protocol.ping": ("ping",),  # arroch ping serve|send (protocol round trip)
+    "runtime.site.cli": ("site",),  # arroch site check|show|generate
+    "runtime.router_cli": ("router",),
+    "runtime.ping": ("ping",),  # arroch ping serve|send (protocol round trip)
     "services.demo": ("demo",),
     "services.planner.cli": ("planner", "plan"),
     "services.restrictor.cli": ("restrictor", "feedback", "constraints"),

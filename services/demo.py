@@ -38,9 +38,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TextIO
 
-from protocol.launch.children import Child, stop_all
 from protocol.site import default_site_path
-from protocol.transport import free_tcp_port
+from runtime.launch.children import Child, stop_all
+from runtime.transport import free_tcp_port
 
 SERVICES = "planner,restrictor,sim,ar"  # under the supervisor; the router and the page are the demo's own
 CAMERA = "tablet"

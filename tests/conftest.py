@@ -12,8 +12,8 @@ from typing import TypeVar
 import pytest
 
 from protocol.messages import Message
-from protocol.service import Service
-from protocol.transport import ZenohOptions, free_tcp_port
+from runtime.service import Service
+from runtime.transport import ZenohOptions, free_tcp_port
 from tests.procs import Proc, arroch
 
 M = TypeVar("M", bound=Message)

@@ -4,15 +4,15 @@ Every module under ``services/`` is parsed (``ast``, nothing is imported) and ea
 absolute or relative, at module level or inside a function, is resolved to a module name. What is
 allowed (docs/architecture.md, "Packages and who owns which contract"):
 
-- a module of ``services/<X>/`` imports ``protocol``, third-party and standard modules, and its own
+- a module of ``services/<X>/`` imports ``protocol``, ``runtime``, third-party and standard modules, and its own
   package ``services.<X>``; never ``services.<Y>`` (Y ≠ X) nor a top-level ``services`` module,
   except that ``services/<X>/__main__.py`` may import the ``services.cli`` dispatcher (so that
   ``python -m services.<X>`` is ``arroch <X>``);
 - the top-level modules (``services/cli.py``, ``services/demo.py``) import no service package;
   the dispatcher loads each sub-command by name from ``COMMANDS``, whose entries must be
-  ``protocol`` modules, top-level ``services`` modules or a service's ``cli`` module.
+  ``protocol`` or ``runtime`` modules, top-level ``services`` modules or a service's ``cli`` module.
 
-What two services share lives in ``protocol/``.
+What two services share lives in ``protocol/`` (the wire) and ``runtime/`` (the code they run alike).
 """
 
 from __future__ import annotations
@@ -102,10 +102,10 @@ def test_no_service_imports_another_services_package():
 def test_the_dispatcher_loads_only_command_modules():
     for name in COMMANDS:
         service = _service_of(name)
-        allowed = name.startswith("protocol.") or (
+        allowed = name.startswith(("protocol.", "runtime.")) or (
             name.startswith("services.") and (service is None or name.endswith(".cli"))
         )
-        assert allowed, f"COMMANDS entry {name}: expected a protocol module or a service's cli module"
+        assert allowed, f"COMMANDS entry {name}: expected a protocol or runtime module or a service's cli module"
 
 
 @pytest.mark.parametrize(
@@ -120,7 +120,7 @@ def test_the_dispatcher_loads_only_command_modules():
         ("from services.demo import run", "services.planner.service", 1),
         ("from ..world import WorldView", "services.ar_client.web.bridge", 0),  # its own package
         ("from services.planner.motion import plan", "services.planner.service", 0),
-        ("from protocol.feedback_client import send_feedback", "services.sim.feedback", 0),
+        ("from runtime.feedback_client import send_feedback", "services.sim.feedback", 0),
         ("import numpy as np", "services.sim.world", 0),
     ],
 )

@@ -61,7 +61,7 @@ def install(out: Path) -> None:
 def probing_sims(folder: Path) -> Iterator[None]:
     """While inside, the sweep runner's trials start their sim through this script, writing
     ``folder/<trial ident>.json``."""
-    from protocol.launch.catalog import ARROCH
+    from runtime.launch.catalog import ARROCH
     from services.experiments import trial as trial_module
 
     original = trial_module.service_commands

@@ -1,4 +1,4 @@
-"""Site files: loading and validation, derived geometry, occupancy grid, generator, top-down render.
+"""Site files: loading and validation, derived geometry, occupancy grid (tools: :mod:`runtime.site`).
 
 A site is a TOML file describing the building (rooms, doors, passages, wall landmarks), the
 robots, the objects to deliver and the human (DESIGN §2; the "Site model" section of
@@ -7,7 +7,6 @@ every service agrees on geometry.
 """
 
 from .errors import SiteError
-from .generate import generate_site
 from .grid import OccupancyGrid
 from .load import default_site_path, load_site, loads_site
 from .model import DoorLeaf, HumanSpec, Landmark, ObjectSpec, Opening, Params, RobotSpec, Room, Site, WallSegment
@@ -27,6 +26,5 @@ __all__ = [
     "WallSegment",
     "DoorLeaf",
     "OccupancyGrid",
-    "generate_site",
     "default_site_path",
 ]

@@ -51,5 +51,5 @@ def load_site(path: str | Path | None = None) -> Site:
 
 
 def loads_site(text: str, file: str = "<string>") -> Site:
-    """Load and validate a site from TOML text (e.g. from :func:`protocol.site.generate_site`)."""
+    """Load and validate a site from TOML text (e.g. from :func:`runtime.site.generate.generate_site`)."""
     return build_site(check_document(file, parse_toml(text, file)), file, file)

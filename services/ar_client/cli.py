@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from protocol.runner import add_common_arguments, run_service
+from runtime.runner import add_common_arguments, run_service
 
 log = logging.getLogger("arroch.ar")
 
@@ -55,8 +55,8 @@ def _intrinsics_for(args: argparse.Namespace, image) -> Any:  # noqa: ANN001
 
 
 def _run_service(args: argparse.Namespace) -> int:
-    from protocol.clock import make_clock
-    from protocol.transport import options_from
+    from runtime.clock import make_clock
+    from runtime.transport import options_from
 
     from .project import Intrinsics
     from .service import ArService

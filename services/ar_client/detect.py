@@ -1,7 +1,7 @@
 """AprilTag 36h11 detection: image → tag ids with corners named TL, TR, BR, BL (OpenCV pixel convention).
 
 Two back ends, both returning :class:`TagDetection` with corners already reordered by
-:mod:`protocol.apriltag` (the rest of the client never sees a detector's own corner order):
+:mod:`runtime.apriltag` (the rest of the client never sees a detector's own corner order):
 
 * ``opencv`` (default) — OpenCV's ArUco detector with ``DICT_APRILTAG_36h11``, its corners then
   refined by fitting the tag's four edges (:mod:`refine`).
@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from protocol.apriltag import apriltag_corners, opencv_corners
+from runtime.apriltag import apriltag_corners, opencv_corners
 
 from .refine import Lens, refine_corners
 from .smalltags import decode_quads

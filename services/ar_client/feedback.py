@@ -8,7 +8,7 @@ live constraint ids for "cancel"); tapping the entry's button sends a ``Feedback
 values. The answer — accepted, refused with the restrictor's reason, or no answer — stays on the
 panel's status line.
 
-Sending goes through the restrictor's client contract (``protocol.feedback_client.send_feedback``):
+Sending goes through the restrictor's client contract (``runtime.feedback_client.send_feedback``):
 the Feedback is stamped once and its bytes sent as a query on ``feedback`` (the reply is the
 ``FeedbackAck``), re-sent with the same ``src``/``seq`` until an ack arrives either as the reply or on
 ``feedback/ack/<src>``; the restrictor applies a repeated ``(src, seq)`` once. That call blocks, so a
@@ -29,8 +29,8 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
-from protocol.feedback_client import send_feedback
 from protocol.messages import ConstraintSet, FeedbackAck, LibraryEntry, LibraryParam, Primitive
+from runtime.feedback_client import send_feedback
 
 from .draw import text_width
 
@@ -78,7 +78,7 @@ class Result:
 WAITING = "Feedback: waiting for the restrictor's library"
 
 
-def restrictor_sender(service, timeout: float = 5.0) -> Sender:  # noqa: ANN001 (an open protocol.service.Service)
+def restrictor_sender(service, timeout: float = 5.0) -> Sender:  # noqa: ANN001 (an open runtime.service.Service)
     """A sender that talks to the restrictor through ``service``'s Zenoh session."""
 
     def send(kind: str, params: dict[str, Any]) -> FeedbackAck | None:

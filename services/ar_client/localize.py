@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from protocol.frames import CameraPose, rotation_angle
+from runtime.frames import CameraPose, rotation_angle
 
 from .detect import TagDetection
 from .gravity import GravityPrior, gravity_error, yaw_scan

@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from protocol.frames import CameraPose
 from protocol.messages import Overlay
+from runtime.frames import CameraPose
 
 from .detect import TagDetection, TagDetector, to_gray
 from .draw import draw

@@ -28,7 +28,7 @@ from itertools import pairwise
 import cv2
 import numpy as np
 
-from protocol.frames import CameraPose, rotation_angle
+from runtime.frames import CameraPose, rotation_angle
 
 from .gravity import GravityPrior, gravity_error
 

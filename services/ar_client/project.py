@@ -13,7 +13,7 @@ from itertools import pairwise
 
 import numpy as np
 
-from protocol.frames import CameraPose
+from runtime.frames import CameraPose
 
 #: Default near plane (metres in front of the camera centre).
 NEAR = 0.05

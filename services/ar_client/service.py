@@ -26,11 +26,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from protocol.clock import SimClock, WallClock
-from protocol.feedback_client import newest_constraints, wait_for_library
 from protocol.messages import CameraFrame, ConstraintSet, Overlay
-from protocol.service import Service
-from protocol.transport import ZenohOptions
+from runtime.clock import SimClock, WallClock
+from runtime.feedback_client import newest_constraints, wait_for_library
+from runtime.service import Service
+from runtime.transport import ZenohOptions
 
 from .detect import TagDetector
 from .feedback import FeedbackPanel, restrictor_sender

@@ -106,7 +106,7 @@ def decode_quads(
 
     ``quads`` are (4, 2) pixel corners in any order. The corners returned are refined and in the
     order ArUco reports a detected marker's (the generator's top-left first), so
-    :func:`protocol.apriltag.opencv_corners` names them as for any other OpenCV detection.
+    :func:`runtime.apriltag.opencv_corners` names them as for any other OpenCV detection.
     """
     kept = []
     for q in quads:

@@ -1,7 +1,7 @@
 """Synthetic tablet frames: the site's wall tags rendered at a known camera pose.
 
 Used by the tests and the benchmark as a second source of real pixels beside the simulator's
-snapshots: each visible landmark's official tag image (:func:`protocol.apriltag.tag_image`, with
+snapshots: each visible landmark's official tag image (:func:`runtime.apriltag.tag_image`, with
 its white quiet zone) is warped onto a grey background with ``cv2.warpPerspective`` through the
 homography of its printed corners, on a 3× supersampled canvas averaged down (anti-aliased module
 edges), then blurred slightly and given sensor noise. The true pixel positions of every tag's
@@ -19,8 +19,8 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
-from protocol.apriltag import tag_image
-from protocol.frames import CameraPose
+from runtime.apriltag import tag_image
+from runtime.frames import CameraPose
 
 from .project import Intrinsics, Projector
 from .visibility import Occluders
@@ -146,7 +146,7 @@ def sample_views(
     the tag (so tags are not always centred), rolled a little. Poses outside every room (with
     ``wall_clearance``) or with a wall between camera and tag are drawn again. Deterministic per seed.
     """
-    from protocol.frames import look_at
+    from runtime.frames import look_at
 
     rng = np.random.default_rng(seed)
     occ = Occluders.from_site(site)

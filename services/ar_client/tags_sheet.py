@@ -2,7 +2,7 @@
 
 ``arroch tags sheet --site FILE --out tags.pdf`` writes a multi-page PDF; ``--out DIR/`` or
 ``--out NAME.png`` writes one PNG per page (``NAME_<tag>.png``) at ``--dpi``. Each page shows the
-official tag36h11 image of the landmark (:func:`protocol.apriltag.tag_image`, the same pixels the
+official tag36h11 image of the landmark (:func:`runtime.apriltag.tag_image`, the same pixels the
 simulator renders) with its one-module white border, scaled so the black square measures the
 landmark's ``size``; an "UP" arrow; a 100 mm scale bar to check the printer did not rescale; and the
 landmark's place: room, wall, centre position and height, facing direction.
@@ -21,7 +21,7 @@ matplotlib.use("Agg")  # files only, no display
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.backends.backend_pdf import PdfPages  # noqa: E402
 
-from protocol.apriltag import quad_edge, tag_image  # noqa: E402
+from runtime.apriltag import quad_edge, tag_image  # noqa: E402
 
 A4 = (8.27, 11.69)  # inches
 MARGIN_IN = 0.6

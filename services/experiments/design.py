@@ -10,7 +10,7 @@ The *point* sweeps (``detour``, ``sensitivity``, ``population``) vary instead a 
 the robots' capacity, the door hold, the share of deliveries behind her door, and any of the
 human model's parameters), each trial a point, a method and a repetition (``TrialKey.point``).
 ``detour`` crosses capacities and door shares on the detour buildings
-(:mod:`protocol.site.generate_detour`); ``sensitivity`` runs the samples of a Morris or Sobol
+(:mod:`runtime.site.generate_detour`); ``sensitivity`` runs the samples of a Morris or Sobol
 design (:mod:`.sensitivity`); ``population`` runs one point per simulated person
 (:mod:`.population`). ``domain`` says which buildings: ``paper`` (every delivery through her door,
 ``generate_site``) or ``detour``. ``human`` sets human-model parameters for every trial of any

@@ -8,7 +8,7 @@ exactly one place:
 - ``key``: a trial-key field the sim gets on its command line and trials.csv has a column for
   (the door-opening probability, her mean task length, the interruption cost);
 - ``site``: an option of the site generator (``robot_capacity``, ``door_hold_time``; ``door_share``
-  of :func:`protocol.site.generate_detour.generate_detour_site`);
+  of :func:`runtime.site.generate_detour.generate_detour_site`);
 - ``human``: a field of the sim's human model (``services/sim/human.py``, ``HumanConfig``), written
   to the trial's ``--human-config`` file.
 

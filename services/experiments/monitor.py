@@ -26,7 +26,7 @@ from protocol.codec import decoder_for
 from protocol.errors import ProtocolError
 from protocol.keys import Keys
 from protocol.messages import TeamPlan
-from protocol.transport import ZenohOptions, open_session
+from runtime.transport import ZenohOptions, open_session
 
 from .plan_changes import PlanRecord
 

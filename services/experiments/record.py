@@ -29,7 +29,7 @@ PLAN_FIELDS = (
 KEY_FIELDS = ("method", "robots", "objects", "door_probability", "task_mean", "interruption_cost", "trial")
 
 TRIAL_FIELDS = KEY_FIELDS + (
-    "site_seed",  # protocol.site.generate_site(robots, objects, site_seed)
+    "site_seed",  # runtime.site.generate.generate_site(robots, objects, site_seed)
     "seed",  # the sim's --seed
     "status",  # ok, unfinished, timeout, error
     "reason",

@@ -8,7 +8,7 @@ namespace. How many routers a sweep starts is a speed question only (``--router`
 - ``shared``: one for the whole sweep;
 - ``trial``: a fresh router per trial (the most isolated, and the slowest to start).
 
-The router is started through :class:`protocol.launch.children.Child`, like ``arroch up``
+The router is started through :class:`runtime.launch.children.Child`, like ``arroch up``
 starts it: its own process group, tied to the thread that started it by the parent-death signal.
 """
 
@@ -19,9 +19,9 @@ import logging
 import os
 import time
 
-from protocol.launch.catalog import Launch, router_argv
-from protocol.launch.children import Child, describe_exit, stop_all
-from protocol.transport import free_tcp_port
+from runtime.launch.catalog import Launch, router_argv
+from runtime.launch.children import Child, describe_exit, stop_all
+from runtime.transport import free_tcp_port
 
 from .monitor import RouterMonitor
 

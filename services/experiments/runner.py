@@ -34,7 +34,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from protocol.signals import StopSignals, restore
+from runtime.signals import StopSignals, restore
 
 from .design import SweepSpec, TrialKey
 from .params import varied_paths, write_params
@@ -252,7 +252,7 @@ class Sweep:
             root = logging.getLogger()
             saved_handlers = root.handlers[:]
             root.handlers[:] = [handler]
-        # The handlers only note the signal (protocol.signals): the loop below turns it into a cancel.
+        # The handlers only note the signal (runtime.signals): the loop below turns it into a cancel.
         signals = StopSignals()
         previous = (
             signals.install((signal.SIGINT, signal.SIGTERM, signal.SIGHUP))

@@ -39,10 +39,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from protocol.launch.catalog import RECORDER, RECORDING, SERVICES, Launch, MissionOptions, ServiceSpec, service_argv
-from protocol.launch.children import Child, describe_exit, stop_all
-from protocol.site import generate_site, loads_site
-from protocol.site.generate_detour import generate_detour_site
+from protocol.site import loads_site
+from runtime.launch.catalog import RECORDER, RECORDING, SERVICES, Launch, MissionOptions, ServiceSpec, service_argv
+from runtime.launch.children import Child, describe_exit, stop_all
+from runtime.site.generate import generate_site
+from runtime.site.generate_detour import generate_detour_site
 
 from .design import DEFAULT_DOOR_SHARE, SweepSpec, TrialKey, format_p
 from .factors import split
@@ -331,7 +332,7 @@ class Trial:
 
     def _dump_stacks(self) -> None:
         """Have every service still running print its threads' stacks into the trial's log (each
-        registers SIGUSR1 for that: protocol.runner.setup_logging), so a hang says where it hangs."""
+        registers SIGUSR1 for that: runtime.runner.setup_logging), so a hang says where it hangs."""
         running = [child for child in self.children.values() if child.running()]
         for child in running:
             child.signal(signal.SIGUSR1)

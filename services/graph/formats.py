@@ -160,7 +160,7 @@ def to_markdown(services: Sequence[ServiceNode]) -> str:
         "",
         "## ROS 2 topics",
         "",
-        "Reached through rmw_zenoh (`protocol/ros2`); names as configured.",
+        "Reached through rmw_zenoh (`runtime/ros2`); names as configured.",
         "",
         "| topic | type | " + " | ".join(ROLE_COLUMNS.values()) + " |",
         "|---|---|" + "---|" * len(ROLE_COLUMNS),

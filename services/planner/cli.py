@@ -10,8 +10,8 @@ import argparse
 import json
 import sys
 
-from protocol.runner import add_common_arguments, run_service
-from protocol.transport import options_from
+from runtime.runner import add_common_arguments, run_service
+from runtime.transport import options_from
 
 EXIT_NO_PLAN = 1
 EXIT_CONFIG = 2
@@ -120,8 +120,8 @@ def _settings(args: argparse.Namespace):
 
 
 def _run_service(args: argparse.Namespace) -> int:
-    from protocol.clock import make_clock
     from protocol.site import load_site
+    from runtime.clock import make_clock
 
     from .service import PlannerService
     from .settings import ServiceSettings

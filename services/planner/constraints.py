@@ -10,7 +10,7 @@ diagnostic - all without grounding the program again.
 Text from the wire is untrusted: it must pass the restrictor's vocabulary check (no directives
 such as ``#script``/``#include``, only rules and weak constraints, only vocabulary predicates).
 A constraint that fails it is left out and reported, never added. That check and clingo's parse are
-one pass (:func:`protocol.asp_vocabulary.read_program`).
+one pass (:func:`runtime.asp_check.read_program`).
 
 What the planner needs to know of a constraint besides its rules (the rooms whose stays it
 watches, the integers where a wait may end, the windows the validator checks) it reads from the
@@ -29,8 +29,9 @@ import clingo
 import clingo.ast as ast
 
 from protocol.asp_terms import ConstraintTerms, InterpretedFact
-from protocol.asp_vocabulary import UnsafeProgram, read_program
+from protocol.asp_vocabulary import UnsafeProgram
 from protocol.messages import ConstraintSet
+from runtime.asp_check import read_program
 
 GUARD = "cactive"
 

@@ -1,4 +1,4 @@
-"""The planner's side of the lockstep handshake (:mod:`protocol.lockstep`, the rules; the
+"""The planner's side of the lockstep handshake (:mod:`runtime.lockstep`, the rules; the
 simulator holds its ``LockstepGate``), with the wall-time recovery from lost messages.
 
 In lockstep the simulator publishes everything of a world version (statuses, events, door states)
@@ -22,8 +22,8 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from protocol import lockstep
 from protocol.messages import Clock, TeamPlan
+from runtime import lockstep
 
 REPEAT_AFTER = 2.0  # wall s the simulator may stay paused at a version the plan answers before the plan is sent again
 STALL_REPORT = 10.0  # wall s of a stall before the planner says what it holds (the sim warns then too)
@@ -79,12 +79,12 @@ class LockstepFollower:
 
     def version_complete(self, world_version: int, constraints_version: int) -> bool:
         """Whether everything the plan for ``world_version`` must answer is in
-        (:func:`protocol.lockstep.version_complete`; ``constraints_version`` is the one held here)."""
+        (:func:`runtime.lockstep.version_complete`; ``constraints_version`` is the one held here)."""
         return lockstep.version_complete(self.clock, world_version, constraints_version)
 
     def plan_awaited(self, world_version: int, constraints_version: int, sent: TeamPlan | None) -> bool:
         """Whether the simulator waits for a plan newer than ``sent`` and the news it waits on is in
-        (:func:`protocol.lockstep.plan_awaited`)."""
+        (:func:`runtime.lockstep.plan_awaited`)."""
         return lockstep.plan_awaited(self.clock, world_version, constraints_version, sent)
 
     def repeat_due(self, sent: TeamPlan | None, now: float) -> Repeat | None:

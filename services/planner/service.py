@@ -9,7 +9,7 @@ call for a plan; the :class:`~.scheduler.ReplanScheduler` (one replan for a burs
 :class:`~.world_cache.WorldCache`; the :class:`~.lockstep.LockstepFollower` (when a lockstep
 simulator has all of a version and waits for a plan: planning only then makes a lockstep mission the
 same on a busy machine as on an idle one; and what to do when it waits for one not being made; the
-rules are :mod:`protocol.lockstep`);
+rules are :mod:`runtime.lockstep`);
 :class:`~.readiness.Readiness` (enough known to plan after a (re)start); :func:`~.continuation.continued`
 (the plan being executed kept when the news calls for no solve). Every world version is answered
 with a TeamPlan, even if nothing changed. Replanning starts from the plan being executed (IIDP warm
@@ -22,13 +22,13 @@ from __future__ import annotations
 
 import time
 
-from protocol.clock import SimClock, WallClock
 from protocol.events import RobotOutcome
-from protocol.lockstep import in_lockstep
 from protocol.messages import Clock, ConstraintSet, DoorState, Event, RobotPose, RobotStatus
-from protocol.service import Service
 from protocol.site import Site
-from protocol.transport import ZenohOptions
+from runtime.clock import SimClock, WallClock
+from runtime.lockstep import in_lockstep
+from runtime.service import Service
+from runtime.transport import ZenohOptions
 
 from .constraints import ConstraintProgram, from_constraint_set
 from .continuation import continued

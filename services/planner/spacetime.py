@@ -22,7 +22,7 @@ a head-on in a passage with nowhere to wait), the plain timing is returned and m
 the simulator's right of way (services/sim/right_of_way.py) is then the last line of defence.
 
 A wait becomes two rows at the same point (the second one later): a *hold*, which the robots'
-controller (protocol/pursuit.py) keeps - it does not leave that point before the hold's time.
+controller (runtime/pursuit.py) keeps - it does not leave that point before the hold's time.
 """
 
 from __future__ import annotations

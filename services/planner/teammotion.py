@@ -22,7 +22,7 @@ from collections import Counter
 from dataclasses import dataclass, field, replace
 from itertools import pairwise
 
-from protocol.plane import segment_distance
+from runtime.plane import segment_distance
 
 from .key_points import BESIDE_MARGIN
 from .motion import MotionPlanner, NoPath, Point

@@ -9,8 +9,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from protocol.runner import add_common_arguments, namespace_from, run_service, zenoh_options
-from protocol.transport import NoRouter, through_local_router
+from runtime.runner import add_common_arguments, namespace_from, run_service, zenoh_options
+from runtime.transport import NoRouter, through_local_router
 
 from .rosbag import DEFAULT_DISTRO, DISTROS
 
@@ -45,9 +45,9 @@ def _checked_options(args: argparse.Namespace):
 
 
 def _build_recorder(args: argparse.Namespace, *, serve: tuple[str, int] | None):
-    from protocol.clock import make_clock
     from protocol.keys import Keys
     from protocol.site import load_site
+    from runtime.clock import make_clock
 
     from .profile import FoxgloveProfile
     from .service import Recorder

@@ -2,7 +2,7 @@
 
 Lines look like ``[planner] 2026-01-01 12:00:00,000 INFO    arroch.planner: plan 3 ...`` (a child's
 log record) or ``[sim] anything`` (other output). A line cut short by the writer waits for its end.
-Secrets in a line (the tablet page's token, keys: :mod:`protocol.redact`) are redacted here, before
+Secrets in a line (the tablet page's token, keys: :mod:`runtime.redact`) are redacted here, before
 the line can reach a recording.
 """
 
@@ -12,7 +12,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from protocol.redact import Redactor
+from runtime.redact import Redactor
 
 _LINE = re.compile(
     r"^\[(?P<name>[^\]]{1,64})\] (?:\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d+ (?P<level>[A-Z]+)\s+)?(?P<text>.*)$"

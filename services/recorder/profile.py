@@ -32,8 +32,8 @@ from protocol.messages import (
     RobotPose,
     RobotStatus,
 )
-from protocol.palette import unlisted_robot_color
 from protocol.site import Site
+from runtime.palette import unlisted_robot_color
 
 from . import convert, topics
 from .images import scale_frame, scale_overlay

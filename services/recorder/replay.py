@@ -33,9 +33,9 @@ import msgspec
 
 from protocol.codec import encode
 from protocol.messages import CameraFrame, Clock, DoorState, Intent, Message, Overlay, RobotCommand
-from protocol.runner import add_common_arguments, zenoh_options
-from protocol.service import Service
-from protocol.transport import NoRouter, ZenohOptions, through_local_router
+from runtime.runner import add_common_arguments, zenoh_options
+from runtime.service import Service
+from runtime.transport import NoRouter, ZenohOptions, through_local_router
 
 from .reading import Recorded, RecordingError, messages, metadata
 from .service import without_shared_memory

@@ -4,7 +4,7 @@ play`` and RViz 2 take as they are. The same code converts a recorded ``run.mcap
 (``arroch runs export RUN --ros2 OUT``, :mod:`.export`).
 
 Topics, frames and marker namespaces are those of ``arroch ros2 bridge`` (its default
-``--ros-namespace /arroch``; :mod:`protocol.ros2.markers`), so an RViz 2 set-up for the live bridge
+``--ros-namespace /arroch``; :mod:`runtime.ros2.markers`), so an RViz 2 set-up for the live bridge
 shows a bag too:
 
 | topic | type |
@@ -43,9 +43,9 @@ from protocol.messages import (
     RobotPose,
     RobotStatus,
 )
-from protocol.ros2 import types as ros
-from protocol.ros2.markers import MAP_FRAME, SiteState, robot_frame, site_markers
 from protocol.site import Site
+from runtime.ros2 import types as ros
+from runtime.ros2.markers import MAP_FRAME, SiteState, robot_frame, site_markers
 
 from . import convert
 from .logtail import LogLine

@@ -15,7 +15,7 @@ from rosbag2's own sources (``ros2/rosbag2``, branches ``humble`` and ``jazzy``)
   ``offered_qos_profiles``, and in Jazzy ``topic_type_hash``.
 
 Schemas are ``ros2msg`` definitions from the distribution's ``rosbags`` type store; the CDR bytes are
-``protocol.ros2.types``' (the messages written here have the same fields in Humble and Jazzy, which a
+``runtime.ros2.types``' (the messages written here have the same fields in Humble and Jazzy, which a
 test checks by reading a Humble bag back with Humble's definitions). The storage file is
 ``<folder>/<folder name>_0.mcap``, as ``ros2 bag record`` names it.
 """
@@ -36,7 +36,7 @@ from rosbags.rosbag2.metadata import dump_qos_v8, dump_qos_v9
 from rosbags.typesys import Stores, get_typestore
 from ruamel.yaml import YAML
 
-from protocol.ros2 import types as ros
+from runtime.ros2 import types as ros
 
 
 @dataclass(frozen=True)
@@ -101,7 +101,7 @@ class _Topic:
 
 
 class BagWriter:
-    """Write messages (``protocol.ros2.types`` objects) to a new rosbag2 folder; ``close()`` finishes it."""
+    """Write messages (``runtime.ros2.types`` objects) to a new rosbag2 folder; ``close()`` finishes it."""
 
     def __init__(self, folder: Path, distro: Distro, custom_data: dict[str, str] | None = None) -> None:
         if folder.exists():

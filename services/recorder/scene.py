@@ -1,7 +1,7 @@
 """The site as a 3D scene: walls, door leaves in their live state, rooms, tag landmarks, objects and
 robot bodies, described once (:class:`Entity` of :class:`Shape`) and drawn as Foxglove
 ``SceneUpdate`` entities. (ROS 2 bags draw the site with the bridge's markers instead,
-:mod:`protocol.ros2.markers`, so a bag and the live bridge look the same in RViz 2.)
+:mod:`runtime.ros2.markers`, so a bag and the live bridge look the same in RViz 2.)
 
 The scene is sent whole once, then only the entities that change: a door opening or closing, an
 object loaded (it then rides in its robot's frame) or delivered (left where the robot stood).
@@ -25,8 +25,8 @@ from foxglove.messages import (
     Vector3,
 )
 
-from protocol.palette import robot_colors
 from protocol.site import Site
+from runtime.palette import robot_colors
 
 from .topics import MAP_FRAME, robot_frame
 

@@ -18,12 +18,12 @@ from typing import Protocol
 
 import zenoh
 
-from protocol.clock import SimClock, WallClock
 from protocol.codec import decoder_for
 from protocol.errors import ProtocolError
 from protocol.messages import Message
-from protocol.service import Service
-from protocol.transport import ZenohOptions, on_zenoh_thread
+from runtime.clock import SimClock, WallClock
+from runtime.service import Service
+from runtime.transport import ZenohOptions, on_zenoh_thread
 
 from .logtail import LogFollower, LogLine
 from .timebase import Timebase

@@ -15,7 +15,7 @@ from typing import Any
 
 from protocol.events import FeedbackSent, MissionDone, data_to_wire
 from protocol.messages import DoorState, Event, Feedback, RobotStatus
-from protocol.palette import robot_colors
+from runtime.palette import robot_colors
 
 from .reading import messages
 

@@ -5,7 +5,7 @@ Every ARROCH message is kept twice over, for two readers: as JSON (with its type
 as, in the file's wire store (:mod:`.wire`), what ``arroch replay`` publishes again. Beside these,
 the viewer channels (Foxglove schemas) show the run; their topics are the constants below.
 
-Frames are those of ``arroch ros2 bridge`` (:mod:`protocol.ros2.markers`): ``map``, each robot's
+Frames are those of ``arroch ros2 bridge`` (:mod:`runtime.ros2.markers`): ``map``, each robot's
 ``<rid>/base_link``, and the tablet camera's ``<cid>/camera_optical_frame`` (OpenCV axes, REP 103's
 optical frame), so a Foxglove recording, a ROS 2 bag and the live bridge line up.
 """
@@ -15,8 +15,8 @@ from __future__ import annotations
 from protocol.graph import RECORDED
 from protocol.keys import Keys
 from protocol.messages import Message
-from protocol.ros2.markers import MAP_FRAME, robot_frame
 from protocol.site import Site
+from runtime.ros2.markers import MAP_FRAME, robot_frame
 
 __all__ = ["MAP_FRAME", "robot_frame"]
 

@@ -12,6 +12,6 @@ Modules, one responsibility each:
 
 What other services share with it lives in ``protocol/``: the ASP vocabulary and its check
 (:mod:`protocol.asp_vocabulary`), the client side of feedback and of the live set
-(:mod:`protocol.feedback_client`) and the library as it is served (:mod:`protocol.constraint_library`).
+(:mod:`runtime.feedback_client`) and the library as it is served (:mod:`protocol.constraint_library`).
 No other service imports this package.
 """

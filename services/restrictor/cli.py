@@ -13,13 +13,13 @@ import os
 import sys
 from typing import Any
 
-from protocol.clock import make_clock
 from protocol.constraint_library import entries_to_wire
 from protocol.messages import Constraint, ConstraintSet, FeedbackAck
-from protocol.runner import add_common_arguments, run_service
 from protocol.schema import record_to_wire
-from protocol.service import Service
-from protocol.transport import options_from
+from runtime.clock import make_clock
+from runtime.runner import add_common_arguments, run_service
+from runtime.service import Service
+from runtime.transport import options_from
 
 from .library import CONSTRAINT, INT, Library, library_for_site, load_library
 
@@ -131,7 +131,7 @@ def _typed(param_type: str, text: str) -> int | str:
 
 
 def _feedback_send(args: argparse.Namespace) -> int:
-    from protocol.feedback_client import send_feedback
+    from runtime.feedback_client import send_feedback
 
     parser: argparse.ArgumentParser = args.parser
     if not args.kind:
@@ -193,7 +193,7 @@ def _print_ack(ack: FeedbackAck, as_json: bool) -> None:
 
 
 def _constraints_show(args: argparse.Namespace) -> int:
-    from protocol.feedback_client import fetch_constraints
+    from runtime.feedback_client import fetch_constraints
 
     try:
         namespace = args.namespace or _load_site(args.site).name

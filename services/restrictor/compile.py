@@ -1,7 +1,7 @@
 """Templates → ASP: a validated choice and the time "now" become one constraint's ASP and window.
 
 Only :class:`validate.Validated` values reach a template, and the result is checked again with
-:func:`protocol.asp_vocabulary.read_program` (defence in depth: a library template was checked at load with
+:func:`runtime.asp_check.read_program` (defence in depth: a library template was checked at load with
 sample values, this checks the real text), which also gives what the text states as fields
 (:class:`protocol.asp_terms.ConstraintTerms`). No client text is ever substituted.
 
@@ -22,7 +22,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from protocol.asp_terms import ConstraintTerms
-from protocol.asp_vocabulary import ASP_INT_MAX, ASP_INT_MIN, UnsafeProgram, read_program
+from protocol.asp_vocabulary import ASP_INT_MAX, ASP_INT_MIN, UnsafeProgram
+from runtime.asp_check import read_program
 
 from .library import ADD, INT, Library, SiteLike
 from .validate import Refusal, Validated, validate

@@ -5,7 +5,7 @@ The library is a TOML file (the packaged ``library.toml``, or a site-specific on
 message names the file, the entry and the field, e.g.
 ``lab.toml: entry[1] (id "forbid_room"): params[1] (name "minutes"): min 5 is above max 3``.
 Templates are checked at load time too: their placeholders must be parameters (or ``t0``/``t1``),
-and a rendering with sample values must pass :func:`protocol.asp_vocabulary.check_program`, so a library that
+and a rendering with sample values must pass :func:`runtime.asp_check.check_program`, so a library that
 loads can only ever produce ASP over the shared vocabulary.
 
 :func:`library_for_site` gives the library with the site's choices filled in: what the running
@@ -27,7 +27,7 @@ from typing import Annotated, Any, Literal, Protocol
 import msgspec
 from msgspec import Meta, Struct
 
-from protocol.asp_vocabulary import ASP_INT_MAX, ASP_INT_MIN, UnsafeProgram, check_program, is_asp_constant
+from protocol.asp_vocabulary import ASP_INT_MAX, ASP_INT_MIN, UnsafeProgram, is_asp_constant
 
 # The limits of a library as the wire carries it: a file the restrictor loads must fit in one.
 from protocol.constraint_library import (
@@ -42,6 +42,7 @@ from protocol.constraint_library import (
 from protocol.errors import ProtocolError
 from protocol.schema import Says
 from protocol.validation import Words, field_error
+from runtime.asp_check import check_program
 
 PACKAGED = "<packaged library>"
 

@@ -14,10 +14,10 @@ I/O (keys under ``arroch/<namespace>/``):
   of the AR client and the tablet page are built from this answer;
 - drops expired constraints (window end reached on the site clock) and publishes the new version.
 
-In a lockstep mission (the restrictor's part of the handshake, :mod:`protocol.lockstep`) the
+In a lockstep mission (the restrictor's part of the handshake, :mod:`runtime.lockstep`) the
 restrictor's clock lags the simulator's by however many clock messages are still on their way, which
 depends on the machine's load. So there a feedback's window starts at the feedback's own stamp
-(:func:`~protocol.lockstep.feedback_time`), and constraints expire only when feedback is handled,
+(:func:`~runtime.lockstep.feedback_time`), and constraints expire only when feedback is handled,
 never on a timer: a ConstraintSet published between two world versions would reach the planner at a
 moment of the machine's choosing, and the same seed would not give the same mission.
 
@@ -39,14 +39,14 @@ from pathlib import Path
 
 import zenoh
 
-from protocol.clock import SimClock, WallClock
 from protocol.codec import ENCODING, decode, encode
 from protocol.constraint_library import encode_library
 from protocol.errors import ProtocolError
-from protocol.lockstep import expires_on_timer, feedback_time, in_lockstep
 from protocol.messages import ConstraintSet, Feedback, FeedbackAck
-from protocol.service import Service
-from protocol.transport import ZenohOptions
+from runtime.clock import SimClock, WallClock
+from runtime.lockstep import expires_on_timer, feedback_time, in_lockstep
+from runtime.service import Service
+from runtime.transport import ZenohOptions
 
 from .active import DEFAULT_MAX_ACTIVE, ActiveSet, Outcome
 from .library import Library, SiteLike, library_for_site

@@ -23,10 +23,11 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from protocol.asp_vocabulary import UnsafeProgram, read_program
+from protocol.asp_vocabulary import UnsafeProgram
 from protocol.errors import ProtocolError
 from protocol.messages import Constraint
 from protocol.schema import record_from_wire, record_to_wire
+from runtime.asp_check import read_program
 
 SCHEMA = 1
 MAX_ACKS = 10_000

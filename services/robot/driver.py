@@ -2,14 +2,14 @@
 
 The driver gets the robot's pose (map frame) as often as the robot reports it and answers each one
 with the velocity to send, ``(v, omega)``. It follows a command's trajectory with the simulator's
-pure-pursuit controller (:mod:`protocol.pursuit`), one control period per pose, so a robot driven
+pure-pursuit controller (:mod:`runtime.pursuit`), one control period per pose, so a robot driven
 through ROS 2 makes the moves a simulated one makes. Phases, as in the simulator: *drive*, then
 *wait for the door* (``opendoor``) or *dwell* (``load``/``unload``), then done.
 
 It commands zero velocity whenever the robot must not move: no command or the command is over,
 a command it refused, a closed door ahead (it holds ``radius + stop_margin`` short of the leaf's
 line, ``waiting_at_door``), a hold in the trajectory not over yet (the planner making it give way
-to another robot, :meth:`protocol.pursuit.Path.hold_limit`), and whenever the service tells it to
+to another robot, :meth:`runtime.pursuit.Path.hold_limit`), and whenever the service tells it to
 hold (stale pose, planner lost, shutting down).
 """
 
@@ -21,10 +21,10 @@ from dataclasses import dataclass
 
 from msgspec.structs import replace
 
-from protocol.execution import REACH, START_TOLERANCE, command_problem, dwell_problem
 from protocol.messages import RobotCommand, RobotStatus
-from protocol.pursuit import ControllerConfig, Path, PurePursuit, crossing_behind, path_crossings
 from protocol.site.model import Site
+from runtime.execution import REACH, START_TOLERANCE, command_problem, dwell_problem
+from runtime.pursuit import ControllerConfig, Path, PurePursuit, crossing_behind, path_crossings
 
 
 @dataclass(frozen=True)

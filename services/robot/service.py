@@ -7,7 +7,7 @@ ROS 2 side: the robot's pose in (``nav_msgs/Odometry`` in the odom frame, moved 
 by a fixed map→odom transform or one from ``tf``; or ``geometry_msgs/PoseWithCovarianceStamped`` in
 the map frame, possibly transient-local and sparse, with odometry carrying the pose between two of
 them); ``geometry_msgs/Twist`` or ``TwistStamped`` out on its ``cmd_vel``, one per pose received;
-``sensor_msgs/LaserScan`` in (the safety field, :mod:`protocol.safety_field`), when configured.
+``sensor_msgs/LaserScan`` in (the safety field, :mod:`runtime.safety_field`), when configured.
 
 Safety: zero velocity goes out when the command ends or is refused, at a closed door, when no pose
 came for ``pose_timeout`` site seconds (checked every 20 ms of wall time), when the scan is stale
@@ -29,16 +29,16 @@ import numpy as np
 import zenoh
 
 from protocol.messages import DoorState, RobotCommand, RobotPose
-from protocol.plane import wrap
-from protocol.pursuit import ControllerConfig
-from protocol.ros2 import types as ros
-from protocol.ros2.config import RobotLink
-from protocol.ros2.keys import TopicNaming
-from protocol.ros2.node import RosNode
-from protocol.safety_field import FieldConfig, Verdict, limit, scan_points
-from protocol.service import Service
 from protocol.site.model import Site
-from protocol.transport import ZenohOptions
+from runtime.plane import wrap
+from runtime.pursuit import ControllerConfig
+from runtime.ros2 import types as ros
+from runtime.ros2.config import RobotLink
+from runtime.ros2.keys import TopicNaming
+from runtime.ros2.node import RosNode
+from runtime.safety_field import FieldConfig, Verdict, limit, scan_points
+from runtime.service import Service
+from runtime.transport import ZenohOptions
 
 from .driver import Driver, DriverConfig
 

@@ -30,13 +30,13 @@ from typing import Any
 
 from protocol.events import Delivered
 from protocol.messages import DoorState, Event, Intent, RobotPose, RobotStatus
-from protocol.ros2 import types as ros
-from protocol.ros2.keys import TopicNaming
-from protocol.ros2.markers import SiteState, robot_frame, site_markers
-from protocol.ros2.node import RosNode
-from protocol.service import Service
 from protocol.site.model import Site
-from protocol.transport import ZenohOptions
+from runtime.ros2 import types as ros
+from runtime.ros2.keys import TopicNaming
+from runtime.ros2.markers import SiteState, robot_frame, site_markers
+from runtime.ros2.node import RosNode
+from runtime.service import Service
+from runtime.transport import ZenohOptions
 
 MARKER_PERIOD = 1.0  # wall s between republications of the site markers
 FEEDBACK_TIMEOUT = 5.0  # s to wait for the restrictor's ack
@@ -158,7 +158,7 @@ class BridgeService(Service):
 
     def _send_feedback(self) -> None:
         # Blocking queries (the restrictor's client helper), so on a thread of their own.
-        from protocol.feedback_client import send_feedback
+        from runtime.feedback_client import send_feedback
 
         while True:
             request = self._feedback.get()

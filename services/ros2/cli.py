@@ -8,8 +8,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from protocol.ros2.config import add_ros2_link_arguments, ros2_config_from
-from protocol.runner import add_common_arguments, run_service
+from runtime.ros2.config import add_ros2_link_arguments, ros2_config_from
+from runtime.runner import add_common_arguments, run_service
 
 
 def register(subparsers: Any) -> None:
@@ -43,11 +43,11 @@ def register(subparsers: Any) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     def build() -> Any:
-        from protocol.clock import make_clock
-        from protocol.ros2.config import check_doors
-        from protocol.ros2.keys import full_topic
         from protocol.site import load_site
-        from protocol.transport import options_from
+        from runtime.clock import make_clock
+        from runtime.ros2.config import check_doors
+        from runtime.ros2.keys import full_topic
+        from runtime.transport import options_from
 
         from .bridge import BridgeService
 

@@ -35,10 +35,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from protocol.plane import wrap
-from protocol.pursuit import ControllerConfig, Path, Step, integrate
 from protocol.site.grid import OccupancyGrid
 from protocol.site.model import Room, Site
+from runtime.plane import wrap
+from runtime.pursuit import ControllerConfig, Path, Step, integrate
 
 from .right_of_way import Body
 

@@ -28,8 +28,8 @@ from functools import cached_property
 import cv2
 import numpy as np
 
-from protocol.frames import camera_from_yaw_pitch, gravity_in_camera, quat_from_matrix
 from protocol.messages import CameraFrame, CameraTruth
+from runtime.frames import camera_from_yaw_pitch, gravity_in_camera, quat_from_matrix
 
 #: Near and far clipping planes of the rendering (m). Near is small so a tablet held close to a
 #: wall still sees it; far covers any site this project generates. Depth precision is no issue:

@@ -15,9 +15,9 @@ import argparse
 import re
 from typing import Any
 
-from protocol.runner import add_common_arguments, run_service
 from protocol.schema import ID_REGEX
-from protocol.transport import options_from
+from runtime.runner import add_common_arguments, run_service
+from runtime.transport import options_from
 
 from .human import FOCUS_READINGS, METHODS, HumanConfig
 from .pacing import MODES
@@ -86,7 +86,7 @@ def register(subparsers: Any) -> None:
         help="each robot is a simulated ROS 2 mobile base: Twist on cmd_vel in, "
         "Odometry out; `arroch robot --ros2` drives it",
     )
-    from protocol.ros2.config import add_ros2_link_arguments
+    from runtime.ros2.config import add_ros2_link_arguments
 
     add_ros2_link_arguments(real)
     study = parser.add_argument_group("study: a participant in place of the simulated human, real doors")
@@ -187,7 +187,7 @@ def build_options(args: argparse.Namespace) -> Any:
         raise ValueError("--trial: at most 64 characters (a ParticipantAction's trial)")
     ros2_bases = None
     if args.ros2_bases:
-        from protocol.ros2.config import ros2_config_from
+        from runtime.ros2.config import ros2_config_from
 
         if args.robots == "none":
             raise ValueError("--ros2-bases simulates the robots' bases: it cannot go with --robots none")

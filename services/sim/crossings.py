@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from protocol.plane import segment_distance
+from runtime.plane import segment_distance
 
 from .doors import Doors
 from .robots import Robot

@@ -30,8 +30,8 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from protocol.plane import Point, segment_distance
 from protocol.site.model import DoorLeaf, Opening
+from runtime.plane import Point, segment_distance
 
 
 @dataclass(frozen=True)

@@ -44,8 +44,8 @@ from protocol.events import (
     data_to_wire,
 )
 from protocol.messages import RobotCommand, TeamPlan
-from protocol.pursuit import ControllerConfig
 from protocol.site.model import Site
+from runtime.pursuit import ControllerConfig
 
 from .crossings import ClosedDoorWatch
 from .doors import DoorChange, DoorConfig, Doors

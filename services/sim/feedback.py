@@ -1,6 +1,6 @@
 """Sending the simulated human's feedback to the restrictor and waiting for its acknowledgement.
 
-The sending itself is the restrictor's client helper (:func:`protocol.feedback_client.send_feedback`):
+The sending itself is the restrictor's client helper (:func:`runtime.feedback_client.send_feedback`):
 the Feedback goes out as a query on ``feedback``, and an ack published on ``feedback/ack/<src>``
 counts too. An attempt with no ack within ``timeout`` wall seconds is repeated, ``retries`` times.
 That blocks, so it runs on one background thread here; answers come back through :meth:`answers`,
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from protocol.messages import FeedbackAck
-from protocol.service import Service
+from runtime.service import Service
 
 log = logging.getLogger("arroch.sim.feedback")
 
@@ -66,7 +66,7 @@ class FeedbackSender:
         self._thread.join(0.5)
 
     def _run(self) -> None:
-        from protocol.feedback_client import send_feedback
+        from runtime.feedback_client import send_feedback
 
         while not self._stop.is_set():
             item = self._todo.get()

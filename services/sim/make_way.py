@@ -37,7 +37,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from itertools import pairwise
 
-from protocol.pursuit import Path
+from runtime.pursuit import Path
 
 from .right_of_way import Body
 

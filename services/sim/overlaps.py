@@ -17,8 +17,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from protocol.plane import segment_distance
 from protocol.site.model import Site
+from runtime.plane import segment_distance
 
 if TYPE_CHECKING:  # for type hints only: .walls, which the executor (.robots) imports, imports this
     from .robots import Robot

@@ -5,7 +5,7 @@
   than ``max_lag`` behind (a slow machine, a stall) it drops the backlog instead of sprinting to
   catch up, so time never jumps and the lag is reported.
 - ``lockstep``: sim time advances only while the gate of the lockstep handshake is open
-  (:class:`protocol.lockstep.LockstepGate`: the latest TeamPlan answers the current
+  (:class:`runtime.lockstep.LockstepGate`: the latest TeamPlan answers the current
   ``world_version`` and the ``constraints_version`` an accepted feedback produced, the commands it
   starts with have arrived, no feedback of the human awaits its ack). Time then runs as fast as the
   machine allows, or at most ``rate`` times real time (a :class:`WallPacer` caps it).

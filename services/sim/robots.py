@@ -31,11 +31,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from protocol.events import ActionDone, ActionFailed, Delivered, Loaded, RobotOutcome, WaitingAtDoor
-from protocol.execution import REACH, START_TOLERANCE, command_problem, dwell_problem
 from protocol.messages import RobotCommand
-from protocol.plane import segment_distance
-from protocol.pursuit import ControllerConfig, Path, PurePursuit, Step, crossing_behind, path_crossings
 from protocol.site.model import Site
+from runtime.execution import REACH, START_TOLERANCE, command_problem, dwell_problem
+from runtime.plane import segment_distance
+from runtime.pursuit import ControllerConfig, Path, PurePursuit, Step, crossing_behind, path_crossings
 
 from .avoidance import Avoidance
 from .doors import Doors

@@ -31,11 +31,11 @@ from typing import Any
 
 from protocol.events import ActionDone, ActionFailed, Delivered, Loaded, RobotOutcome, WaitingAtDoor
 from protocol.messages import RobotCommand, RobotPose, RobotStatus
-from protocol.plane import wrap
-from protocol.pursuit import Path, integrate, path_crossings
-from protocol.ros2 import types as ros
-from protocol.ros2.config import Ros2Config
-from protocol.ros2.node import RosNode, RosPublisher
+from runtime.plane import wrap
+from runtime.pursuit import Path, integrate, path_crossings
+from runtime.ros2 import types as ros
+from runtime.ros2.config import Ros2Config
+from runtime.ros2.node import RosNode, RosPublisher
 
 from .human import HUMAN_RADIUS
 from .robots import Outcome, Robot

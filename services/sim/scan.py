@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from protocol.plane import wrap
 from protocol.site.model import Site
+from runtime.plane import wrap
 
 from .doors import Doors
 

@@ -16,7 +16,7 @@ pacer starts counting again from the paused instant, so site time goes on from t
 ``abort`` ends the mission at once (``mission_done``, ``completed`` false, ``reason`` "aborted by the
 experimenter: ..."); with ``--until-done`` the process then exits with :data:`EXIT_STUDY_ABORTED`.
 
-Lockstep: time advances only while the handshake of :mod:`protocol.lockstep` allows it (this
+Lockstep: time advances only while the handshake of :mod:`runtime.lockstep` allows it (this
 process holds its gate, ``self.gate``; a held camera frame and real robots' drivers wait besides).
 
 Order of publication after a tick that changed the world: poses, then statuses and door states,
@@ -58,7 +58,6 @@ from typing import IO, Any
 import zenoh
 
 from protocol.keys import chunk_at
-from protocol.lockstep import OPEN, LockstepGate, Wait, simulator_waits
 from protocol.messages import (
     Clock,
     DoorState,
@@ -72,9 +71,10 @@ from protocol.messages import (
     StudyControl,
     TeamPlan,
 )
-from protocol.service import Service
 from protocol.site.model import Site
-from protocol.transport import ZenohOptions
+from runtime.lockstep import OPEN, LockstepGate, Wait, simulator_waits
+from runtime.service import Service
+from runtime.transport import ZenohOptions
 
 from .camfeed import MAX_MISSED
 from .engine import Engine, EngineConfig, FeedbackRequest, SimEvent
@@ -114,7 +114,7 @@ class SimOptions:
         FEEDBACK_ABORT  # lockstep: wall s to wait for an answer (feedback ack) before failing the run
     )
     robots: str = "sim"  # "none": every robot is real, executed by its own driver (services/sim/ros2_base.py)
-    ros2_bases: Any = None  # a protocol.ros2.config.Ros2Config: every robot is a simulated ROS 2 base
+    ros2_bases: Any = None  # a runtime.ros2.config.Ros2Config: every robot is a simulated ROS 2 base
     human_mode: str = "simulated"  # "participant": a person on her tablet page plays the human
     doors: str = "sim"  # "sensor": the human-operated doors are real and follow door/<did>/sensor
     participant: str = ""  # take acts of this participant only ("" any)
@@ -567,7 +567,7 @@ class SimService(Service):
 
     def _waits_for(self) -> Wait:
         """In lockstep, what time waits for (the Clock's ``awaiting``) and why, in words
-        (:func:`protocol.lockstep.simulator_waits`); ``OPEN`` when it may advance."""
+        (:func:`runtime.lockstep.simulator_waits`); ``OPEN`` when it may advance."""
         if self.options.mode != "lockstep":
             return OPEN
         gate = self.gate.waits_for(

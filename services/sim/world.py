@@ -15,12 +15,12 @@ Content, all built from the :class:`~protocol.site.Site`:
   about its hinge from ``closed_yaw`` (fraction 0) to ``open_yaw`` (fraction 1); human-operated
   doors have their own colour;
 * each landmark as a one-sided textured quad carrying the official upright tag36h11 image
-  (:func:`protocol.apriltag.tag_image`) with a white quiet zone, its black square exactly
+  (:func:`runtime.apriltag.tag_image`) with a white quiet zone, its black square exactly
   ``size`` and centred on the landmark position, facing its yaw. Textures go on a mesh quad, not a
   box: a box shows a quarter of the texture per face (NOTES.md);
 * objects (0.2 m cubes in a darker shade of their robot's colour; a carried one rides on its
   robot's top), robots (cylinders of ``robot_radius`` with a heading bar on top and a bumper at
-  the front, colours from :mod:`protocol.palette`) and the human (a figure holding a tablet, at her
+  the front, colours from :mod:`runtime.palette`) and the human (a figure holding a tablet, at her
   desk facing her door until told otherwise).
 
 Names: walls are ``wall:<index in site.walls>``, lintels ``lintel:<opening id>``, door leaves
@@ -41,10 +41,10 @@ import numpy as np
 import pybullet
 from pybullet_utils.bullet_client import BulletClient
 
-from protocol.apriltag import quad_edge, tag_image
-from protocol.palette import robot_colors
 from protocol.site import Site
 from protocol.site.model import Landmark
+from runtime.apriltag import quad_edge, tag_image
+from runtime.palette import robot_colors
 
 from .camera import CameraSpec
 from .human import HUMAN_RADIUS

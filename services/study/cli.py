@@ -41,7 +41,7 @@ def register(subparsers: Any) -> None:
         epilog="Examples:" + __doc__.split("Examples:", 1)[1],
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    from protocol.runner import add_common_arguments
+    from runtime.runner import add_common_arguments
 
     sub = parser.add_subparsers(dest="study_command", metavar="SUBCOMMAND", required=True)
     for name, (module_name, summary) in SUBCOMMANDS.items():

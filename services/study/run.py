@@ -37,10 +37,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-from protocol.clock import make_clock
 from protocol.keys import Keys
-from protocol.runner import LOG_FORMAT
-from protocol.transport import ZenohOptions, options_from
+from runtime.clock import make_clock
+from runtime.runner import LOG_FORMAT
+from runtime.transport import ZenohOptions, options_from
 
 from .console import Console
 from .layout import CONDITION_METHOD, PlannedParticipant, StudyError, StudyFolder, StudyPlan
@@ -424,7 +424,7 @@ def _num(value: Any) -> str:
 
 
 if __name__ == "__main__":  # ``python -m services.study.run`` is ``arroch study run``
-    from protocol.runner import add_common_arguments, setup_logging
+    from runtime.runner import add_common_arguments, setup_logging
 
     parser = argparse.ArgumentParser(
         prog="arroch study run", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter

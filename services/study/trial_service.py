@@ -1,6 +1,6 @@
 """The runner's own Zenoh client during a trial: what it hears and what it says.
 
-A :class:`~protocol.service.Service` named ``study`` (it joins a secured deployment as the
+A :class:`~runtime.service.Service` named ``study`` (it joins a secured deployment as the
 ``supervisor`` role, which may publish ``study/control`` and ``participant/*``). It hears the
 trial's messages — ``event``, ``participant/action``, ``participant/answers``, ``human/state``,
 ``door/*/state``, ``door/*/sensor``, ``constraints``, ``study/control`` — on ordered subscriptions,
@@ -20,7 +20,6 @@ from typing import Any, Protocol
 
 import zenoh
 
-from protocol.clock import SimClock, WallClock
 from protocol.messages import (
     ConstraintSet,
     DoorState,
@@ -32,8 +31,9 @@ from protocol.messages import (
     RobotStatus,
     StudyControl,
 )
-from protocol.service import Service
-from protocol.transport import ZenohOptions
+from runtime.clock import SimClock, WallClock
+from runtime.service import Service
+from runtime.transport import ZenohOptions
 
 NAME = "study"
 

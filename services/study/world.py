@@ -9,7 +9,7 @@ when the trial is over. By default ``up`` starts its router on a free localhost 
 chooses (``--router-listen``) and the runner joins it; a plan whose ``up_args`` bring their own
 network (``--no-router --connect ...``, ``--zenoh-config-dir DIR``) is joined as they say.
 
-The process runs through :mod:`protocol.launch.children`: its own process group (a terminal's
+The process runs through :mod:`runtime.launch.children`: its own process group (a terminal's
 Ctrl-C reaches only the runner, which stops it in order), and the kernel SIGTERMs it should the
 runner die without cleaning up. Stopping is SIGTERM to its group (``up`` then stops its services),
 then SIGKILL after a timeout.
@@ -29,8 +29,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from protocol.launch.children import Child, describe_exit, stop_all
-from protocol.transport import DEFAULT_ROUTER, ZenohOptions, free_tcp_port
+from runtime.launch.children import Child, describe_exit, stop_all
+from runtime.transport import DEFAULT_ROUTER, ZenohOptions, free_tcp_port
 
 from .layout import StudyPlan
 

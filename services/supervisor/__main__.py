@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from protocol.runner import setup_logging
+from runtime.runner import setup_logging
 
 from .cli import __doc__ as UP_DOC
 from .cli import add_up_arguments, run_up

@@ -27,8 +27,8 @@ import logging
 import sys
 from pathlib import Path
 
-from protocol.clock import make_clock
-from protocol.launch.catalog import (
+from runtime.clock import make_clock
+from runtime.launch.catalog import (
     DEFAULT_SERVICES,
     RECORDER,
     SERVICES,
@@ -39,8 +39,8 @@ from protocol.launch.catalog import (
     parse_child,
     parse_services,
 )
-from protocol.runner import LOG_FORMAT, add_common_arguments
-from protocol.transport import DEFAULT_ROUTER, ZenohOptions, free_tcp_port
+from runtime.runner import LOG_FORMAT, add_common_arguments
+from runtime.transport import DEFAULT_ROUTER, ZenohOptions, free_tcp_port
 
 from .output import Output, OutputHandler
 from .supervisor import Supervisor, UpConfig
@@ -54,7 +54,7 @@ def _namespace(args: argparse.Namespace) -> str:
 
         Keys(args.namespace)  # ValueError (exit 2) for a name that cannot be a key chunk
         return args.namespace
-    from protocol.runner import namespace_from  # loads the site file: only when the name is needed
+    from runtime.runner import namespace_from  # loads the site file: only when the name is needed
 
     return namespace_from(args)
 

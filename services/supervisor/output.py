@@ -1,7 +1,7 @@
 """The supervisor's one output: every child's lines prefixed with its name, merged, plus progress.
 
 Lines go to the terminal (or whatever stdout is) and to the run's log file, which gets them with
-their secrets redacted (:mod:`protocol.redact`: the tablet page's token, keys). On a terminal the
+their secrets redacted (:mod:`runtime.redact`: the tablet page's token, keys). On a terminal the
 progress is a bar kept on the last line: a log line first erases it, then the bar is redrawn
 below. Elsewhere (a pipe, a CI log) progress is an ordinary ``[up] progress ...`` line.
 """
@@ -13,7 +13,7 @@ import shutil
 import threading
 from typing import TextIO
 
-from protocol.redact import Redactor
+from runtime.redact import Redactor
 
 _ERASE = "\r\x1b[K"
 

@@ -1,6 +1,6 @@
 """``arroch up``: one command that runs a router and the chosen services, and watches the mission.
 
-The supervisor is itself a small Zenoh client (a :class:`~protocol.service.Service` named
+The supervisor is itself a small Zenoh client (a :class:`~runtime.service.Service` named
 ``supervisor``): it hears ``event`` and ``robot/*/status`` to show progress and to notice the end
 of the mission. Everything it does to its children happens on its worker thread (the main thread),
 in a timer every :data:`TICK` seconds — that thread is also the one the launch wrapper's
@@ -25,13 +25,13 @@ from typing import Any
 
 import zenoh
 
-from protocol.clock import SimClock, WallClock
-from protocol.launch.catalog import ROUTER, SUPERVISOR_ROLE, Launch, ServiceSpec, router_argv, service_argv
-from protocol.launch.children import CONFIG_ERROR, Child, RestartPolicy, describe_exit, stop_all
 from protocol.messages import Event, RobotStatus
 from protocol.schema import record_to_wire
-from protocol.service import Service
-from protocol.transport import ZenohOptions
+from runtime.clock import SimClock, WallClock
+from runtime.launch.catalog import ROUTER, SUPERVISOR_ROLE, Launch, ServiceSpec, router_argv, service_argv
+from runtime.launch.children import CONFIG_ERROR, Child, RestartPolicy, describe_exit, stop_all
+from runtime.service import Service
+from runtime.transport import ZenohOptions
 
 from .output import Output
 from .progress import MissionProgress
@@ -88,7 +88,7 @@ class Supervisor(Service):
     def install_signal_handlers(self) -> None:
         """First signal: stop in order. A second one: stop waiting, kill the children now.
 
-        The handlers only count signals (:mod:`protocol.signals`): they run on the main thread
+        The handlers only count signals (:mod:`runtime.signals`): they run on the main thread
         between two bytecodes, possibly while it holds a lock, so what a signal means is worked out
         on the worker (:meth:`on_stop_signal`, :meth:`_hurried`) and logged there.
         """

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from protocol.frames import CameraPose, look_at, rotation_angle
 from protocol.site import load_site
+from runtime.frames import CameraPose, look_at, rotation_angle
 from services.ar_client.project import Intrinsics
 
 SITES = Path(__file__).parent / "sites"

@@ -11,7 +11,7 @@ import pupil_apriltags
 import pytest
 from pupil_apriltags import bindings
 
-from protocol.apriltag import (
+from runtime.apriltag import (
     NUM_TAGS,
     apriltag_corners,
     named_corners,
@@ -117,7 +117,7 @@ def test_a_landmark_seen_from_the_front_has_its_tl_corner_top_left(detector):
     """The site's corner convention on rendered pixels: a level camera facing a wall tag sees the
     landmark's ``corners()[0]`` (TL) at the top-left of the detected quad, and each detector's named
     corners land on the projections of ``corners()`` (the texture, the site and the detectors agree)."""
-    from protocol.frames import look_at
+    from runtime.frames import look_at
     from services.ar_client.detect import TagDetector
     from services.ar_client.project import Projector
     from services.ar_client.synth import render

@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from protocol.frames import look_at, matrix_from_quat, rotation_angle
+from runtime.frames import look_at, matrix_from_quat, rotation_angle
 from services.ar_client.detect import TagDetector
 from services.ar_client.synth import render
 from tests.ar.helpers import HALL_FILE, HD, site
@@ -134,7 +134,7 @@ def test_tags_sheet_png_pages_decode_upright_at_true_size(tmp_path):
 
 
 def test_localize_takes_gravity_and_picks_a_single_tags_right_solution(tmp_path):
-    from protocol.frames import gravity_in_camera
+    from runtime.frames import gravity_in_camera
     from tests.ar.helpers import VGA, only_tags
     from tests.ar.test_gravity import single_tag_view
 

@@ -7,7 +7,7 @@ import dataclasses
 import cv2
 import numpy as np
 
-from protocol.frames import look_at
+from runtime.frames import look_at
 from services.ar_client.detect import TagDetector
 from services.ar_client.localize import Localizer
 from services.ar_client.refine import Lens

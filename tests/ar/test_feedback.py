@@ -10,9 +10,9 @@ import time
 
 import pytest
 
-from protocol.feedback_client import fetch_library, wait_for_library
 from protocol.messages import Constraint, ConstraintSet
 from protocol.site import load_site
+from runtime.feedback_client import fetch_library, wait_for_library
 from services.ar_client.feedback import FeedbackPanel, restrictor_sender
 from services.restrictor.library import library_for_site
 from tests.procs import arroch

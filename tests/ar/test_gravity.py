@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from protocol.frames import gravity_in_camera, look_at
+from runtime.frames import gravity_in_camera, look_at
 from services.ar_client.detect import TagDetector
 from services.ar_client.gravity import GravityPrior, gravity_error, parse_gravity, refine, yaw_scan
 from services.ar_client.localize import Localizer
@@ -36,7 +36,7 @@ def test_yaw_scan_finds_the_true_pose_among_its_minima():
     seeds = yaw_scan(obj, img.reshape(-1, 2), VGA.K, VGA.dist, prior)
     assert 1 <= len(seeds) <= 4
     # Every seed agrees with gravity exactly (the scan only turns about the vertical) ...
-    from protocol.frames import CameraPose
+    from runtime.frames import CameraPose
 
     for r, t in seeds:
         assert np.degrees(gravity_error(CameraPose.from_rvec_tvec(r, t).R_wc, prior)) < 1e-6

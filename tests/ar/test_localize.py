@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 import pytest
 
-from protocol.frames import CameraPose, camera_from_yaw_pitch
+from runtime.frames import CameraPose, camera_from_yaw_pitch
 from services.ar_client.detect import TagDetector
 from services.ar_client.localize import Localizer
 from services.ar_client.synth import render

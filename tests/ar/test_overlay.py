@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from protocol.codec import decode, encode
-from protocol.frames import camera_from_yaw_pitch, look_at
 from protocol.messages import DoorState, Intent, Overlay, RobotPose, RobotStatus
+from runtime.frames import camera_from_yaw_pitch, look_at
 from services.ar_client.draw import draw
 from services.ar_client.overlay import DOOR_CLOSED, DOOR_OPEN, OverlayBuilder
 from services.ar_client.pipeline import BadFrame, Pipeline

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from protocol.frames import CameraPose, gravity_in_camera, look_at, rotation_angle
+from runtime.frames import CameraPose, gravity_in_camera, look_at, rotation_angle
 from services.ar_client.gravity import GravityPrior
 from services.ar_client.pipeline import Pipeline
 from services.ar_client.posefilter import PoseFilter

@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from protocol.frames import camera_from_yaw_pitch, look_at
+from runtime.frames import camera_from_yaw_pitch, look_at
 from services.ar_client.detect import TagDetector
 from services.ar_client.localize import Localizer
 from services.ar_client.project import NEAR, Intrinsics, Projector

@@ -11,8 +11,8 @@ import cv2
 import numpy as np
 import pytest
 
-from protocol.frames import look_at
 from protocol.messages import CameraFrame, Event, Overlay, RobotPose
+from runtime.frames import look_at
 from services.ar_client.synth import render
 from tests.ar.helpers import HALL_FILE, HD, VGA, site
 from tests.conftest import wait_for_message

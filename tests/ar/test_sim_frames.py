@@ -1,5 +1,5 @@
 """Localisation on the simulator's own pixels: the pybullet scene (``services.sim.world.World``: tags
-on textured quads made from ``protocol.apriltag.tag_image``) rendered by the virtual tablet camera
+on textured quads made from ``runtime.apriltag.tag_image``) rendered by the virtual tablet camera
 (``services.sim.camera.CameraSpec``, whose intrinsics carry the tiny renderer's half-pixel offset),
 the office's storage room, 1280x720; and one frame through the two commands' files
 (``arroch sim snapshot`` → ``arroch ar localize``).
@@ -20,8 +20,8 @@ import cv2
 import numpy as np
 import pytest
 
-from protocol.frames import CameraPose
 from protocol.site import load_site
+from runtime.frames import CameraPose
 from services.ar_client.pipeline import Pipeline
 from services.ar_client.project import Intrinsics, Projector
 from tests.ar.helpers import errors
@@ -110,7 +110,7 @@ def test_a_snapshot_file_localised_by_the_cli(tmp_path):
     import json
     import subprocess
 
-    from protocol.frames import matrix_from_quat, rotation_angle
+    from runtime.frames import matrix_from_quat, rotation_angle
     from tests.procs import ROOT, arroch
 
     png, truth_file = tmp_path / "s.png", tmp_path / "s.json"

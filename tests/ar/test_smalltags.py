@@ -6,7 +6,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from protocol.frames import look_at
+from runtime.frames import look_at
 from services.ar_client.detect import TagDetector
 from services.ar_client.smalltags import decode_quads
 from services.ar_client.synth import render
@@ -46,7 +46,7 @@ def test_small_tags_found_at_least_as_often_as_apriltag3(pupil):
 
 def test_the_corner_order_is_found_whatever_corner_the_quad_starts_at():
     """A quad handed over starting at any of its corners, either winding: the tag's own TL, TR, BR, BL come back."""
-    from protocol.apriltag import opencv_corners
+    from runtime.apriltag import opencv_corners
 
     hall = site("hall")
     pose = look_at([7.0, CLUSTER_CENTRE[1] + 0.5, 1.3], CLUSTER_CENTRE)

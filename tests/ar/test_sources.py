@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from protocol.frames import look_at
+from runtime.frames import look_at
 from services.ar_client.pipeline import Pipeline
 from services.ar_client.sources import ImageFolderSource, VideoSource, folder_intrinsics, open_source, parse_source
 from services.ar_client.synth import render

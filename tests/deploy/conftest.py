@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from protocol.transport import free_tcp_port
+from runtime.transport import free_tcp_port
 from tests.deploy.netns import Lan, require_netns
 from tests.deploy.secure import RoleClient, make_pki, render_configs, role_clients
 from tests.procs import Proc, arroch

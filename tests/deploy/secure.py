@@ -15,10 +15,10 @@ import uuid
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-from protocol.certs import make_certs, parse_hosts
-from protocol.clock import WallClock
-from protocol.service import Service
-from protocol.transport import ZenohOptions
+from runtime.certs import make_certs, parse_hosts
+from runtime.clock import WallClock
+from runtime.service import Service
+from runtime.transport import ZenohOptions
 from services.supervisor.deployment import acl
 from services.supervisor.deployment.render import Request, render
 from tests.conftest import TestClient

@@ -17,8 +17,8 @@ import zenoh
 from cryptography import x509
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
-from protocol.certs import CertError, make_certs, parse_hosts
-from protocol.launch.catalog import DEFAULT_SERVICES
+from runtime.certs import CertError, make_certs, parse_hosts
+from runtime.launch.catalog import DEFAULT_SERVICES
 from services.cli import build_parser
 from services.supervisor.deployment import acl
 from services.supervisor.deployment.render import RenderError, Request, render

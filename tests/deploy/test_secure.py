@@ -16,7 +16,7 @@ import pytest
 import zenoh
 
 from protocol.messages import ConstraintSet, Feedback, RobotCommand, RobotStatus
-from protocol.transport import ZenohOptions, open_session
+from runtime.transport import ZenohOptions, open_session
 from services.supervisor.deployment import acl
 from services.supervisor.deployment.render import Request, render
 from tests.conftest import wait_for_message

@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from protocol.launch.catalog import (
+from protocol.messages import Event, RobotStatus
+from runtime.launch.catalog import (
     SERVICES,
     Launch,
     MissionOptions,
@@ -18,8 +19,7 @@ from protocol.launch.catalog import (
     router_argv,
     service_argv,
 )
-from protocol.launch.children import RestartPolicy, describe_exit
-from protocol.messages import Event, RobotStatus
+from runtime.launch.children import RestartPolicy, describe_exit
 from services.supervisor.output import Output
 from services.supervisor.progress import MissionProgress
 

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from protocol.launch.catalog import SERVICES, Launch, MissionOptions, service_argv
 from protocol.messages import Event, RobotStatus
+from runtime.launch.catalog import SERVICES, Launch, MissionOptions, service_argv
 from tests.procs import Proc, arroch
 
 CRASH = "{python} -c 'import sys; sys.exit(3)'"

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from protocol.site import generate_site, loads_site
-from protocol.site.generate_detour import door_count, generate_detour_site
+from protocol.site import loads_site
+from runtime.site.generate import generate_site
+from runtime.site.generate_detour import door_count, generate_detour_site
 from services.planner.constraints import ConstraintProgram, unavailable
 from services.planner.planner import PlannerSettings, TaskPlanner
 from services.planner.validator import Windows, validate_result

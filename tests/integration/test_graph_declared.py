@@ -46,7 +46,7 @@ from protocol.graph import (
     WITH_FEEDBACK,
     ServiceNode,
 )
-from protocol.transport import free_tcp_port
+from runtime.transport import free_tcp_port
 from tests.procs import Proc, arroch
 
 pytestmark = pytest.mark.integration

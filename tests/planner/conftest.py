@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from protocol.site import Site, generate_site, load_site, loads_site
+from protocol.site import Site, load_site, loads_site
+from runtime.site.generate import generate_site
 from services.planner.planner import PlannerSettings, TaskPlanner
 
 SITES = Path(__file__).resolve().parent / "sites"

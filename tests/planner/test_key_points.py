@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import math
 
-from protocol.site import generate_site, loads_site
+from protocol.site import loads_site
+from runtime.site.generate import generate_site
 from services.planner.dispatcher import Dispatcher
 from services.planner.key_points import DROP_SPACING, QUEUE_SPACING
 from services.planner.motion import MotionPlanner

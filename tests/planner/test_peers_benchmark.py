@@ -33,7 +33,8 @@ def load_benchmark():
 @pytest.fixture(scope="module")
 def two_robots():
     """A generated site with 2 robots and 1 object each, its planner and its world."""
-    from protocol.site import generate_site, loads_site
+    from protocol.site import loads_site
+    from runtime.site.generate import generate_site
     from services.planner.planner import TaskPlanner
     from services.planner.world import initial_world
 
@@ -87,7 +88,8 @@ def test_an_engine_plan_passes_both_validators_and_a_spoiled_one_fails_both(two_
 def test_the_clock_encoding_reads_back_into_a_valid_timed_plan():
     """ENHSP takes no durative actions: its plan of the clock encoding is a sequence, timed by
     replaying the robots' clocks, and both validators accept it."""
-    from protocol.site import generate_site, loads_site
+    from protocol.site import loads_site
+    from runtime.site.generate import generate_site
     from services.planner.planner import TaskPlanner
     from services.planner.world import initial_world
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from protocol.pursuit import Path
+from runtime.pursuit import Path
 from services.planner.motion import MotionPlanner
 from services.planner.plan import Pass, RobotPlan, Step
 from services.planner.reservations import ReservationTable

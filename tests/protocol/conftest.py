@@ -9,8 +9,8 @@ from collections.abc import Callable, Iterator
 
 import pytest
 
-from protocol.service import Service
-from protocol.transport import ZenohOptions, free_tcp_port
+from runtime.service import Service
+from runtime.transport import ZenohOptions, free_tcp_port
 from tests.conftest import TestClient
 from tests.procs import Proc, arroch
 

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from protocol.asp_vocabulary import VOCABULARY, UnsafeProgram, check_program, is_asp_constant
+from protocol.asp_vocabulary import VOCABULARY, UnsafeProgram, is_asp_constant
+from runtime.asp_check import check_program
 
 ACCEPTED = [
     (

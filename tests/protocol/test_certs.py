@@ -1,4 +1,4 @@
-"""Certificates made in-process (protocol.certs): real TLS handshakes with them, and what is refused.
+"""Certificates made in-process (runtime.certs): real TLS handshakes with them, and what is refused.
 
 A foreign authority (``trustme``) stands for certificates someone else made: they must not pass
 :func:`verify`, must not be accepted by a server trusting our authority, and a tablet certificate
@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 import trustme
 
-from protocol.certs import CertError, HostCert, describe, ensure_host_certificate, info, make_certs, parse_hosts, verify
+from runtime.certs import CertError, HostCert, describe, ensure_host_certificate, info, make_certs, parse_hosts, verify
 
 
 def _handshake(server: ssl.SSLContext, client: ssl.SSLContext, hostname: str) -> dict:

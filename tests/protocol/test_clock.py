@@ -6,13 +6,13 @@ import time
 
 import pytest
 
-from protocol import clock as clock_module
-from protocol.clock import MAX_EXTRAPOLATION, SimClock, WallClock, make_clock
 from protocol.messages import Clock
+from runtime import clock as clock_module
+from runtime.clock import MAX_EXTRAPOLATION, SimClock, WallClock, make_clock
 
 
 class FakeMonotonic:
-    """Stands in for time.monotonic inside protocol.clock, so extrapolation is checked exactly."""
+    """Stands in for time.monotonic inside runtime.clock, so extrapolation is checked exactly."""
 
     def __init__(self) -> None:
         self.now = 1000.0

@@ -9,8 +9,8 @@ import threading
 from collections.abc import Callable
 
 from protocol.messages import RobotPose
-from protocol.service import Service, _Tally
-from protocol.transport import ZenohOptions
+from runtime.service import Service, _Tally
+from runtime.transport import ZenohOptions
 
 THREADS, EACH = 4, 20_000
 

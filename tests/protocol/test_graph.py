@@ -14,9 +14,9 @@ import zenoh
 
 from protocol.graph import BY_NAME, FRAMEWORK, RECORDED, SERVICES
 from protocol.keys import Keys
-from protocol.launch.catalog import RECORDER as RECORDER_SPEC
-from protocol.launch.catalog import SERVICES as LAUNCHED
 from protocol.messages import ALL_MESSAGES
+from runtime.launch.catalog import RECORDER as RECORDER_SPEC
+from runtime.launch.catalog import SERVICES as LAUNCHED
 from services.graph.draw import draw
 from services.graph.formats import GENERATED_BY, to_dot, to_json, to_markdown, to_text
 from services.recorder.topics import recorded_keys
@@ -82,7 +82,7 @@ def test_what_the_graph_publishes_and_serves_the_access_control_allows() -> None
 
 
 def test_services_run_as_the_role_arroch_up_gives_them() -> None:
-    """``arroch up`` renders each service's Zenoh config for its identity (protocol/launch/catalog.py)."""
+    """``arroch up`` renders each service's Zenoh config for its identity (runtime/launch/catalog.py)."""
     for spec in (*LAUNCHED.values(), RECORDER_SPEC):
         expected = spec.identity if spec.identity in ROLES else ""  # ping: no access-control role
         assert BY_NAME[spec.name].role == expected, f"{spec.name}: arroch up runs it as {spec.identity!r}"

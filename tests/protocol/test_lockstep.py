@@ -1,4 +1,4 @@
-"""The lockstep handshake's invariants (protocol/lockstep.py), on the rules alone: no Zenoh, no process.
+"""The lockstep handshake's invariants (runtime/lockstep.py), on the rules alone: no Zenoh, no process.
 
 - the simulator's gate never lets time advance while a feedback's ack, a plan answering the world
   and constraints versions, or a front command is outstanding, and says which, in that order;
@@ -16,9 +16,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, initialize, invariant, precondition, rule
 
-from protocol import lockstep
-from protocol.clock import SimClock, WallClock
-from protocol.lockstep import (
+from protocol.messages import AWAITING, Clock, PlanStep, TeamPlan
+from runtime import lockstep
+from runtime.clock import SimClock, WallClock
+from runtime.lockstep import (
     CAMERA,
     COMMAND,
     FEEDBACK,
@@ -31,7 +32,6 @@ from protocol.lockstep import (
     Wait,
     simulator_waits,
 )
-from protocol.messages import AWAITING, Clock, PlanStep, TeamPlan
 
 ROBOTS = ("r0", "r1")
 versions = st.integers(0, 6)

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from protocol.messages import RobotPose
-from protocol.transport import free_tcp_port
+from runtime.transport import free_tcp_port
 from tests.conftest import wait_for_message
 from tests.procs import ROOT, Proc, arroch
 

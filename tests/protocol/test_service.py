@@ -12,10 +12,10 @@ import msgpack
 import pytest
 import zenoh
 
-from protocol import service as service_module
 from protocol.codec import ENCODING, encode
 from protocol.messages import Event, RobotPose, RobotStatus
-from protocol.service import BAD_LOG_INTERVAL, MAX_BAD_SENDERS, Service, publisher_options
+from runtime import service as service_module
+from runtime.service import BAD_LOG_INTERVAL, MAX_BAD_SENDERS, Service, publisher_options
 from tests.protocol.conftest import Running, eventually
 
 pytestmark = pytest.mark.integration

@@ -11,7 +11,7 @@ import time
 import pytest
 import zenoh
 
-from protocol.transport import (
+from runtime.transport import (
     DEFAULT_ROUTER,
     ZenohOptions,
     add_zenoh_arguments,

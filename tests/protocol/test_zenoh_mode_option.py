@@ -7,7 +7,7 @@ import argparse
 
 import pytest
 
-from protocol.transport import add_zenoh_arguments, options_from
+from runtime.transport import add_zenoh_arguments, options_from
 from services.cli import build_parser
 
 

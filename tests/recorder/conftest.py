@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from protocol.transport import free_tcp_port
+from runtime.transport import free_tcp_port
 from tests.procs import Proc, arroch
 
 MISSION_TIMEOUT = 150.0  # wall s; the mission takes 12-35 s on two cores

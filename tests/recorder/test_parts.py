@@ -20,10 +20,10 @@ from mcap_protobuf.decoder import DecoderFactory
 
 from protocol.codec import encode
 from protocol.keys import Keys
-from protocol.launch.catalog import RECORDER_NAME, SERVICES, Launch, MissionOptions, service_argv
 from protocol.messages import ALL_MESSAGES, CameraFrame, Intent, Overlay, Primitive, RobotPose, TeamPlan
 from protocol.site import load_site
-from protocol.transport import NoRouter, ZenohOptions, free_tcp_port, through_local_router
+from runtime.launch.catalog import RECORDER_NAME, SERVICES, Launch, MissionOptions, service_argv
+from runtime.transport import NoRouter, ZenohOptions, free_tcp_port, through_local_router
 from services.cli import main
 from services.recorder.jsonschema import record_schema
 from services.recorder.layout import build_layout, layout_json

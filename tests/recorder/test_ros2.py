@@ -21,9 +21,9 @@ from rosbags.typesys import Stores, get_typestore
 from ruamel.yaml import YAML
 
 from protocol.messages import Clock, RobotPose
-from protocol.ros2.markers import SiteState, site_markers
-from protocol.ros2.types import PUBLISHED_HASHES, TF_MESSAGE
 from protocol.site import load_site
+from runtime.ros2.markers import SiteState, site_markers
+from runtime.ros2.types import PUBLISHED_HASHES, TF_MESSAGE
 from services.recorder.reading import messages, metadata
 from tests.procs import ROOT, arroch
 

@@ -17,7 +17,7 @@ from mcap.records import Schema
 from mcap_protobuf.decoder import DecoderFactory
 
 from protocol.messages import Event
-from protocol.transport import free_tcp_port
+from runtime.transport import free_tcp_port
 from services.recorder.reading import channel_stats
 from tests.procs import ROOT, arroch
 

@@ -35,7 +35,6 @@ import msgpack
 import zenoh
 from hypothesis import strategies as st
 
-from protocol.clock import WallClock
 from protocol.codec import decode
 from protocol.errors import ProtocolError
 from protocol.messages import (
@@ -53,8 +52,9 @@ from protocol.messages import (
     RobotStatus,
     TeamPlan,
 )
-from protocol.service import Service
-from protocol.transport import ZenohOptions
+from runtime.clock import WallClock
+from runtime.service import Service
+from runtime.transport import ZenohOptions
 from services.restrictor.library import Library
 from tests.conftest import TestClient
 from tests.protocol.strategies import fields_of, is_required, minimal_wire, oversized_value, pack, wrong_type_value

@@ -25,8 +25,8 @@ from pathlib import Path
 
 import pytest
 
-from protocol.feedback_client import send_feedback
 from protocol.messages import ConstraintSet, Overlay, TeamPlan
+from runtime.feedback_client import send_feedback
 
 from .missions import SITE, UpMission, assert_mission_completed
 from .watch import Watch, observing

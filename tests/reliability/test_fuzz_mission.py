@@ -34,12 +34,12 @@ import numpy as np
 import pytest
 import zenoh
 
-from protocol.asp_vocabulary import check_program
 from protocol.codec import decode, encode
 from protocol.messages import CameraFrame, Clock, ConstraintSet, Event, Feedback, FeedbackAck
-from protocol.service import MAX_KEYED_COUNTERS
 from protocol.site import load_site
-from protocol.transport import free_tcp_port
+from runtime.asp_check import check_program
+from runtime.service import MAX_KEYED_COUNTERS
+from runtime.transport import free_tcp_port
 from services.restrictor.library import load_library
 from tests.procs import Proc, arroch
 from tests.reliability.fuzzing import (

@@ -25,7 +25,7 @@ import zenoh
 
 from protocol.codec import encode
 from protocol.messages import Event, Feedback, RobotCommand
-from protocol.transport import ZenohOptions, free_tcp_port, open_session
+from runtime.transport import ZenohOptions, free_tcp_port, open_session
 from tests.deploy.secure import INTRUDER, RoleClient, make_pki, render_configs, role_clients
 from tests.procs import Proc, arroch
 

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
-from protocol.feedback_client import fetch_constraints, send_feedback
 from protocol.site import load_site
+from runtime.feedback_client import fetch_constraints, send_feedback
 from services.cli import main
 from services.restrictor.library import load_library
 from tests.procs import restrictor_argv

@@ -272,7 +272,7 @@ FEEDBACK = st.tuples(
 @settings(max_examples=150, deadline=None)
 @given(feedbacks=st.lists(FEEDBACK, min_size=1, max_size=6), now=st.floats(min_value=0, max_value=1e9))
 def test_any_feedback_gets_an_answer_and_only_valid_feedback_changes_the_set(library, lab_site, feedbacks, now) -> None:
-    from protocol.asp_vocabulary import check_program
+    from runtime.asp_check import check_program
 
     store = StateStore(None, lab_site.name)  # in-memory SQLite: a fresh set per example
     try:

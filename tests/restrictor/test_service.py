@@ -172,7 +172,7 @@ def test_send_feedback_counts_forged_acks_and_keeps_waiting_for_the_real_one(
     and the sender still gets the restrictor's real ack once one is up."""
     from concurrent.futures import ThreadPoolExecutor
 
-    from protocol.feedback_client import send_feedback
+    from runtime.feedback_client import send_feedback
 
     forger = TestClient(namespace, router).open()
     try:

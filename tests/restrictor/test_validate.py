@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from protocol.asp_vocabulary import check_program
+from runtime.asp_check import check_program
 from services.restrictor.compile import Compiled, compile_feedback
 from services.restrictor.library import CONSTRAINT, INT, site_choices
 from services.restrictor.validate import Refusal, Validated, split_tablet_feedback, validate

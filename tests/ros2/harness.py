@@ -17,11 +17,11 @@ import time
 from dataclasses import dataclass
 
 from protocol.messages import Clock, RobotCommand
-from protocol.pursuit import integrate
-from protocol.ros2 import types as ros
-from protocol.ros2.config import Ros2Config
-from protocol.ros2.node import RosNode
 from protocol.site import load_site
+from runtime.pursuit import integrate
+from runtime.ros2 import types as ros
+from runtime.ros2.config import Ros2Config
+from runtime.ros2.node import RosNode
 from services.sim.human import HUMAN_RADIUS
 from services.sim.scan import Scanner
 from tests.conftest import TestClient

@@ -19,11 +19,11 @@ import queue
 import time
 
 from protocol.messages import DoorState, Intent, RobotPose
-from protocol.ros2 import types as ros
-from protocol.ros2.attachment import Attachment
-from protocol.ros2.config import Ros2Config
-from protocol.ros2.keys import TopicNaming
 from protocol.site import load_site
+from runtime.ros2 import types as ros
+from runtime.ros2.attachment import Attachment
+from runtime.ros2.config import Ros2Config
+from runtime.ros2.keys import TopicNaming
 from tests.conftest import wait_for_message
 from tests.procs import arroch
 from tests.ros2.harness import FakeBase, straight_command
@@ -144,7 +144,7 @@ def test_bridge_messages_decode_to_the_poses_they_came_from(spawn, router, names
         )
 
     # Feedback in (std_msgs/String JSON) -> the restrictor -> ack out
-    from protocol.ros2.node import RosNode
+    from runtime.ros2.node import RosNode
 
     node = RosNode(client, NAMING, "test_tablet", "/arroch")
     feedback = node.publisher("feedback", ros.STRING)
@@ -218,7 +218,7 @@ def test_driver_takes_map_to_odom_from_tf(spawn, router, namespace, client, tmp_
     config_file.write_text('[ros2.robots.r1]\ntf_topic = "/tf"\n')
     base = FakeBase(client, robot, SITE.robots[robot].start, Ros2Config())
     try:
-        from protocol.ros2.node import RosNode
+        from runtime.ros2.node import RosNode
 
         tf = RosNode(client, NAMING, "test_localiser", "/").publisher("/tf", ros.TF_MESSAGE)
         map_to_odom = (12.0, 8.2, -1.4)  # not the start pose: the pose must come from tf
@@ -264,7 +264,7 @@ def test_simulated_bases_publish_their_robots_poses_as_odometry(spawn, router, n
         c, s = math.cos(th0), math.sin(th0)
         assert abs(x0 + c * p.x - s * p.y - x0) <= MM and abs(y0 + s * p.x + c * p.y - y0) <= MM
         assert angle_gap(th0 + p.theta, th0) <= DEG
-    from protocol.ros2.node import RosNode
+    from runtime.ros2.node import RosNode
 
     cmd_vel = RosNode(client, NAMING, "test_teleop", "/r0").publisher("cmd_vel", ros.TWIST)
     for _ in range(10):  # 1 s at 0.4 m/s, straight ahead
@@ -276,7 +276,7 @@ def test_simulated_bases_publish_their_robots_poses_as_odometry(spawn, router, n
 
 def test_driver_takes_its_pose_from_a_localisation_topic(spawn, router, namespace, client, tmp_path):
     """``pose_type = "pose"``: PoseWithCovarianceStamped in the map frame (e.g. amcl_pose), no transform."""
-    from protocol.ros2.node import RosNode
+    from runtime.ros2.node import RosNode
 
     config_file = tmp_path / "robots.toml"
     config_file.write_text('[ros2.robots.r1]\npose_topic = "amcl_pose"\npose_type = "pose"\n')
@@ -316,8 +316,8 @@ def test_nodes_of_one_session_share_one_id_counter_and_gids_are_rmw_zenohs(clien
     publisher's token (XXH3-128); keep-last publishers drop rather than block under congestion."""
     import zenoh
 
-    from protocol.ros2.attachment import gid_of
-    from protocol.ros2.node import RosNode
+    from runtime.ros2.attachment import gid_of
+    from runtime.ros2.node import RosNode
 
     naming = TopicNaming("rmw_zenoh", 11)
     a = RosNode(client, naming, "node_a", "/r0")

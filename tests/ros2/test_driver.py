@@ -9,8 +9,8 @@ import math
 import pytest
 
 from protocol.messages import RobotCommand
-from protocol.pursuit import ControllerConfig, integrate
 from protocol.site import load_site
+from runtime.pursuit import ControllerConfig, integrate
 from services.robot.driver import Driver, DriverConfig
 
 SITE = load_site()

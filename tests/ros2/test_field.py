@@ -21,10 +21,10 @@ import pytest
 import zenoh.ext
 
 from protocol.messages import Event, RobotCommand, RobotPose, RobotStatus
-from protocol.ros2 import types as ros
-from protocol.ros2.config import load_ros2_config
-from protocol.safety_field import FieldConfig, limit, scan_points, stop_distance
 from protocol.site import load_site
+from runtime.ros2 import types as ros
+from runtime.ros2.config import load_ros2_config
+from runtime.safety_field import FieldConfig, limit, scan_points, stop_distance
 from services.sim.human import HUMAN_RADIUS
 from tests.conftest import wait_for_message
 from tests.procs import arroch

@@ -24,10 +24,10 @@ import pytest
 import zenoh
 
 from protocol.messages import Clock, DoorState, Event, HumanState, ParticipantAction, RobotPose, RobotStatus
-from protocol.ros2 import types as ros
-from protocol.ros2.config import load_ros2_config
-from protocol.ros2.node import RosNode
 from protocol.site import loads_site
+from runtime.ros2 import types as ros
+from runtime.ros2.config import load_ros2_config
+from runtime.ros2.node import RosNode
 from tests.conftest import TestClient
 from tests.procs import arroch
 

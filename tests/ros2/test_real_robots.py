@@ -6,8 +6,8 @@ the driver's statuses into the mission's events with a new world version; no clo
 from __future__ import annotations
 
 from protocol.messages import Event, RobotCommand, RobotPose
-from protocol.ros2.config import Ros2Config
 from protocol.site import load_site
+from runtime.ros2.config import Ros2Config
 from tests.conftest import wait_for_message
 from tests.procs import arroch
 from tests.ros2.harness import FakeBase, straight_command

@@ -14,8 +14,8 @@ import time
 import pytest
 
 from protocol.messages import DoorState, RobotCommand, RobotStatus
-from protocol.ros2.config import Ros2Config
 from protocol.site import load_site
+from runtime.ros2.config import Ros2Config
 from tests.conftest import wait_for_message
 from tests.procs import arroch
 from tests.ros2.harness import FakeBase, straight_command
@@ -86,8 +86,8 @@ def test_killed_planner_stops_the_base(spawn, router, namespace, client, base):
             "-c",
             textwrap.dedent(f"""
         import time
-        from protocol.service import Service
-        from protocol.transport import ZenohOptions
+        from runtime.service import Service
+        from runtime.transport import ZenohOptions
         with Service("planner", "{namespace}", ZenohOptions(mode="client", connect=["{router}"])):
             print("planner token declared", flush=True)
             time.sleep(600)
@@ -156,8 +156,8 @@ def test_closed_door_holds_the_robot_short_of_the_leaf(spawn, router, namespace,
 
 def test_bad_odometry_is_dropped_and_counted(spawn, router, namespace, client, base):
     from protocol.messages import Event
-    from protocol.ros2 import types as ros
-    from protocol.ros2.keys import TopicNaming
+    from runtime.ros2 import types as ros
+    from runtime.ros2.keys import TopicNaming
 
     driver = start_driver(spawn, router, namespace)
     base.first_zero_after(0.0, timeout=10)

@@ -1,4 +1,4 @@
-"""The ROS 2 wire helpers (protocol/ros2): type hashes against the values ROS 2 publishes, keys and
+"""The ROS 2 wire helpers (runtime/ros2): type hashes against the values ROS 2 publishes, keys and
 tokens in rmw_zenoh's and zenoh-bridge-ros2dds's formats, the attachment layout, CDR round trips,
 the robot config file's checks."""
 
@@ -12,10 +12,10 @@ import struct
 import pytest
 from rosbags.serde import SerdeError
 
-from protocol.ros2 import types as ros
-from protocol.ros2.attachment import Attachment, gid_of
-from protocol.ros2.config import RosConfigError, load_ros2_config, parse_ros2_config
-from protocol.ros2.keys import Qos, TopicNaming, full_topic
+from runtime.ros2 import types as ros
+from runtime.ros2.attachment import Attachment, gid_of
+from runtime.ros2.config import RosConfigError, load_ros2_config, parse_ros2_config
+from runtime.ros2.keys import Qos, TopicNaming, full_topic
 
 
 @pytest.mark.parametrize("typename", ros.USED_TYPES)
@@ -188,8 +188,8 @@ def test_twist_stamped_carries_stamp_and_frame():
 
 
 def test_door_sensors_in_the_config(tmp_path):
-    from protocol.ros2.config import check_doors
     from protocol.site import load_site
+    from runtime.ros2.config import check_doors
 
     f = tmp_path / "robots.toml"
     f.write_text('[ros2]\ndomain = 4\n[ros2.doors.d_storage]\ntopic = "/building/storage_door"\n[ros2.doors.d_x]\n')
@@ -244,8 +244,8 @@ def test_config_errors_name_the_key(table, where):
 
 
 def test_site_markers_follow_the_state():
-    from protocol.ros2.markers import SiteState, site_markers
     from protocol.site import load_site
+    from runtime.ros2.markers import SiteState, site_markers
 
     site = load_site()
     state = SiteState(

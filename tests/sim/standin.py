@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import msgspec
 
 from protocol.messages import Clock, ConstraintSet, Event, Feedback, FeedbackAck, PlanStep, RobotCommand, TeamPlan
-from protocol.service import Service
 from protocol.site.model import Site
-from protocol.transport import ZenohOptions
+from runtime.service import Service
+from runtime.transport import ZenohOptions
 
 STANDOFF = 0.6  # m in front of an opening where approach ends and gothrough arrives
 

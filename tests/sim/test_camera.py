@@ -2,7 +2,7 @@
 
 Everything here runs on real rendered pixels (ER_TINY_RENDERER) and real detectors: OpenCV's ArUco
 detector (DICT_APRILTAG_36h11) and AprilTag 3 (pupil-apriltags, the reference for corner accuracy).
-Corners are put in the site's TL, TR, BR, BL order by protocol/apriltag.py's helpers only.
+Corners are put in the site's TL, TR, BR, BL order by runtime/apriltag.py's helpers only.
 
 Measured on these views (default office site, inside storage, tags 0.16 m at 1.4–2.8 m, oblique to
 the wall): OpenCV ArUco + CORNER_REFINE_SUBPIX, SQPnP + LM over all tags, 1.3–4.9 mm / 0.04–0.14° at
@@ -25,12 +25,12 @@ import numpy as np
 import pybullet
 import pytest
 
-from protocol.apriltag import apriltag_corners, opencv_corners
 from protocol.codec import decode, encode
-from protocol.frames import matrix_from_quat, rotation_angle
 from protocol.messages import CameraFrame, CameraTruth
 from protocol.site import load_site
 from protocol.site.model import Site
+from runtime.apriltag import apriltag_corners, opencv_corners
+from runtime.frames import matrix_from_quat, rotation_angle
 from services.ar_client.detect import apriltag_detector
 from services.cli import main
 from services.sim.camera import FAR, NEAR, CameraSpec, frame_message, truth_json, truth_message

@@ -14,8 +14,8 @@ from itertools import pairwise
 
 import pytest
 
-from protocol.plane import segment_distance, wrap
-from protocol.pursuit import ControllerConfig, Path, PurePursuit, integrate
+from runtime.plane import segment_distance, wrap
+from runtime.pursuit import ControllerConfig, Path, PurePursuit, integrate
 
 CFG = ControllerConfig(speed=0.5, max_turn_rate=1.5, lookahead=0.3)
 DT = 0.05

@@ -7,9 +7,9 @@ import json
 import msgspec
 import pytest
 
-from protocol.lockstep import LockstepGate
 from protocol.messages import PlanStep, TeamPlan
 from protocol.site import load_site
+from runtime.lockstep import LockstepGate
 from services.sim.engine import Engine
 from services.sim.human import HumanConfig
 from services.sim.pacing import WallPacer

@@ -7,8 +7,8 @@ from __future__ import annotations
 import math
 from itertools import pairwise
 
-from protocol.pursuit import Path, Step
 from protocol.site import loads_site
+from runtime.pursuit import Path, Step
 from services.sim.engine import Engine
 from services.sim.human import HumanConfig
 from services.sim.make_way import MakeWay, Request

@@ -15,9 +15,9 @@ import pytest
 from msgspec import UNSET
 
 from protocol.events import data_to_wire
-from protocol.launch.catalog import SERVICES, Launch, MissionOptions, service_argv
 from protocol.messages import Clock, DoorState, Event, HumanState, ParticipantAction, StudyControl
 from protocol.site import load_site
+from runtime.launch.catalog import SERVICES, Launch, MissionOptions, service_argv
 from services.sim.cli import build_options
 from services.sim.cli import register as register_sim
 from services.sim.engine import Engine, SimEvent

@@ -10,7 +10,7 @@ import zenoh
 
 from protocol.messages import RobotPose
 from protocol.site import load_site
-from protocol.transport import ZenohOptions
+from runtime.transport import ZenohOptions
 from services.sim.service import SimOptions, SimService
 
 SITE_SECONDS = 10.0

@@ -7,7 +7,7 @@ import math
 import pytest
 from msgspec import UNSET
 
-from protocol.plane import segment_distance
+from runtime.plane import segment_distance
 from services.sim.engine import Engine
 from tests.sim.helpers import PASSIVE, command, small_site
 

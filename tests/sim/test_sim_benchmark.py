@@ -11,7 +11,8 @@ import sys
 import pytest
 
 from benchmarks.lib.coordinated import CoordinatedPlanner, unload_slots
-from protocol.site import generate_site, loads_site
+from protocol.site import loads_site
+from runtime.site.generate import generate_site
 from services.sim.engine import Engine
 from tests.procs import ROOT
 from tests.sim.helpers import run_mission

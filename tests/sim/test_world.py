@@ -13,10 +13,10 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from protocol.apriltag import quad_edge
-from protocol.palette import robot_colors
 from protocol.site import default_site_path, load_site, loads_site
 from protocol.site.model import Site
+from runtime.apriltag import quad_edge
+from runtime.palette import robot_colors
 from services.ar_client.overlay import robot_colours as overlay_colours
 from services.sim.camera import CameraSpec
 from services.sim.objects import CARRY_HEIGHT, FLOOR_HEIGHT

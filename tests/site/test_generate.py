@@ -6,7 +6,8 @@ import tomllib
 
 import pytest
 
-from protocol.site import generate_site, loads_site
+from protocol.site import loads_site
+from runtime.site.generate import generate_site
 
 
 @pytest.mark.parametrize("robots", range(1, 21))

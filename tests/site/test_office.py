@@ -69,7 +69,7 @@ def test_the_visibility_check_notices_missing_tags(office: Site) -> None:
 
 @pytest.mark.parametrize("robots,seed", [(3, 0), (12, 5)])
 def test_generated_storage_serves_the_tablet_too(robots: int, seed: int) -> None:
-    from protocol.site import generate_site
+    from runtime.site.generate import generate_site
 
     site = loads_site(generate_site(robots, seed=seed))
     assert not poses_seeing_fewer_than(site, "storage", 2)
@@ -80,7 +80,7 @@ def test_every_room_robot_and_object_connects_on_the_inflated_grid(robots: int |
     import cv2
     import numpy as np
 
-    from protocol.site import generate_site
+    from runtime.site.generate import generate_site
 
     site = load_site() if robots is None else loads_site(generate_site(robots, seed=seed))
     grid = site.occupancy_grid(

@@ -40,9 +40,9 @@ from protocol.messages import (
     QuestionnaireAnswers,
     StudyControl,
 )
-from protocol.service import Service
-from protocol.signals import StopSignals
-from protocol.transport import ZenohOptions
+from runtime.service import Service
+from runtime.signals import StopSignals
+from runtime.transport import ZenohOptions
 
 METRICS = {
     "completed": True,

@@ -26,8 +26,8 @@ from protocol.messages import (
     QuestionnaireAnswers,
     StudyControl,
 )
-from protocol.runner import add_common_arguments
-from protocol.transport import ZenohOptions
+from runtime.runner import add_common_arguments
+from runtime.transport import ZenohOptions
 from services.study import run as study_run
 from services.study.layout import (
     PlannedParticipant,

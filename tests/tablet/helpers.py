@@ -127,7 +127,7 @@ class Server:
 def start_tablet(
     spawn: Callable[..., Proc], router: str, namespace: str, state_dir: Path, *extra: str, port: int | None = None
 ) -> Server:
-    from protocol.transport import free_tcp_port
+    from runtime.transport import free_tcp_port
 
     port = port or free_tcp_port()
     proc = spawn(

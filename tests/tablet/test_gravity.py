@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 import pytest
 
-from protocol.frames import gravity_in_camera
+from runtime.frames import gravity_in_camera
 from services.ar_client.synth import render
 from services.ar_client.web.fakecam import write_y4m
 from services.ar_client.web.intrinsics import write_intrinsics

@@ -9,8 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
-from protocol.frames import look_at
 from protocol.messages import Overlay, Primitive
+from runtime.frames import look_at
 from services.ar_client.project import Intrinsics, Projector
 from services.ar_client.web import wire
 from services.ar_client.web.intrinsics import CameraModel, default_intrinsics, load_intrinsics, scaled, write_intrinsics

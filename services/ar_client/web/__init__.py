@@ -6,7 +6,7 @@ sees the robots, their plans and the doors over the live camera image, and taps 
 - :mod:`.server` serves the page (``static/``) over HTTPS and one WebSocket per page;
 - :mod:`.session` runs one page's WebSocket: camera frames in, that frame's Overlay out, feedback
   in, acks out, the world (robots, intents, doors) for the map view;
-- :mod:`.bridge` is the server's Zenoh side (a :class:`protocol.service.Service`): the world state,
+- :mod:`.bridge` is the server's Zenoh side (a :class:`runtime.service.Service`): the world state,
   the live constraints, feedback to the restrictor, the sim's camera stream for viewer mode;
 - :mod:`.wire` is the page protocol (binary frames, JSON messages) and its limits;
 - :mod:`.security` the per-run access token, the Origin check, the certificate, rate limits;

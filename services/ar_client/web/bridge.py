@@ -1,6 +1,6 @@
 """The tablet server's Zenoh side: what the pages see of the system, and what they say to it.
 
-A :class:`TabletBridge` is a :class:`protocol.service.Service` named ``tablet``. Its worker thread
+A :class:`TabletBridge` is a :class:`runtime.service.Service` named ``tablet``. Its worker thread
 (:meth:`Service.run`, on a thread of the server's) feeds:
 
 - a :class:`WorldView` from ``robot/*/pose`` (latest), ``robot/*/status``, ``intent/*`` and
@@ -18,7 +18,7 @@ These are handed to the web server's event loop through the ``on_constraints`` /
 worker; the server makes them thread-safe).
 
 Outwards: each page's Overlays on ``ar/<cid>/overlay`` (for recorders) and feedback to the
-restrictor with :func:`protocol.feedback_client.send_feedback` (query with ack, retried until
+restrictor with :func:`runtime.feedback_client.send_feedback` (query with ack, retried until
 answered), which blocks and so runs on the server's feedback threads, never on the worker. In study
 mode, what the participant does on ``participant/action`` and her answers on ``participant/answers``
 (the tablet publishes as the ``ar`` role of the deployment's access table).
@@ -30,9 +30,7 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-from protocol.clock import SimClock, WallClock
 from protocol.constraint_library import entries_to_wire
-from protocol.feedback_client import newest_constraints, send_feedback, wait_for_library
 from protocol.messages import (
     CameraFrame,
     ConstraintSet,
@@ -44,8 +42,10 @@ from protocol.messages import (
     QuestionnaireAnswers,
 )
 from protocol.messages import Clock as ClockMessage
-from protocol.service import Service
-from protocol.transport import ZenohOptions
+from runtime.clock import SimClock, WallClock
+from runtime.feedback_client import newest_constraints, send_feedback, wait_for_library
+from runtime.service import Service
+from runtime.transport import ZenohOptions
 
 from ..world import WorldView
 

@@ -11,7 +11,7 @@ import argparse
 import logging
 import sys
 
-from protocol.runner import add_common_arguments
+from runtime.runner import add_common_arguments
 
 from ..cli import detector_option
 
@@ -46,9 +46,9 @@ def _camera_source(text: str) -> str | None:
 
 
 def _run_tablet(args: argparse.Namespace) -> int:
-    from protocol.clock import make_clock
     from protocol.site import load_site
-    from protocol.transport import options_from
+    from runtime.clock import make_clock
+    from runtime.transport import options_from
 
     from .bridge import TabletBridge
     from .intrinsics import DEFAULT_HFOV_DEG, CameraModel, load_intrinsics

@@ -75,7 +75,7 @@ def run_tablet(
     *, site, bridge: TabletBridge, camera_model: CameraModel, options: ServerOptions, listen: ListenOptions
 ) -> int:  # noqa: ANN001
     """Serve until a signal; returns the exit code. ``bridge`` is built but not yet open."""
-    from protocol.certs import CertError
+    from runtime.certs import CertError
 
     from .security import default_state_dir
 

@@ -5,7 +5,7 @@
   (HttpOnly, Secure, SameSite=Strict), compared in constant time. Without it: HTTP 403.
 - **HTTPS**: browsers give the camera only to secure origins (localhost aside), so the server always
   speaks TLS. The certificate is made on first run in the state directory by the deployment's
-  certificate helper (:mod:`protocol.certs`): a small authority ``ca.pem``
+  certificate helper (:mod:`runtime.certs`): a small authority ``ca.pem``
   (install it on a tablet once to silence the browser's warning for good) and ``tablet.pem`` signed
   by it, naming every address the server announces. Later runs reuse both; the tablet certificate
   alone is remade when an address is new or it is about to expire, so a tablet that trusts the
@@ -28,7 +28,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from protocol.certs import HostCert, ensure_host_certificate
+from runtime.certs import HostCert, ensure_host_certificate
 
 log = logging.getLogger("arroch.tablet.security")
 
@@ -100,7 +100,7 @@ class Certificate:
 def ensure_certificate(directory: Path, dns: Iterable[str], ips: Iterable[str]) -> Certificate:
     """The tablet certificate in ``directory`` naming ``dns`` and ``ips``, made or remade as needed.
 
-    Raises :class:`protocol.certs.CertError` when the files cannot be made or read.
+    Raises :class:`runtime.certs.CertError` when the files cannot be made or read.
     """
     directory = Path(directory)
     dns_names = list(dict.fromkeys(["localhost", *dns]))

@@ -15,7 +15,7 @@ import logging
 import sys
 from pathlib import Path
 
-from protocol.certs import CertError, make_certs, parse_hosts
+from runtime.certs import CertError, make_certs, parse_hosts
 
 from . import acl
 from .render import KINDS, PROFILES, TEMPLATE_DIR, RenderError, Request, render

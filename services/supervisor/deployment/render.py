@@ -15,7 +15,7 @@ from pathlib import Path
 
 import zenoh
 
-from protocol.certs import CA_NAME, CertError, verify
+from runtime.certs import CA_NAME, CertError, verify
 
 from . import acl
 

@@ -6,9 +6,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from .errors import SiteError
-from .load import load_site
-from .model import Site
+from protocol.site.errors import SiteError
+from protocol.site.load import load_site
+from protocol.site.model import Site
 
 
 def _ranges(numbers: list[int]) -> str:
@@ -108,7 +108,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
 def cmd_schema(args: argparse.Namespace) -> int:
     import json
 
-    from .fileformat import site_schema
+    from protocol.site.fileformat import site_schema
 
     print(json.dumps(site_schema(), indent=2))
     return 0

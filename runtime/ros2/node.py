@@ -19,7 +19,7 @@ from typing import Any
 import zenoh
 import zenoh.ext
 
-from protocol.service import Service
+from runtime.service import Service
 
 from . import types as ros
 from .attachment import Attachment, gid_of

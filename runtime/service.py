@@ -8,7 +8,7 @@ on arrival keeps bad payloads out of the inbox: however many arrive, they take n
 messages.
 
 A subscription declared ``inline=True`` skips the worker: the payload is decoded and the handler
-called on Zenoh's own receive thread (:func:`protocol.transport.on_zenoh_thread`; other callbacks
+called on Zenoh's own receive thread (:func:`runtime.transport.on_zenoh_thread`; other callbacks
 run on a Python thread zenoh-python feeds from it). That saves two thread hand-offs (tens of µs per
 message on a loaded machine) for cheap, thread-safe handlers such as the site clock or an echo;
 such handlers run concurrently with the worker and with each other.
@@ -47,12 +47,13 @@ from typing import Annotated, Any, TypeVar
 import msgspec
 import zenoh
 
+from protocol.codec import ENCODING, decode, decoder_for, encode, encoder_for, validator_for
+from protocol.errors import ProtocolError
+from protocol.keys import Keys
+from protocol.messages import Clock as ClockMessage
+from protocol.messages import Event, Message
+
 from .clock import SimClock, WallClock
-from .codec import ENCODING, decode, decoder_for, encode, encoder_for, validator_for
-from .errors import ProtocolError
-from .keys import Keys
-from .messages import Clock as ClockMessage
-from .messages import Event, Message
 from .signals import StopSignals
 from .transport import ZenohOptions, on_zenoh_thread, open_session
 
@@ -189,7 +190,7 @@ class Service:
 
     def install_signal_handlers(self) -> None:
         """SIGINT/SIGTERM stop the service. The handlers only note the signal (see
-        :mod:`protocol.signals`); :meth:`run` logs it and stops within 0.1 s."""
+        :mod:`runtime.signals`); :meth:`run` logs it and stops within 0.1 s."""
         self.signals.install()
 
     def on_stop_signal(self) -> None:

@@ -1,6 +1,6 @@
 """``arroch ping``: RobotPose round trips through the protocol layer, to check a link and time it.
 
-``arroch ping serve`` is a :class:`~protocol.service.Service` that hears every ``robot/*/pose``
+``arroch ping serve`` is a :class:`~runtime.service.Service` that hears every ``robot/*/pose``
 (RobotPose), validates it and republishes it unchanged (envelope included) on ``ping/reply``.
 
 ``arroch ping send`` publishes RobotPoses on ``robot/<robot>/pose`` one at a time and times each
@@ -25,9 +25,10 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 
+from protocol.codec import encode
+from protocol.messages import RobotPose
+
 from .clock import make_clock
-from .codec import encode
-from .messages import RobotPose
 from .runner import add_common_arguments, namespace_from, run_service
 from .service import Service
 from .transport import ZenohOptions, options_from

@@ -16,7 +16,7 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from .model import TAG_PRINT_SCALE, DoorLeaf, Opening, Room
+from protocol.site.model import TAG_PRINT_SCALE, DoorLeaf, Opening, Room
 
 FACE_OFFSET = 0.001  # tags hang this far in front of the wall face, so a renderer sees them
 STEP = 0.005  # sweep and candidate resolution along a wall (metres)

@@ -2,7 +2,7 @@
 
 A new service slots in with one :data:`SERVICES` entry: its ``arroch`` sub-command and which of
 ``up``'s options it takes (each option's flags are spelled once, in :data:`OPTION_FLAGS`).
-Every service also gets the common options of :func:`protocol.runner.add_common_arguments`
+Every service also gets the common options of :func:`runtime.runner.add_common_arguments`
 (``--namespace``, ``--site``, ``--clock``, ``--log-level``) and its Zenoh settings: ``--connect`` to
 the supervisor's router, or ``--zenoh-config DIR/<role>.json5`` from ``arroch deploy render`` (the
 access-control role it runs as: its own name, unless its entry names another, as the tablet page
@@ -178,7 +178,7 @@ class Launch:
         return ["--connect", ",".join(self.connect)] if self.connect else []
 
     def zenoh_env(self) -> dict[str, str]:
-        """For extra children: the same router, through the variables protocol.transport reads."""
+        """For extra children: the same router, through the variables runtime.transport reads."""
         env = {"ARROCH_NAMESPACE": self.namespace}
         if self.zenoh_config_dir is None and self.connect:
             env["ARROCH_ZENOH_CONNECT"] = ",".join(self.connect)

@@ -55,8 +55,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
+from protocol.messages import Clock, TeamPlan
+
 from .clock import SimClock
-from .messages import Clock, TeamPlan
 
 LOCKSTEP = "lockstep"  # the Clock's mode
 

@@ -20,9 +20,9 @@ from typing import Any
 
 import numpy as np
 
-from protocol.palette import robot_colors
-from protocol.ros2 import types as ros
 from protocol.site.model import Site
+from runtime.palette import robot_colors
+from runtime.ros2 import types as ros
 
 FLOOR_Z = 0.1  # object cubes rest on the floor (centre 0.1 m up)
 CARRIED_Z = 0.45  # on a robot's top

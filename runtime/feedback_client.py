@@ -24,7 +24,7 @@ from protocol.codec import encode
 from protocol.constraint_library import ConstraintLibrary, decode_library
 from protocol.errors import ProtocolError
 from protocol.messages import ConstraintSet, Feedback, FeedbackAck
-from protocol.service import Service
+from runtime.service import Service
 
 log = logging.getLogger("arroch.feedback")
 

@@ -11,7 +11,7 @@ import threading
 import time
 from typing import Protocol
 
-from .messages import Clock as ClockMessage
+from protocol.messages import Clock as ClockMessage
 
 EXTRAPOLATED_MODES = ("realtime", "rate", "wall")  # modes in which time runs between messages
 MAX_EXTRAPOLATION = 1.0  # seconds: a stalled sim stops time rather than letting it run away

@@ -14,10 +14,11 @@ from __future__ import annotations
 import math
 from itertools import pairwise
 
-from .actions import STEPS, Action
-from .messages import RobotCommand
+from protocol.actions import STEPS, Action
+from protocol.messages import RobotCommand
+from protocol.site.model import Site
+
 from .plane import segment_distance, segment_intersection
-from .site.model import Site
 
 START_TOLERANCE = 1.5  # m; a trajectory may start at most this far from the robot
 REACH = 1.0  # m from the robot's centre within which it can pick up an object

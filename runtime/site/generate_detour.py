@@ -1,6 +1,6 @@
 """The detour family: buildings where only some deliveries need the human's door.
 
-The paper's delivery task (§V-A, :func:`protocol.site.generate_site`) sends every object into the
+The paper's delivery task (§V-A, :func:`runtime.site.generate.generate_site`) sends every object into the
 storage room behind her door, so while she declares herself unavailable the robots can only wait.
 Here the same building, robots and object places serve a mixed errand: a share ``door_share`` of the
 objects (``round(door_share × objects)``, at least one when the share is above 0) go into the
@@ -28,8 +28,9 @@ import random
 import tomllib
 from typing import Any
 
+from protocol.site.load import loads_site
+
 from .generate import generate_site
-from .load import loads_site
 from .tomlw import dump_site
 
 STORAGE = "storage"  # the human's room behind her door (generate_site's layout)
@@ -76,7 +77,7 @@ def generate_detour_site(
         f"seed={seed}, door_share={door_share!r}"
         + "".join(f", {k}={v!r}" for k, v in sorted(options.items()))
         + f").\n{through_door} of {len(objects)} objects go through the human's door.\n"
-        "Regenerate rather than edit: protocol.site.generate_detour.generate_detour_site."
+        "Regenerate rather than edit: runtime.site.generate_detour.generate_detour_site."
     )
     text = dump_site({k: v for k, v in doc.items() if v or k == "site"}, header=header)
     loads_site(text, f"{name}.toml")  # a generated site is always valid; this refuses a generator bug loudly

@@ -14,7 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Arc, Circle, Patch, Rectangle  # noqa: E402
 
-from .model import Opening, Site  # noqa: E402
+from protocol.site.model import Opening, Site  # noqa: E402
 
 WALL = "#3b3b3b"
 HUMAN_DOOR = "#d62728"

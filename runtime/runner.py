@@ -97,6 +97,6 @@ def namespace_from(args: argparse.Namespace) -> str:
     packaged default). Raises ``ValueError`` for a bad site file (see :func:`run_service`)."""
     if getattr(args, "namespace", None):
         return args.namespace
-    from .site import load_site  # only when needed: loading a site is not free
+    from protocol.site import load_site  # only when needed: loading a site is not free
 
     return load_site(getattr(args, "site", None)).name

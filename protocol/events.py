@@ -25,6 +25,7 @@ SECONDS = Float(-1e10, 1e10)  # site-clock seconds (as the messages' TIME)
 COUNT = Int(0, 2**63 - 1)
 NUMBER = int | Float()  # a figure kept as written: an int stays an int in events.jsonl
 POSE = List(Float(-1e6, 1e6), 3, lengths=(3,))  # [x, y, theta]
+POSITION = List(Float(-1e6, 1e6), 2, lengths=(2,))  # [x, y]
 TEXT = Str(4096)
 
 
@@ -168,7 +169,7 @@ class RobotOverlap(EventData):
     robots: List(Ident, 2)
     place: Str(64)
     depth: NUMBER
-    poses: Rows(3, 2, -1e6, 1e6)  # each robot's [x, y, theta]
+    poses: Rows(2, 2, -1e6, 1e6)  # each robot's [x, y]
     actions: List(Str(256), 2)  # what each was doing: says whether the plan or the execution let them meet
 
 
@@ -176,7 +177,7 @@ class WallContact(EventData):
     KIND: ClassVar[str] = "wall_contact"
     place: Str(64)
     depth: NUMBER
-    pose: POSE
+    pose: POSITION  # where the robot's centre was: [x, y]
     action: Str(256)
 
 

@@ -29,15 +29,23 @@ def run_graph(args: argparse.Namespace) -> int:
         if args.format is not None:
             print(f"arroch graph: --format {args.format} does not apply to a picture ({out.name})", file=sys.stderr)
             return 2
-        draw(services, out)
+        try:
+            draw(services, out)
+        except OSError as exc:
+            print(f"arroch graph: cannot write {out}: {exc.strerror or exc}", file=sys.stderr)
+            return 2
         print(f"wrote {out}")
         return 0
     text = WRITERS[args.format or "text"](services)
     if out is None:
         sys.stdout.write(text)
-    else:
+        return 0
+    try:
         out.write_text(text, encoding="utf-8")
-        print(f"wrote {out}")
+    except OSError as exc:
+        print(f"arroch graph: cannot write {out}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {out}")
     return 0
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import math
 
+import msgspec
+
 from protocol.messages import RobotCommand, RobotPose, RobotStatus
 from protocol.site import load_site
 from services.sim.engine import Engine
@@ -20,7 +22,7 @@ def status(action_id: int, action: str, state: str, **kw) -> RobotStatus:
 
 
 def kinds(engine: Engine) -> list[tuple[str, str, bool]]:
-    return [(e.kind, e.object or e.door, "world_version" in e.data) for e in engine.take_events()]
+    return [(e.kind, e.object or e.door, "world_version" in msgspec.to_builtins(e.data)) for e in engine.take_events()]
 
 
 def test_statuses_become_events_and_world_versions():

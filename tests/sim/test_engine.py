@@ -7,7 +7,7 @@ import json
 import msgspec
 import pytest
 
-from protocol.messages import PlanStep, TeamPlan
+from protocol.messages import Event, PlanStep, TeamPlan
 from protocol.site import load_site
 from runtime.lockstep import LockstepGate
 from services.sim.engine import Engine
@@ -113,3 +113,28 @@ def test_wall_pacer_follows_the_rate_and_drops_a_backlog():
     assert pacer.due(2.0, 110.0) == 1  # 10 s stalled: the backlog is dropped, not sprinted through
     assert pacer.dropped > 90.0
     assert pacer.due(2.05, 110.05) == 9  # counted from where it resumed: (2.0 + 0.5 - 2.05) / 0.05
+
+
+def test_every_event_a_mission_emits_crosses_the_wire():
+    """Struct limits are checked on decoding only: an event the engine builds must also decode, or
+    every receiver drops it (wall contacts once did: their position is [x, y], not a pose)."""
+    from protocol.codec import decode, encode
+    from protocol.events import RobotOverlap, WallContact
+    from services.sim.engine import SimEvent
+
+    events = run_mission(Engine(load_site(None), method="arroch", seed=1))
+    # what goes wrong is rare in a scripted mission: one of each, shaped as the engine's watches make them
+    events += [
+        SimEvent(1.0, WallContact(place="corridor", depth=0.004, pose=[1.5, 2.25], action="approach"), robot="r0"),
+        SimEvent(
+            2.0,
+            RobotOverlap(
+                robots=["r0", "r1"], place="lab", depth=0.01, poses=[[1.0, 2.0], [1.3, 2.0]], actions=["", ""]
+            ),
+            robot="r0",
+        ),
+    ]
+    assert {"delivered", "mission_done", "wall_contact", "robot_overlap"} <= {e.kind for e in events}
+    for event in events:
+        msg = Event(data=event.data, robot=event.robot, door=event.door, object=event.object)  # as the sim sends it
+        assert decode(encode(msg), Event) == msg, event.kind

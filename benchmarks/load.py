@@ -176,6 +176,30 @@ def stats_of(service: Service, name: str) -> dict:
     return dict(replies[0].data) if replies else {}
 
 
+def settled_stats(bench: Service, sent: dict[str, int], observer: Observer) -> dict:
+    """The AR client's counters once everything in flight has landed: every frame and pose sent is
+    accounted for and every overlay published received, or the counters stopped moving for a second
+    (a message really lost), or 15 s passed. A fixed pause undercounted a frame still being worked on
+    at a loaded machine's pace."""
+    deadline = time.monotonic() + 15.0
+    last: tuple[int, ...] = ()
+    still_since = time.monotonic()
+    while True:
+        s = stats_of(bench, "ar")
+        frames = s.get("frames", 0) + s.get("bad_frames", 0) + per_key(s, "superseded", f"/camera/{CAMERA}/frame")
+        poses = s.get("received", 0) - s.get("frames", 0) - s.get("bad_frames", 0) + per_key(s, "superseded", "/pose")
+        published = s.get("published", 0)
+        if frames >= sent["camera"] and poses >= sent["poses"] and observer.received >= published:
+            return s
+        now = time.monotonic()
+        counters = (frames, poses, published, observer.received)
+        if counters != last:
+            last, still_since = counters, now
+        elif now - still_since > 1.0 or now > deadline:
+            return s
+        time.sleep(0.1)
+
+
 def rss_mb(pid: int) -> float:
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
         if line.startswith("VmRSS:"):
@@ -259,8 +283,8 @@ def measure(args: argparse.Namespace) -> dict:
         for proc in procs[2:]:
             proc.stop()
             sent[proc.name] = int(proc.wait_for("sent ", timeout=5).split()[-1])
-        time.sleep(1.5)
-        return report(args, observer, samples, stats_of(bench, "ar"), sent, overlays_in_window, (rss_start, rss_end))
+        final = settled_stats(bench, sent, observer)
+        return report(args, observer, samples, final, sent, overlays_in_window, (rss_start, rss_end))
     finally:
         bench.close()
         for proc in reversed(procs):

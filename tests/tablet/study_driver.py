@@ -136,8 +136,17 @@ class StudyPageDriver:
     def switch(self, view: str) -> None:
         """Tap the tab of ``view``: ``puzzle``, or ``robots`` (also accepted: ``ar``, ``map``)."""
         tab = "puzzle" if view == "puzzle" else "robots"
-        self.tap(f"#tab-{tab}")
-        self.wait(f"s.tab === '{tab}'")
+        # A person taps again when a tap did nothing: the page's layout can move between measuring
+        # the tab and the click landing (a status line redrawn as the world starts), and the click
+        # then lands beside the tab.
+        for attempt in range(3):
+            self.tap(f"#tab-{tab}")
+            try:
+                self.wait(f"s.tab === '{tab}'", timeout=10 if attempt < 2 else None)
+                return
+            except BrowserError:
+                if attempt == 2:
+                    raise
 
     def read_puzzle(self) -> list[int]:
         """For each slot, the slot its piece belongs in, as a person sees it: the piece's picture

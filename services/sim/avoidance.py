@@ -60,7 +60,9 @@ class Detour:
 @dataclass
 class Avoidance:
     site: Site
-    free: OccupancyGrid  # where a robot's centre may be (walls and open leaves inflated by its radius)
+    # where a robot's centre may be: walls and open leaves inflated by its radius and the motion
+    # planner's wall clearance (runtime/clearance.py), so ways around robots keep it too
+    free: OccupancyGrid
     radius: float
     controller: ControllerConfig
     contact_gap: float = 0.005  # m: the closest two discs may come while closing in
@@ -373,9 +375,22 @@ class Avoidance:
         def cell(p: tuple[float, float]) -> tuple[int, int]:
             return (min(max(int((p[1] - y0) / res), 0), ny - 1), min(max(int((p[0] - x0) / res), 0), nx - 1))
 
+        def centre(c: tuple[int, int]) -> tuple[float, float]:
+            return (x0 + (c[1] + 0.5) * res, y0 + (c[0] + 0.5) * res)
+
         a, b = cell(start), cell(goal)
         if blocked[b]:
             return []
+        leave: list[tuple[float, float]] = []
+        if not cells[a]:
+            # within the walls' clearance (pushed there, or beside a jamb): every cell around may be
+            # in it too, so the way first leaves it through the nearest cell that is not
+            rows, cols = np.nonzero(~blocked)
+            if rows.size == 0:
+                return []
+            nearest = int(np.argmin((rows - a[0]) ** 2 + (cols - a[1]) ** 2))
+            a = (int(rows[nearest]), int(cols[nearest]))
+            leave = [centre(a)]
         came: dict[tuple[int, int], tuple[int, int]] = {}
         cost = {a: 0.0}
         heap = [(0.0, a)]
@@ -397,8 +412,27 @@ class Avoidance:
         while route[-1] != a:
             route.append(came[route[-1]])
         route.reverse()
-        points = [(x0 + (c[1] + 0.5) * res, y0 + (c[0] + 0.5) * res) for c in _corners(route, blocked)]
-        return [*([backed] if backed else []), *points, goal]
+
+        def straight(a: tuple[int, int], b: tuple[int, int]) -> bool:
+            # over free cells of this grid, and of the fine grid the robot's steps keep to: a leg
+            # cutting a corner of the fine grid's free space would come nearer a wall than its clearance
+            return _straight(a, b, blocked) and self._leg_free(centre(a), centre(b))
+
+        points = [centre(c) for c in _corners(route, straight)]
+        return [*([backed] if backed else []), *leave, *points, goal]
+
+    def _leg_free(self, a: tuple[float, float], b: tuple[float, float]) -> bool:
+        """Whether every point of the straight leg a-b lies on a free cell of ``free`` (sampled at a
+        quarter cell)."""
+        grid = self.free
+        count = max(math.ceil(math.dist(a, b) / (grid.resolution * 0.25)), 1)
+        t = np.linspace(0.0, 1.0, count + 1)
+        cols = np.floor((a[0] + (b[0] - a[0]) * t - grid.origin[0]) / grid.resolution).astype(np.int64)
+        rows = np.floor((a[1] + (b[1] - a[1]) * t - grid.origin[1]) / grid.resolution).astype(np.int64)
+        ny, nx = grid.occupied.shape
+        if rows.min() < 0 or cols.min() < 0 or rows.max() >= ny or cols.max() >= nx:
+            return False
+        return not bool(grid.occupied[rows, cols].any())
 
     def _backed_off(self, robot: Body, others: list[tuple[float, float]]) -> tuple[float, float] | None:
         """Where a robot nearer than ``keep`` to other robots first backs off to before it drives a
@@ -428,14 +462,16 @@ class Avoidance:
         return point
 
 
-def _corners(route: list[tuple[int, int]], blocked: np.ndarray) -> list[tuple[int, int]]:
+def _corners(
+    route: list[tuple[int, int]], straight: Callable[[tuple[int, int], tuple[int, int]], bool]
+) -> list[tuple[int, int]]:
     """The cells of ``route`` (after its first, before its last) where it must turn: from each kept
-    cell the next is the farthest one reached in a straight line over free cells only, so the
+    cell the next is the farthest one reached in a ``straight`` line (over free cells only), so the
     straight legs between them never cut across a blocked cell."""
     kept, here = [], 0
     while here < len(route) - 1:
         nxt = here + 1
-        while nxt + 1 < len(route) and _straight(route[here], route[nxt + 1], blocked):
+        while nxt + 1 < len(route) and straight(route[here], route[nxt + 1]):
             nxt += 1
         if nxt < len(route) - 1:
             kept.append(route[nxt])

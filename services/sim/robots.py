@@ -33,6 +33,7 @@ from typing import Any
 from protocol.events import ActionDone, ActionFailed, Delivered, Loaded, RobotOutcome, WaitingAtDoor
 from protocol.messages import RobotCommand
 from protocol.site.model import Site
+from runtime.clearance import wall_clearance
 from runtime.execution import REACH, START_TOLERANCE, command_problem, dwell_problem
 from runtime.plane import segment_distance
 from runtime.pursuit import ControllerConfig, Path, PurePursuit, Step, crossing_behind, path_crossings
@@ -47,6 +48,7 @@ from .walls import WallDepth
 
 QUEUE_DISTANCE = 1.5  # m from the end of its approach within which a robot kept back queues there
 BOX_SLACK = 1e-9  # m: the door guard's quick box test errs on the side of the exact one
+FREE_RESOLUTION = 0.05  # m: cells of the grid a robot driving around others keeps to (the motion planner's)
 
 
 def _crossing(robot: Robot) -> str:
@@ -128,8 +130,13 @@ class RobotExecutor:
         self.config = config
         self.fleet: dict[str, Robot] = {}  # every robot, for the right of way (set by the engine)
         self.right_of_way = RightOfWay(config.radius, config.robot_margin)
-        # where a robot's centre may go when it drives around another (doors open: shut ones are checked apart)
-        self._free = site.occupancy_grid(resolution=0.05, open_doors=tuple(site.door_leaves), inflate=config.radius)
+        # where a robot's centre may go when it drives around another (doors open: shut ones are checked
+        # apart): the motion planner's grid, so a way around keeps the same clearance from walls
+        self._free = site.occupancy_grid(
+            resolution=FREE_RESOLUTION,
+            open_doors=tuple(site.door_leaves),
+            inflate=config.radius + wall_clearance(FREE_RESOLUTION),
+        )
         self._walls = WallDepth(site, config.radius)
         self.avoidance = Avoidance(site, self._free, config.radius, config.controller)
         self.doorways = Doorways(site)

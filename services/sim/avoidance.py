@@ -88,14 +88,19 @@ class Avoidance:
 
     def clear(self, robot: Body, x: float, y: float, fleet: Mapping[str, Body]) -> bool:
         """Whether stepping to (x, y) keeps ``robot`` from touching any other robot."""
+        return not self.closing_in_on(robot, x, y, fleet)
+
+    def closing_in_on(self, robot: Body, x: float, y: float, fleet: Mapping[str, Body]) -> str:
+        """The first robot (in fleet order) that stepping to (x, y) would bring ``robot`` within
+        ``contact_gap`` of while closing in, else ""."""
         limit = 2.0 * self.radius + self.contact_gap
         for other in fleet.values():
             if other.id == robot.id:
                 continue
             after = math.hypot(x - other.x, y - other.y)
             if after < limit and after < math.hypot(robot.x - other.x, robot.y - other.y) - 1e-9:
-                return False
-        return True
+                return other.id
+        return ""
 
     # ------------------------------------------------------------------ driving around
 

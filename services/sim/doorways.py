@@ -112,14 +112,18 @@ class Doorways:
 
     def lane_taken(self, robot: Mover, x: float, y: float, fleet: Mapping[str, Mover]) -> bool:
         """Whether stepping to (x, y) takes ``robot`` into the lane of an opening another robot holds."""
+        return bool(self.lane_holder(robot, x, y, fleet))
+
+    def lane_holder(self, robot: Mover, x: float, y: float, fleet: Mapping[str, Mover]) -> str:
+        """The robot holding the opening whose lane stepping to (x, y) takes ``robot`` into, else ""."""
         self._release(fleet)
         for opening_id, holder in self.holders.items():
             if holder == robot.id:
                 continue
             opening = self.site.opening(opening_id)
             if in_lane(opening, x, y) and not in_lane(opening, robot.x, robot.y):
-                return True
-        return False
+                return holder
+        return ""
 
     def held_lanes(self, robot: Mover, fleet: Mapping[str, Mover]) -> list[tuple[float, float, float, float]]:
         """The lanes (x0, y0, x1, y1) of the openings other robots hold: ``robot`` may not step in."""

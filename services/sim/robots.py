@@ -44,6 +44,7 @@ from .doorways import Doorways, in_lane
 from .make_way import MakeWay, Request, along
 from .objects import Objects
 from .right_of_way import RightOfWay
+from .waiting import Waits
 from .walls import WallDepth
 
 QUEUE_DISTANCE = 1.5  # m from the end of its approach within which a robot kept back queues there
@@ -143,6 +144,7 @@ class RobotExecutor:
         self.avoidance.keep_out = lambda robot: self.doorways.held_lanes(robot, self.fleet)
         self.avoidance.passable = lambda opening_id: opening_id not in doors.doors or doors.passable(opening_id)
         self.make_way = MakeWay(config.radius, self.doorways.holds)
+        self.waits = Waits()
         self._made_way: set[str] = set()  # robots answering a request to make way
         self._passed_on: dict[str, float] = {}  # robot -> when it last looked for a robot boxing it in
 
@@ -206,7 +208,10 @@ class RobotExecutor:
 
     def step(self, robot: Robot, now: float, dt: float) -> list[Outcome]:
         """Advance one robot by ``dt``; ``now`` is the time at the start of the step."""
-        if self._making_way(robot, now, dt):
+        making_way = self._making_way(robot, now, dt)
+        if making_way or robot.phase != "drive":
+            self.waits.off(robot.id)  # it waits for no robot: it makes way, dwells or waits for a door
+        if making_way:
             return []
         if robot.phase == "drive":
             return self._drive(robot, now, dt)
@@ -233,8 +238,13 @@ class RobotExecutor:
                 robot.yield_time += dt
                 return []
         opening_id = _crossing(robot)
+        kept_back_by = self.waits.waits_for.get(robot.id, "")  # last step's (it may still drive around it)
+        self.waits.off(robot.id)  # until a robot keeps it back below
         if opening_id and not self.doorways.may_cross(robot, opening_id, now, self.fleet):
             robot.v = robot.omega = 0.0  # another robot has the doorway: wait where it is
+            holder = self.doorways.holders.get(opening_id)
+            if holder is not None:
+                self.waits.on(robot.id, holder)
             robot.yield_time += dt
             self.avoidance.moving_on(robot.id)
             return []
@@ -269,26 +279,31 @@ class RobotExecutor:
         if step.held:
             self.right_of_way.forget(robot.id)  # waits for a door or a hold, not for a robot
             self.avoidance.moving_on(robot.id)
-        elif self.doorways.lane_taken(robot, step.x, step.y, self.fleet):
+        elif holder := self.doorways.lane_holder(robot, step.x, step.y, self.fleet):
             # the way ahead crosses a doorway's lane another robot holds: wait for it, like for a door
+            self.waits.on(robot.id, holder)
             robot.v = robot.omega = 0.0
             robot.yield_time += dt
             self.avoidance.moving_on(robot.id)
             return []
         elif (
-            self.right_of_way.blocker(robot, step.x, step.y, self.fleet, now)
-            or not self.avoidance.clear(robot, step.x, step.y, self.fleet)
+            (blocker := self.right_of_way.blocker(robot, step.x, step.y, self.fleet, now))
+            or (blocker := self.avoidance.closing_in_on(robot, step.x, step.y, self.fleet))
             or self.avoidance.driving_around(robot.id)
         ):
+            self.waits.on(robot.id, blocker or kept_back_by)
             if self._goal_taken(robot, follower, now):
                 robot.v = robot.omega = 0.0
                 return self._arrived(robot, now + dt)
-            if self.avoidance.mark_kept_back(robot, now) >= self.avoidance.give_up:
-                # wedged among robots (or behind one that waits for a door) with no way around and
+            kept = self.avoidance.mark_kept_back(robot, now)
+            stuck = kept >= self.avoidance.give_up and self.waits.stuck(robot.id, self.fleet)
+            if stuck or kept >= self.waits.patience:
+                # wedged among robots (a cycle, or behind a parked one) with no way around and
                 # nobody making way: it never pushes through; the planner plans again from here
                 robot.v = robot.omega = 0.0
                 self.avoidance.moving_on(robot.id)
-                return self._fail(robot, f"kept back by robots for {self.avoidance.give_up:g} s")
+                waited = self.avoidance.give_up if stuck else self.waits.patience
+                return self._fail(robot, f"kept back by robots for {waited:g} s")
             step = self._kept_back(robot, follower, now, dt)
             robot.yield_time += dt
         elif step.v > 0.0:

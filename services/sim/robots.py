@@ -49,7 +49,11 @@ from .walls import WallDepth
 
 QUEUE_DISTANCE = 1.5  # m from the end of its approach within which a robot kept back queues there
 BOX_SLACK = 1e-9  # m: the door guard's quick box test errs on the side of the exact one
-FREE_RESOLUTION = 0.05  # m: cells of the grid a robot driving around others keeps to (the motion planner's)
+# m: cells of the grid a robot driving around others keeps to. Half the motion planner's: the clearance
+# it needs for the same guarantee (runtime/clearance.py) is 0.043 m instead of 0.066, so a robot in a
+# 2 m corridor still finds where to step aside between a robot passing down the middle and the wall
+# (twelve robots on the planner's grid jammed the corridor within a minute)
+FREE_RESOLUTION = 0.025
 
 
 def _crossing(robot: Robot) -> str:
@@ -132,7 +136,7 @@ class RobotExecutor:
         self.fleet: dict[str, Robot] = {}  # every robot, for the right of way (set by the engine)
         self.right_of_way = RightOfWay(config.radius, config.robot_margin)
         # where a robot's centre may go when it drives around another (doors open: shut ones are checked
-        # apart): the motion planner's grid, so a way around keeps the same clearance from walls
+        # apart): inflated as the motion planner's grid is, so a way around never touches a wall either
         self._free = site.occupancy_grid(
             resolution=FREE_RESOLUTION,
             open_doors=tuple(site.door_leaves),

@@ -386,4 +386,7 @@ def test_in_lockstep_the_plan_waits_for_the_feedback_ack_and_answers_the_constra
     answer = wait_for_message(every_plan, lambda p: p.world_version >= 2, timeout=30)
     assert (answer.world_version, answer.constraints_version) == (2, 1)
     time.sleep(0.5)
-    assert every_plan.empty(), "one plan answers the version and its constraints"
+    # The same plan published again is no second answer: the planner repeats a plan the simulator
+    # stays paused at (in case it was lost), which a loaded machine can make happen in this pause.
+    later = [p for p, _ in iter(lambda: None if every_plan.empty() else every_plan.get(), None)]
+    assert all(p.plan_id == answer.plan_id for p in later), "one plan answers the version and its constraints"

@@ -53,9 +53,13 @@ lint: setup
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
 
+# Two workers (pytest-xdist), one per core; a test file stays on one worker, so the processes a
+# module's fixtures start are started once. Most tests wait on real processes more than they compute.
+TEST_WORKERS ?= 2
+
 test: lint
 	@.ci/system-packages
-	$(PY) -m pytest -q -p no:cacheprovider
+	$(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile
 
 bench: $(STAMP_BENCH)
 	@mkdir -p benchmarks/results

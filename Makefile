@@ -53,9 +53,10 @@ lint: setup
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
 
-# Two workers (pytest-xdist), one per core; a test file stays on one worker, so the processes a
-# module's fixtures start are started once. Most tests wait on real processes more than they compute.
-TEST_WORKERS ?= 2
+# Three pytest-xdist workers on the two cores: most tests wait on real processes more than they
+# compute (two workers kept ~1.2 cores busy). A test file stays on one worker, so the processes its
+# module fixtures start are started once; files with slow tests go first (tests/conftest.py).
+TEST_WORKERS ?= 3
 
 test: lint
 	@.ci/system-packages

@@ -49,11 +49,12 @@ from protocol.graph import (
 from runtime.transport import free_tcp_port
 from tests.procs import Proc, arroch
 
-pytestmark = pytest.mark.integration
+pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 DECLARED = ("publisher", "subscriber", "queryable")  # the admin space's words
 DIRECTION = {"publisher": "pub", "subscriber": "sub", "queryable": "serve"}
 OBSERVE_TIMEOUT = 90.0  # wall s for every declared use to show (the first overlay comes within ~10 s)
+ADMIN_TIMEOUT = 5.0  # wall s for one query of the router's admin space
 
 
 @dataclass(frozen=True)
@@ -154,11 +155,22 @@ def _listen(session: zenoh.Session, prefix: str) -> tuple[Heard, zenoh.Subscribe
     return heard, session.declare_subscriber(f"{prefix}**", on_sample)
 
 
+def _bounded_get(session: zenoh.Session, selector: str, timeout: float) -> list[zenoh.Reply]:
+    """The replies to ``selector`` that came within ``timeout`` (+1 s). The reply channel's iterator
+    waits for the query's end, which an admin-space query of this process's busy router was once seen
+    never to reach (a 12-minute hang): a callback and a deadline cannot hang."""
+    replies: list[zenoh.Reply] = []
+    done = threading.Event()
+    session.get(selector, handler=zenoh.handlers.Callback(replies.append, done.set), timeout=timeout)
+    done.wait(timeout + 1.0)
+    return list(replies)
+
+
 def _declarations(session: zenoh.Session, prefix: str) -> dict[str, dict[str, set[str]]]:
     """Per client session id: per admin word (publisher, ...), the relative keys it declared."""
     out: dict[str, dict[str, set[str]]] = defaultdict(lambda: defaultdict(set))
     for word in DECLARED:
-        for reply in session.get(f"@/{session.zid()}/router/{word}/**", timeout=5.0):
+        for reply in _bounded_get(session, f"@/{session.zid()}/router/{word}/**", ADMIN_TIMEOUT):
             if reply.ok is None:
                 continue
             key = str(reply.ok.key_expr).split(f"/router/{word}/", 1)[1]

@@ -16,7 +16,7 @@ import pytest
 from protocol.site import load_site
 from tests.procs import arroch
 
-pytestmark = pytest.mark.integration
+pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 TIMEOUT = 150.0  # wall s; the mission takes 30-60 s on the shared 2-core machine
 SITE = load_site()

@@ -53,10 +53,10 @@ lint: setup
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
 
-# Three pytest-xdist workers on the two cores: most tests wait on real processes more than they
-# compute (two workers kept ~1.2 cores busy). A test file stays on one worker, so the processes its
-# module fixtures start are started once; files with slow tests go first (tests/conftest.py).
-TEST_WORKERS ?= 3
+# Two pytest-xdist workers, one per core (three made wall-clock bounds of mission tests miss). A
+# test file stays on one worker, so the processes its module fixtures start are started once; files
+# with slow tests go first (tests/conftest.py), so both workers end together.
+TEST_WORKERS ?= 2
 
 test: lint
 	@.ci/system-packages

@@ -157,8 +157,7 @@ def _listen(session: zenoh.Session, prefix: str) -> tuple[Heard, zenoh.Subscribe
 
 def _bounded_get(session: zenoh.Session, selector: str, timeout: float) -> list[zenoh.Reply]:
     """The replies to ``selector`` that came within ``timeout`` (+1 s). The reply channel's iterator
-    waits for the query's end, which an admin-space query of this process's busy router was once seen
-    never to reach (a 12-minute hang): a callback and a deadline cannot hang."""
+    waits for the query's end: a callback and a deadline cannot keep a failing run waiting."""
     replies: list[zenoh.Reply] = []
     done = threading.Event()
     session.get(selector, handler=zenoh.handlers.Callback(replies.append, done.set), timeout=timeout)
@@ -257,11 +256,25 @@ def test_conditions_named_here_exist_in_the_graph() -> None:
 
 
 def test_running_services_declare_what_the_graph_says(
-    admin_router: tuple[str, zenoh.Session], spawn: Callable[..., Proc], namespace: str, tmp_path: Path
+    admin_router: tuple[str, zenoh.Session],
+    spawn: Callable[..., Proc],
+    namespace: str,
+    tmp_path: Path,
+    request: pytest.FixtureRequest,
 ) -> None:
     endpoint, session = admin_router
     prefix = f"arroch/{namespace}/"
-    heard, _listener = _listen(session, prefix)
+    # What the services send is heard on a client session of its own: a Python callback on the
+    # router's session, run for every camera frame, once deadlocked the router's admin queries.
+    listener_session = zenoh.open(
+        zenoh.Config.from_json5(
+            json.dumps(
+                {"mode": "client", "connect": {"endpoints": [endpoint]}, "scouting": {"multicast": {"enabled": False}}}
+            )
+        )
+    )
+    request.addfinalizer(listener_session.close)
+    heard, _listener = _listen(listener_session, prefix)
     for run in RUNS:
         folder = tmp_path / run.node.name
         folder.mkdir()

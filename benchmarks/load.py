@@ -59,6 +59,7 @@ from runtime.transport import ZenohOptions, free_tcp_port  # noqa: E402
 from tests.procs import Proc, arroch  # noqa: E402
 
 CAMERA = "tablet"
+LINGER = 0.5  # s a generator waits after its last put: a session closed at once may drop what is queued
 # Robots stand in the storage room (x 6..11, y 0..4), in front of the tablet's view of its south wall.
 AREA = (6.6, 0.6, 10.4, 2.6)
 SAMPLE_PERIOD = 0.25  # s between two looks at the AR client's counters
@@ -101,6 +102,7 @@ def run_poses(args: argparse.Namespace) -> int:
             time.sleep(max(0.0, next_due - time.monotonic()))
     finally:
         print(f"sent {service.counters['published']}", flush=True)  # the benchmark's count of this stage
+        time.sleep(LINGER)
         service.close()
     return 0
 
@@ -137,6 +139,7 @@ def run_camera(args: argparse.Namespace) -> int:
             time.sleep(max(0.0, next_due - time.monotonic()))
     finally:
         print(f"sent {service.counters['published']}", flush=True)
+        time.sleep(LINGER)
         service.close()
     return 0
 

@@ -22,11 +22,17 @@ _SKIPPED = pytest.StashKey[dict[str, int]]()
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Files with a ``slow`` test first (in their order), the rest after: ``make test`` hands whole
-    files to its workers in this order, so the long missions start early and the workers finish
-    together instead of one running a long file alone at the end."""
-    slow_files = {item.path for item in items if item.get_closest_marker("slow")}
-    items.sort(key=lambda item: item.path not in slow_files)  # a stable sort keeps each file's order
+    """Files with a ``slow`` test first, the longest first (``slow(seconds=S)``: the wall seconds the
+    file takes, where it is long enough to say), then the rest: ``make test`` hands whole files to its
+    workers in this order, so the long missions start early and the workers finish together instead
+    of one running a long file alone at the end."""
+    seconds: dict[object, float] = {}
+    for item in items:
+        marker = item.get_closest_marker("slow")
+        if marker is not None:
+            seconds[item.path] = max(seconds.get(item.path, 0.0), float(marker.kwargs.get("seconds", 0.0)))
+    # a stable sort keeps each file's own order of tests
+    items.sort(key=lambda item: (item.path not in seconds, -seconds.get(item.path, 0.0)))
 
 
 def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:

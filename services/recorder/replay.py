@@ -33,7 +33,7 @@ import msgspec
 
 from protocol.codec import encode
 from protocol.messages import CameraFrame, Clock, DoorState, Intent, Message, Overlay, RobotCommand
-from runtime.runner import add_common_arguments, zenoh_options
+from runtime.runner import add_common_arguments, leave_if_close_overran, zenoh_options
 from runtime.service import Service
 from runtime.transport import NoRouter, ZenohOptions, through_local_router
 
@@ -200,7 +200,7 @@ def replay_main(args: argparse.Namespace) -> int:
     print(
         f"replay: {replayer.published} messages published on namespace {namespace}{held}", file=sys.stderr, flush=True
     )
-    return code
+    return leave_if_close_overran(replayer, code)
 
 
 def _passes(path: Path, args: argparse.Namespace) -> Iterator[Recorded]:

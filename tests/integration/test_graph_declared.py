@@ -160,7 +160,15 @@ def _bounded_get(session: zenoh.Session, selector: str, timeout: float) -> list[
     waits for the query's end: a callback and a deadline cannot keep a failing run waiting."""
     replies: list[zenoh.Reply] = []
     done = threading.Event()
-    session.get(selector, handler=zenoh.handlers.Callback(replies.append, done.set), timeout=timeout)
+    # The call itself on a thread of its own too: it was once seen to block (a deadlock in the
+    # router's session); then the test fails on what it could not see instead of hanging.
+    asking = threading.Thread(
+        target=session.get,
+        args=(selector,),
+        kwargs={"handler": zenoh.handlers.Callback(replies.append, done.set), "timeout": timeout},
+        daemon=True,
+    )
+    asking.start()
     done.wait(timeout + 1.0)
     return list(replies)
 

@@ -27,7 +27,7 @@ from services.study.layout import StudyFolder, read_jsonl
 from tests.procs import Proc, arroch
 from tests.tablet.study_driver import StudyPageDriver
 
-pytestmark = [pytest.mark.integration, pytest.mark.slow]
+pytestmark = [pytest.mark.integration, pytest.mark.slow(seconds=135)]  # wall s on two quiet cores
 
 DOOR = "d_storage"  # her door, into the storage room where every object goes
 RATE = 10.0

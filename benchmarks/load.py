@@ -179,6 +179,19 @@ def stats_of(service: Service, name: str) -> dict:
     return dict(replies[0].data) if replies else {}
 
 
+def accounted(s: dict) -> dict[str, int]:
+    """From the AR client's counters ``s``: what became of the frames (processed, superseded, refused
+    as bad) and of the poses (handled, superseded) that reached it."""
+    frames_processed, frames_bad = s.get("frames", 0), s.get("bad_frames", 0)
+    return {
+        "frames_processed": frames_processed,
+        "frames_bad": frames_bad,
+        "frames_superseded": per_key(s, "superseded", f"/camera/{CAMERA}/frame"),
+        "poses_handled": s.get("received", 0) - frames_processed - frames_bad,
+        "poses_superseded": per_key(s, "superseded", "/pose"),
+    }
+
+
 def settled_stats(bench: Service, sent: dict[str, int], observer: Observer) -> dict:
     """The AR client's counters once everything in flight has landed: every frame and pose sent is
     accounted for and every overlay published received, or the counters stopped moving for a second
@@ -189,8 +202,9 @@ def settled_stats(bench: Service, sent: dict[str, int], observer: Observer) -> d
     still_since = time.monotonic()
     while True:
         s = stats_of(bench, "ar")
-        frames = s.get("frames", 0) + s.get("bad_frames", 0) + per_key(s, "superseded", f"/camera/{CAMERA}/frame")
-        poses = s.get("received", 0) - s.get("frames", 0) - s.get("bad_frames", 0) + per_key(s, "superseded", "/pose")
+        a = accounted(s)
+        frames = a["frames_processed"] + a["frames_bad"] + a["frames_superseded"]
+        poses = a["poses_handled"] + a["poses_superseded"]
         published = s.get("published", 0)
         if frames >= sent["camera"] and poses >= sent["poses"] and observer.received >= published:
             return s
@@ -304,11 +318,9 @@ def report(
     rss: tuple[float, float],
 ) -> dict:
     """The JSON document: ``s`` is the AR client's final counters, ``sent`` what each generator sent."""
-    frames_processed = s.get("frames", 0)
-    frames_bad = s.get("bad_frames", 0)
-    frames_superseded = per_key(s, "superseded", f"/camera/{CAMERA}/frame")
-    poses_superseded = per_key(s, "superseded", "/pose")
-    poses_handled = s.get("received", 0) - frames_processed - frames_bad
+    a = accounted(s)
+    frames_processed, frames_bad, frames_superseded = a["frames_processed"], a["frames_bad"], a["frames_superseded"]
+    poses_handled, poses_superseded = a["poses_handled"], a["poses_superseded"]
     thirds = [[x for x in samples if k * args.seconds / 3 <= x["t"] < (k + 1) * args.seconds / 3] for k in range(3)]
     return {
         "benchmark": "load",

@@ -7,6 +7,7 @@ import queue
 import time
 import uuid
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import TypeVar
 
 import pytest
@@ -26,7 +27,7 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     file takes, where it is long enough to say), then the rest: ``make test`` hands whole files to its
     workers in this order, so the long missions start early and the workers finish together instead
     of one running a long file alone at the end."""
-    seconds: dict[object, float] = {}
+    seconds: dict[Path, float] = {}  # file -> its longest declared seconds
     for item in items:
         marker = item.get_closest_marker("slow")
         if marker is not None:

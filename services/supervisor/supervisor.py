@@ -30,6 +30,7 @@ from protocol.schema import record_to_wire
 from runtime.clock import SimClock, WallClock
 from runtime.launch.catalog import (
     RECORDER_NAME,
+    RECORDER_STOP_TIMEOUT,
     ROUTER,
     SUPERVISOR_ROLE,
     Launch,
@@ -360,11 +361,11 @@ class Supervisor(Service):
         recorders = [child for child in self.children if child.name == RECORDER_NAME]
         others = [child for child in self.children if child.name != RECORDER_NAME]
         killed = stop_all(others, self.config.stop_timeout, self._hurried)
-        killed += stop_all(recorders, self.config.stop_timeout, self._hurried)
+        killed += stop_all(recorders, max(self.config.stop_timeout, RECORDER_STOP_TIMEOUT), self._hurried)
         if self.router is not None:
             killed += stop_all([self.router], self.config.stop_timeout, self._hurried)
         if killed:
-            log.warning("had to SIGKILL %s after %.0f s", ", ".join(killed), self.config.stop_timeout)
+            log.warning("had to SIGKILL %s: it did not stop in time", ", ".join(killed))
         everyone = ([self.router] if self.router else []) + self.children
         log.info("stopped (%s)", self.stop_reason or "done")
         self.output.end_progress()

@@ -180,6 +180,57 @@ def test_up_does_not_restart_a_child_with_a_configuration_error(spawn, router, n
     assert wait_gone(started(sup)["idle"], 5) == []
 
 
+# A child that notes in a file when it is asked to stop, and leaves ``linger`` s later.
+NOTING_CHILD = """
+import signal, sys, time
+name, log, linger = sys.argv[1], sys.argv[2], float(sys.argv[3])
+def stop(*_):
+    with open(log, "a") as f:
+        f.write(f"{name} asked {time.time()}\\n")
+    time.sleep(linger)
+    with open(log, "a") as f:
+        f.write(f"{name} gone {time.time()}\\n")
+    sys.exit(0)
+signal.signal(signal.SIGTERM, stop)
+open(log, "a").write(f"{name} ready\\n")
+while True:
+    time.sleep(1)
+"""
+
+
+def test_the_recorder_is_stopped_after_the_services_that_publish(spawn, router, namespace, tmp_path):
+    """The recorder settles on what reached it once nothing is published any more: it is asked to stop
+    only once every other service has gone (a run's tail is not lost on a loaded machine)."""
+    script, log = tmp_path / "child.py", tmp_path / "stops.log"
+    script.write_text(NOTING_CHILD)
+    child = f"{{python}} {script} {{name}} {log} {{linger}}"
+    sup = up(
+        spawn,
+        tmp_path / "runs",
+        "--no-router",
+        "--connect",
+        router,
+        "--namespace",
+        namespace,
+        "--services",
+        "",
+        "--no-record",
+        "--child",
+        "recorder=" + child.format(python="{python}", name="recorder", linger=0),
+        "--child",
+        "world=" + child.format(python="{python}", name="world", linger=1.0),
+    )
+    deadline = time.monotonic() + 30
+    while not (log.exists() and log.read_text().count("ready") == 2):
+        assert time.monotonic() < deadline and sup.alive(), sup.output
+        time.sleep(0.05)
+    sup.signal(signal.SIGINT)
+    assert exit_code(sup) == 0, sup.output
+    stops = [line.split() for line in log.read_text().splitlines() if "ready" not in line]
+    at = {(name, what): float(when) for name, what, when in stops}
+    assert at[("recorder", "asked")] >= at[("world", "gone")], at
+
+
 def test_up_until_done_prints_the_metrics_and_writes_the_run_folder(spawn, router, namespace, client, tmp_path):
     sup = up(
         spawn,

@@ -116,6 +116,10 @@ def test_planner_answers_world_versions_and_new_constraints(spawn, router, names
     # late joiners get the current plan from the queryable
     replies = client.query(client.keys.plan(), TeamPlan, timeout=5)
     assert replies and replies[0].plan_id == third.plan_id
+    # and a lockstep simulator that missed them, each robot's current command (the plan's front action)
+    sent = client.query(client.keys.robot_command("*"), RobotCommand, timeout=5)
+    assert sorted(c.robot for c in sent) == sorted(SITE.robots)
+    assert all(c.action_id == third.robots[c.robot][0].action_id for c in sent)
 
 
 def test_unsatisfiable_constraints_give_a_conflict_event_and_the_planner_keeps_going(spawn, router, namespace, client):

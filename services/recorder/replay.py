@@ -38,7 +38,6 @@ from runtime.service import Service
 from runtime.transport import NoRouter, ZenohOptions, through_local_router
 
 from .reading import Recorded, RecordingError, messages, metadata
-from .service import without_shared_memory
 from .topics import MESSAGE_PREFIX, key_of
 
 log = logging.getLogger("arroch.replay")
@@ -172,7 +171,7 @@ def replay_main(args: argparse.Namespace) -> int:
     pacer = Pacer(rate, args.step_size if args.step else None)
     try:
         # A replay into a router of its own would reach no one: say what to start instead.
-        options, _ = through_local_router(without_shared_memory(zenoh_options(args)), become=False)
+        options, _ = through_local_router(zenoh_options(args), become=False)
     except NoRouter as exc:
         log.error("%s", exc)
         return 1

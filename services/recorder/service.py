@@ -39,18 +39,6 @@ PROFILE_TICK = 1.0  # wall seconds between two calls of the profiles' tick (batc
 SETTLE_QUIET, SETTLE_MAX = 0.5, 20.0  # wall s without a message that ends the wait; its longest
 
 
-def without_shared_memory(options: ZenohOptions) -> ZenohOptions:
-    """``options`` with Zenoh's shared-memory transport off, unless it was asked for explicitly.
-
-    Measured with eclipse-zenoh 1.10 on a loaded 2-core machine: a ``--fast`` replay of a 4,295-message
-    mission into a recorder lost 4-34 of its payloads of 3 KiB and more (plans, camera frames,
-    overlays: those that go through shared memory) in every one of 3 runs with it on, none in 7 runs
-    with it off in the recorder and the replay. A recording must have every message."""
-    if "shared_memory" not in options.explicit:
-        options.shared_memory = False
-    return options
-
-
 class RecordingProfile(Protocol):
     def start(self, at: int) -> None: ...
     def origin_fixed(self) -> None: ...

@@ -90,8 +90,8 @@ PAUSED_CLOCK = 0.5  # wall s between clock messages while time stands still
 LOCKSTEP_BUDGET = 0.02  # wall s of stepping per turn of the loop in lockstep, so messages get in
 STALL_WARNING = 10.0  # wall s paused on one reason before lockstep says so at WARNING level
 # Wall s paused for a plan or a command before the planner is asked for what it last sent: it sends a
-# plan again after 2 s, so by then a publication of its was lost on the way (one trial of a 216-trial
-# sample hung so; the plan's repeats were lost too, while queries to the planner were answered).
+# plan again after 2 s, so by then its publications were lost on the way (one trial of a 216-trial
+# sample hung so, a plan and all its repeats lost through Zenoh's shared memory, off since then).
 REFETCH_AFTER = 5.0
 REFETCH_TIMEOUT = 1.0  # wall s the query waits for the planner's answer
 FEEDBACK_ABORT = 120.0  # lockstep: default wall s without an ack of the human's feedback before the run is aborted

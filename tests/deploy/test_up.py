@@ -26,6 +26,11 @@ def up(spawn, run_dir: Path, *args: str) -> Proc:
     return spawn(arroch("up", "--progress", "line", "--run-dir", str(run_dir), *args), name="up")
 
 
+def children_up(spawn, run_dir: Path, router: str, namespace: str, *args: str) -> Proc:
+    """``arroch up`` on a router of the test's, with no ARROCH service: only the ``--child`` ones in ``args``."""
+    return up(spawn, run_dir, "--no-router", "--connect", router, "--namespace", namespace, "--services", "", *args)
+
+
 def started(proc: Proc) -> dict[str, list[int]]:
     """Every pid the supervisor reported starting, per child, in order."""
     pids: dict[str, list[int]] = {}
@@ -129,16 +134,11 @@ def test_up_merges_logs_restarts_killed_children_and_stops_cleanly_on_ctrl_c(spa
 
 
 def test_up_backs_off_then_gives_up_on_a_crash_loop(spawn, router, namespace, tmp_path):
-    sup = up(
+    sup = children_up(
         spawn,
         tmp_path,
-        "--no-router",
-        "--connect",
         router,
-        "--namespace",
         namespace,
-        "--services",
-        "",
         "--max-restarts",
         "2",
         "--child",
@@ -158,16 +158,11 @@ def test_up_backs_off_then_gives_up_on_a_crash_loop(spawn, router, namespace, tm
 
 
 def test_up_does_not_restart_a_child_with_a_configuration_error(spawn, router, namespace, tmp_path):
-    sup = up(
+    sup = children_up(
         spawn,
         tmp_path,
-        "--no-router",
-        "--connect",
         router,
-        "--namespace",
         namespace,
-        "--services",
-        "",
         "--child",
         f"bad={BAD_CONFIG}",
         "--child",
@@ -204,16 +199,11 @@ def test_the_recorder_is_stopped_after_the_services_that_publish(spawn, router, 
     script, log = tmp_path / "child.py", tmp_path / "stops.log"
     script.write_text(NOTING_CHILD)
     child = f"{{python}} {script} {{name}} {log} {{linger}}"
-    sup = up(
+    sup = children_up(
         spawn,
         tmp_path / "runs",
-        "--no-router",
-        "--connect",
         router,
-        "--namespace",
         namespace,
-        "--services",
-        "",
         "--no-record",
         "--child",
         "recorder=" + child.format(python="{python}", name="recorder", linger=0),
@@ -232,16 +222,11 @@ def test_the_recorder_is_stopped_after_the_services_that_publish(spawn, router, 
 
 
 def test_up_until_done_prints_the_metrics_and_writes_the_run_folder(spawn, router, namespace, client, tmp_path):
-    sup = up(
+    sup = children_up(
         spawn,
         tmp_path,
-        "--no-router",
-        "--connect",
         router,
-        "--namespace",
         namespace,
-        "--services",
-        "",
         "--until-done",
         "--child",
         f"idle={IDLE}",

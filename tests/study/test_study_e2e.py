@@ -118,9 +118,9 @@ def _play_trial(driver: StudyPageDriver, url: str, condition: str, first: bool) 
             driver.hold_open()
             did["door_openings"] += 1
         elif not (state.get("puzzle") or {}).get("done"):
-            driver.switch("puzzle")
-            did["moves"] += driver.solve_puzzle(max_moves=1)
-            driver.switch("robots")
+            if driver.switch("puzzle"):  # (the trial may end at any moment: no more tabs then)
+                did["moves"] += driver.solve_puzzle(max_moves=1)
+                driver.switch("robots")
         time.sleep(0.3)  # long enough for the view's next update of the robots (every 0.25 s)
     driver.answer_questionnaire({"arroch-q": ANSWERS[condition]})
     return did

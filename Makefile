@@ -53,9 +53,14 @@ lint: setup
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
 
+# Two pytest-xdist workers, one per core (three made wall-clock bounds of mission tests miss). A
+# test file stays on one worker, so the processes its module fixtures start are started once; files
+# with slow tests go first (tests/conftest.py), so both workers end together.
+TEST_WORKERS ?= 2
+
 test: lint
 	@.ci/system-packages
-	$(PY) -m pytest -q -p no:cacheprovider
+	$(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile
 
 bench: $(STAMP_BENCH)
 	@mkdir -p benchmarks/results

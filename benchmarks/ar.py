@@ -69,7 +69,7 @@ sys.path.insert(0, str(ROOT))
 
 from benchmarks.lib.stdio import c_stdout_to_stderr  # noqa: E402
 from protocol.messages import DoorState, Intent, RobotPose  # noqa: E402
-from protocol.site import load_site  # noqa: E402
+from protocol.site import Site, load_site  # noqa: E402
 from runtime.apriltag import apriltag_corners  # noqa: E402
 from runtime.frames import CameraPose, gravity_in_camera, rotation_angle  # noqa: E402
 from services.ar_client.detect import TagDetector, apriltag_detector, tag_side_px  # noqa: E402
@@ -77,7 +77,7 @@ from services.ar_client.feedback import FeedbackPanel  # noqa: E402
 from services.ar_client.localize import Localizer  # noqa: E402
 from services.ar_client.pipeline import Pipeline  # noqa: E402
 from services.ar_client.project import Intrinsics  # noqa: E402
-from services.ar_client.synth import render, sample_views  # noqa: E402
+from services.ar_client.synth import View, render, sample_views  # noqa: E402
 from services.ar_client.world import WorldView  # noqa: E402
 from services.restrictor.library import library_for_site  # noqa: E402
 
@@ -671,6 +671,16 @@ def hard_main(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------------------------------- --close
 
 
+def render_frames(site: Site, views: list[View], size: tuple[int, int]) -> list[Frame]:
+    """The synthetic frames of ``views`` at ``size`` (frame ``i`` drawn with noise seed ``i``)."""
+    K = Intrinsics.from_fov(size[0], size[1], FOV_Y)
+    frames = []
+    for i, v in enumerate(views):
+        f = render(site, v.pose, K, seed=i)
+        frames.append(Frame(f.image, v.pose, K, f.in_view, f.corners, "synthetic"))
+    return frames
+
+
 def close_main(args: argparse.Namespace) -> int:
     """The close views (the default set at 1280x720) with small-tag reading as built (skipped on frames with
     enough well-seen tags) and read on every frame (as before the skip), alternated round by round in one
@@ -679,12 +689,8 @@ def close_main(args: argparse.Namespace) -> int:
     site = load_site(args.site)
     views = sample_views(site, args.frames, seed=args.seed)
     w, h = SIZES[-1]
-    K = Intrinsics.from_fov(w, h, FOV_Y)
     log(f"close views: rendering {len(views)} frames at {w}x{h}")
-    frames = []
-    for i, v in enumerate(views):
-        f = render(site, v.pose, K, seed=i)
-        frames.append(Frame(f.image, v.pose, K, f.in_view, f.corners, "synthetic"))
+    frames = render_frames(site, views, (w, h))
     known = [lm.tag for lm in site.landmarks]
     policies = {
         "skip_when_well_seen": TagDetector("opencv", known_ids=known),
@@ -790,13 +796,8 @@ def main() -> int:
     }
     groups: list[tuple[str, list[Frame]]] = []
     for w, h in SIZES:
-        K = Intrinsics.from_fov(w, h, FOV_Y)
         log(f"rendering {len(views)} frames at {w}x{h}")
-        frames = []
-        for i, v in enumerate(views):
-            f = render(site, v.pose, K, seed=i)
-            frames.append(Frame(f.image, v.pose, K, f.in_view, f.corners, "synthetic"))
-        groups.append((f"{w}x{h}", frames))
+        groups.append((f"{w}x{h}", render_frames(site, views, (w, h))))
     if args.sim > 0:
         for w, h in SIZES:
             log(f"rendering {args.sim} pybullet frames at {w}x{h} with the simulator's camera")

@@ -156,6 +156,7 @@ PLANNER = ServiceNode(
         pub(_keys.plan(), TeamPlan, "the team plan (makespan, door openings, each robot's steps)"),
         serve(_keys.plan(), TeamPlan, "the current plan, for late joiners"),
         pub(_keys.robot_command(), RobotCommand, "each robot's next action with its trajectory"),
+        serve(_keys.robot_command(), RobotCommand, "each robot's current command, for a simulator that missed it"),
         pub(_keys.intent(), Intent, "each robot's intended motion, for the AR overlay and the bridge"),
         pub(_keys.event(), Event, "plan_conflict: a plan that could not be followed", ON_CONFLICT),
     ),
@@ -180,6 +181,7 @@ RESTRICTOR = ServiceNode(
 SIM_CAMERA = "--camera"
 SIM_HOLD = "--camera, --mode lockstep"  # each held frame waits for its overlay
 _SIM_EXTERNAL = "--robots none or --ros2-bases"  # robots driven outside the simulator
+SIM_REFETCH = "--mode lockstep, paused 5 s for a plan or a command"  # its publication was lost
 SIM = ServiceNode(
     "sim",
     "arroch sim",
@@ -188,6 +190,8 @@ SIM = ServiceNode(
     (
         sub(_keys.robot_command(), RobotCommand, "the robots' actions to execute"),
         sub(_keys.plan(), TeamPlan, "lockstep: the plan answering the current world version"),
+        query(_keys.plan(), TeamPlan, "lockstep: the plan again, when none came", SIM_REFETCH),
+        query(_keys.robot_command(), RobotCommand, "lockstep: the robots' commands again", SIM_REFETCH),
         sub(_keys.study_control(), StudyControl, "the experimenter pauses, resumes or aborts"),
         sub(_keys.participant_action(), ParticipantAction, "the participant's moves", "--human participant"),
         sub(_keys.door_sensor(), DoorState, "real doors' sensors", "--doors sensor"),

@@ -78,9 +78,15 @@ def run_service(build: Callable[[], object]) -> int:
         return 1
     service.run()  # type: ignore[attr-defined]
     code = int(getattr(service, "exit_code", 0))  # a service that gave up sets it (e.g. the sim's lockstep abort)
+    return leave_if_close_overran(service, code)
+
+
+def leave_if_close_overran(service: object, code: int) -> int:
+    """``code``, or, when the service's Zenoh close() overran its budget, the process ends here with it.
+
+    The close still runs on a daemon thread; a normal interpreter exit would wait for the session
+    forever (zenoh-python issue 434) or abort tearing down its threads. Output is flushed first."""
     if getattr(service, "close_timed_out", False):
-        # Zenoh's close() overran its budget and still runs on a daemon thread; a normal interpreter
-        # exit would wait for the session forever (zenoh-python issue 434). Leave now, output flushed.
         logging.shutdown()
         sys.stdout.flush()
         sys.stderr.flush()

@@ -40,7 +40,7 @@ import os
 import queue
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Annotated, Any, TypeVar
 
@@ -627,11 +627,20 @@ class Service:
         # A concrete key answers on itself; a wildcard queryable answers on the key it was asked.
         concrete = _is_concrete(key)
 
+        def replies(query: zenoh.Query) -> list[tuple[str, Message]]:
+            reply = answer(query)
+            return [] if reply is None else [(key if concrete else str(query.key_expr), reply)]
+
+        self.serve_each(key, replies)
+
+    def serve_each(self, key: str, answer: Callable[[zenoh.Query], Iterable[tuple[str, Message]]]) -> None:
+        """Answer queries on ``key`` with every ``(reply key, message)`` of ``answer(query)`` (on
+        Zenoh's thread); each reply key must match the query's key (one per robot of ``robot/*/...``)."""
+
         def on_query(query: zenoh.Query) -> None:
             try:
-                reply = answer(query)
-                if reply is not None:
-                    query.reply(key if concrete else query.key_expr, encode(reply), encoding=zenoh.Encoding(ENCODING))
+                for reply_key, reply in answer(query):
+                    query.reply(reply_key, encode(reply), encoding=zenoh.Encoding(ENCODING))
             except Exception:
                 self.count("handler_errors")
                 self.log.exception("answering a query on %s failed", key)

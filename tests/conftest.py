@@ -7,6 +7,7 @@ import queue
 import time
 import uuid
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import TypeVar
 
 import pytest
@@ -19,6 +20,20 @@ from tests.procs import Proc, arroch
 M = TypeVar("M", bound=Message)
 
 _SKIPPED = pytest.StashKey[dict[str, int]]()
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Files with a ``slow`` test first, the longest first (``slow(seconds=S)``: the wall seconds the
+    file takes, where it is long enough to say), then the rest: ``make test`` hands whole files to its
+    workers in this order, so the long missions start early and the workers finish together instead
+    of one running a long file alone at the end."""
+    seconds: dict[Path, float] = {}  # file -> its longest declared seconds
+    for item in items:
+        marker = item.get_closest_marker("slow")
+        if marker is not None:
+            seconds[item.path] = max(seconds.get(item.path, 0.0), float(marker.kwargs.get("seconds", 0.0)))
+    # a stable sort keeps each file's own order of tests
+    items.sort(key=lambda item: (item.path not in seconds, -seconds.get(item.path, 0.0)))
 
 
 def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter) -> None:

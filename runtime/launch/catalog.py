@@ -87,6 +87,9 @@ def _logs(launch: Launch) -> list[str]:
 
 
 RECORDER_NAME = "recorder"  # its service name (liveliness), which the sim waits for
+# Wall s the recorder has to stop before it is killed: it first drains what is still on its way (its
+# settle lasts at most 20 s), so a run's last messages are recorded even on a loaded machine.
+RECORDER_STOP_TIMEOUT = 30.0
 SIM_CAMERA_ID = "tablet"  # the sim's default --camera-id, which is also the AR client's default --camera
 OVERLAY_FOLDER = "overlays"
 

@@ -25,23 +25,18 @@ def run_graph(args: argparse.Namespace) -> int:
         return 2
     services = [BY_NAME[name] for name in args.service] if args.service else list(SERVICES)
     out = Path(args.out) if args.out else None
-    if out is not None and is_picture(out):
-        if args.format is not None:
-            print(f"arroch graph: --format {args.format} does not apply to a picture ({out.name})", file=sys.stderr)
-            return 2
-        try:
-            draw(services, out)
-        except OSError as exc:
-            print(f"arroch graph: cannot write {out}: {exc.strerror or exc}", file=sys.stderr)
-            return 2
-        print(f"wrote {out}")
-        return 0
-    text = WRITERS[args.format or "text"](services)
+    picture = out is not None and is_picture(out)
+    if picture and args.format is not None:
+        print(f"arroch graph: --format {args.format} does not apply to a picture ({out.name})", file=sys.stderr)
+        return 2
     if out is None:
-        sys.stdout.write(text)
+        sys.stdout.write(WRITERS[args.format or "text"](services))
         return 0
     try:
-        out.write_text(text, encoding="utf-8")
+        if picture:
+            draw(services, out)
+        else:
+            out.write_text(WRITERS[args.format or "text"](services), encoding="utf-8")
     except OSError as exc:
         print(f"arroch graph: cannot write {out}: {exc.strerror or exc}", file=sys.stderr)
         return 2

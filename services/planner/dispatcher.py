@@ -158,6 +158,11 @@ class Dispatcher:
         sent = self.current.get(robot)
         return sent.command if sent is not None else None
 
+    def sent_commands(self) -> list[RobotCommand]:
+        """Each robot's current command, as sent. Called on Zenoh's thread: the dict is copied in one step."""
+        sent = list(self.current.values())
+        return [d.command for d in sent if d.command is not None]
+
     def intents(self, plan_id: int) -> list[Intent]:
         """What every robot with a command is about to follow (for the AR client)."""
         return [

@@ -97,7 +97,12 @@ class PlannerService(Service):
         self.subscribe(k.constraints(), ConstraintSet, self.on_constraints, ordered=True)
         self.subscribe(k.event(), Event, self.on_event, ordered=True)
         self.subscribe(k.clock(), Clock, self.on_clock, ordered=True)
+        # What was last published, for a lockstep simulator that waited in vain for it: its plan, and
+        # the command each robot is on (a publication that never arrived is asked for again).
         self.serve(k.plan(), lambda _query: self.outputs.message)
+        self.serve_each(
+            k.robot_command(), lambda _query: [(k.robot_command(c.robot), c) for c in self.dispatcher.sent_commands()]
+        )
         self.every(0.02, self.tick)
         self._fetch_constraints()  # a restarted planner picks up the active constraints at once
         self.trigger(Start())

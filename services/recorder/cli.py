@@ -36,9 +36,8 @@ Without --connect and with no Zenoh router on the default endpoint, the recorder
 
 def _checked_options(args: argparse.Namespace):
     """The Zenoh options, the recorder becoming the local router when none answers (said in one line)."""
-    from .service import without_shared_memory
 
-    options, note = through_local_router(without_shared_memory(zenoh_options(args)), become=True)
+    options, note = through_local_router(zenoh_options(args), become=True)
     if note:
         log.warning("%s (connect the services to it as to `arroch router`)", note)
     return options

@@ -33,12 +33,11 @@ import msgspec
 
 from protocol.codec import encode
 from protocol.messages import CameraFrame, Clock, DoorState, Intent, Message, Overlay, RobotCommand
-from runtime.runner import add_common_arguments, zenoh_options
+from runtime.runner import add_common_arguments, leave_if_close_overran, zenoh_options
 from runtime.service import Service
 from runtime.transport import NoRouter, ZenohOptions, through_local_router
 
 from .reading import Recorded, RecordingError, messages, metadata
-from .service import without_shared_memory
 from .topics import MESSAGE_PREFIX, key_of
 
 log = logging.getLogger("arroch.replay")
@@ -172,7 +171,7 @@ def replay_main(args: argparse.Namespace) -> int:
     pacer = Pacer(rate, args.step_size if args.step else None)
     try:
         # A replay into a router of its own would reach no one: say what to start instead.
-        options, _ = through_local_router(without_shared_memory(zenoh_options(args)), become=False)
+        options, _ = through_local_router(zenoh_options(args), become=False)
     except NoRouter as exc:
         log.error("%s", exc)
         return 1
@@ -200,7 +199,7 @@ def replay_main(args: argparse.Namespace) -> int:
     print(
         f"replay: {replayer.published} messages published on namespace {namespace}{held}", file=sys.stderr, flush=True
     )
-    return code
+    return leave_if_close_overran(replayer, code)
 
 
 def _passes(path: Path, args: argparse.Namespace) -> Iterator[Recorded]:

@@ -27,8 +27,9 @@ not cross the opening it names.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 from protocol.events import ActionDone, ActionFailed, Delivered, Loaded, RobotOutcome, WaitingAtDoor
 from protocol.messages import RobotCommand
@@ -91,6 +92,39 @@ class Outcome:
     @property
     def kind(self) -> str:
         return self.data.KIND
+
+
+class PlanStep(Protocol):
+    """The plan step an outcome is about: a robot's command, or a ROS 2 robot's status of it."""
+
+    plan_id: str
+    action_id: str
+    action: str
+    args: Sequence[str]
+
+
+def outcome_of(
+    robot: Robot,
+    kind: type[RobotOutcome],
+    step: PlanStep | None,
+    *,
+    door: str = "",
+    object: str = "",
+    new_world: bool = False,
+    reason: str = "",
+) -> Outcome:
+    """The outcome ``kind`` of ``step`` (None: no step), carrying where the robot is as it happens: a
+    consumer can plan from it without relying on the pose stream having arrived first (subscriptions
+    on different keys are not ordered)."""
+    data = (
+        kind()
+        if step is None
+        else kind(plan_id=step.plan_id, action_id=step.action_id, action=step.action, args=list(step.args))
+    )
+    data.pose = [round(robot.x, 6), round(robot.y, 6), round(robot.theta, 6)]
+    if reason:
+        data.reason = reason
+    return Outcome(data, robot.id, door=door, object=object, new_world=new_world)
 
 
 class CommandError(Exception):
@@ -587,18 +621,7 @@ class RobotExecutor:
         new_world: bool = False,
         reason: str = "",
     ) -> Outcome:
-        cmd = robot.command
-        data = (
-            kind()
-            if cmd is None
-            else kind(plan_id=cmd.plan_id, action_id=cmd.action_id, action=cmd.action, args=list(cmd.args))
-        )
-        # Where the robot is as it happens: a consumer can plan from this without relying on the
-        # pose stream having arrived first (subscriptions on different keys are not ordered).
-        data.pose = [round(robot.x, 6), round(robot.y, 6), round(robot.theta, 6)]
-        if reason:
-            data.reason = reason
-        return Outcome(data, robot.id, door=door, object=object, new_world=new_world)
+        return outcome_of(robot, kind, robot.command, door=door, object=object, new_world=new_world, reason=reason)
 
     @staticmethod
     def _set(robot: Robot, **changes: Any) -> None:

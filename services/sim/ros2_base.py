@@ -38,7 +38,7 @@ from runtime.ros2.config import Ros2Config
 from runtime.ros2.node import RosNode, RosPublisher
 
 from .human import HUMAN_RADIUS
-from .robots import Outcome, Robot
+from .robots import Outcome, Robot, outcome_of
 from .scan import Scanner
 
 log = logging.getLogger("arroch.sim")
@@ -211,16 +211,7 @@ class ExternalRobot:
         reason: str = "",
     ) -> Outcome:
         robot = self.engine.robots[self.id]
-        data = kind(
-            plan_id=st.plan_id,
-            action_id=st.action_id,
-            action=st.action,
-            args=list(st.args),
-            pose=[round(robot.x, 6), round(robot.y, 6), round(robot.theta, 6)],
-        )
-        if reason:
-            data.reason = reason
-        return Outcome(data, self.id, door=door, object=object, new_world=new_world)
+        return outcome_of(robot, kind, st, door=door, object=object, new_world=new_world, reason=reason)
 
 
 class ExternalRobots:

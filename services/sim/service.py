@@ -72,7 +72,7 @@ from protocol.messages import (
     TeamPlan,
 )
 from protocol.site.model import Site
-from runtime.lockstep import OPEN, LockstepGate, Wait, simulator_waits
+from runtime.lockstep import COMMAND, OPEN, PLAN, LockstepGate, Wait, simulator_waits
 from runtime.service import Service
 from runtime.transport import ZenohOptions
 
@@ -89,6 +89,11 @@ HEARTBEAT = 1.0  # wall s between republications of every status and door state
 PAUSED_CLOCK = 0.5  # wall s between clock messages while time stands still
 LOCKSTEP_BUDGET = 0.02  # wall s of stepping per turn of the loop in lockstep, so messages get in
 STALL_WARNING = 10.0  # wall s paused on one reason before lockstep says so at WARNING level
+# Wall s paused for a plan or a command before the planner is asked for what it last sent: it sends a
+# plan again after 2 s, so by then its publications were lost on the way (one trial of a 216-trial
+# sample hung so, a plan and all its repeats lost through Zenoh's shared memory, off since then).
+REFETCH_AFTER = 5.0
+REFETCH_TIMEOUT = 1.0  # wall s the query waits for the planner's answer
 FEEDBACK_ABORT = 120.0  # lockstep: default wall s without an ack of the human's feedback before the run is aborted
 EXIT_ABORTED = 3  # exit code of a lockstep run aborted for want of an answer (feedback ack)
 EXIT_STUDY_ABORTED = 4  # exit code (--until-done) of a trial the experimenter aborted (StudyControl abort)
@@ -173,6 +178,7 @@ class SimService(Service):
         self._blocker = ""
         self._blocked_since = 0.0
         self._stall_reported = False
+        self._refetched_at = 0.0  # wall time the planner was last asked for its plan and commands
         self._sender: FeedbackSender | None = None
         self._events_file: IO[str] | None = None
         self._started_wall = 0.0
@@ -279,6 +285,28 @@ class SimService(Service):
             self.engine.plan_seen(plan)
         else:
             self.count("plans_stale")
+
+    def _refetch_plan(self, wall: float, blocker: str) -> None:
+        """Ask the planner for the plan and the commands it last published, and take them as if they had
+        arrived: the same messages, so what happens next does not depend on how they came."""
+        self._refetched_at = wall
+        self.count("plan_refetches")
+        self.log.warning(
+            "lockstep paused %.0f s at t=%.2f (%s): asking the planner for its plan and commands again",
+            wall - self._blocked_since,
+            self.engine.time,
+            blocker,
+        )
+        try:
+            plans = self.query(self.keys.plan(), TeamPlan, timeout=REFETCH_TIMEOUT)
+            commands = self.query(self.keys.robot_command(), RobotCommand, timeout=REFETCH_TIMEOUT)
+        except Exception as exc:  # a session closing under us: the next pause asks again
+            self.log.warning("could not ask the planner: %s", exc)
+            return
+        for plan in plans:
+            self._on_plan(plan, self.keys.plan())
+        for cmd in commands:
+            self._on_command(cmd, self.keys.robot_command(cmd.robot))
 
     def _on_participant(self, action: ParticipantAction, key: str) -> None:
         if action.act not in SIM_ACTS:
@@ -425,6 +453,9 @@ class SimService(Service):
                         "lockstep stalled %.0f s at t=%.2f: %s", wall - self._blocked_since, self.engine.time, blocker
                     )
                     self._stall_reported = True
+                refetch_due = wall - max(self._blocked_since, self._refetched_at) >= REFETCH_AFTER
+                if refetch_due and self._gate_waits_for().awaiting in (PLAN, COMMAND):
+                    self._refetch_plan(wall, blocker)
                 self._paused_heartbeat(wall)
                 return
             self._blocker = ""
@@ -570,12 +601,16 @@ class SimService(Service):
         (:func:`runtime.lockstep.simulator_waits`); ``OPEN`` when it may advance."""
         if self.options.mode != "lockstep":
             return OPEN
-        gate = self.gate.waits_for(
-            self.engine.world_version, {rid: r.last_action_id for rid, r in self.engine.robots.items()}
-        )
+        gate = self._gate_waits_for()
         hold = self._camera.hold.blocker() if self._camera is not None and self._camera.hold is not None else ""
         drivers = self._external.blocker() if self._external is not None else ""
         return simulator_waits(gate, hold, drivers)
+
+    def _gate_waits_for(self) -> Wait:
+        """What the lockstep gate alone waits for: the human's ack, a plan, or a plan's commands."""
+        return self.gate.waits_for(
+            self.engine.world_version, {rid: r.last_action_id for rid, r in self.engine.robots.items()}
+        )
 
     def _camera_hold(self) -> None:
         """Lockstep with a camera: take the held frame when one is due; end a hold that timed out."""

@@ -28,7 +28,16 @@ import zenoh
 from protocol.messages import Event, RobotStatus
 from protocol.schema import record_to_wire
 from runtime.clock import SimClock, WallClock
-from runtime.launch.catalog import ROUTER, SUPERVISOR_ROLE, Launch, ServiceSpec, router_argv, service_argv
+from runtime.launch.catalog import (
+    RECORDER_NAME,
+    RECORDER_STOP_TIMEOUT,
+    ROUTER,
+    SUPERVISOR_ROLE,
+    Launch,
+    ServiceSpec,
+    router_argv,
+    service_argv,
+)
 from runtime.launch.children import CONFIG_ERROR, Child, RestartPolicy, describe_exit, stop_all
 from runtime.service import Service
 from runtime.transport import ZenohOptions
@@ -346,12 +355,17 @@ class Supervisor(Service):
         if self.stop_reason.startswith("received"):
             log.info("%s: stopping everything (a second signal kills at once)", self.stop_reason)
         self.close()
-        # Services first: they may still publish on their way out, through a router that is up.
-        killed = stop_all(self.children, self.config.stop_timeout, self._hurried)
+        # Services first: they may still publish on their way out, through a router that is up. The
+        # recorder after them: it settles on what reached it once nothing is published any more, so a
+        # run's last poses and its mission_done make it into the recording even on a loaded machine.
+        recorders = [child for child in self.children if child.name == RECORDER_NAME]
+        others = [child for child in self.children if child.name != RECORDER_NAME]
+        killed = stop_all(others, self.config.stop_timeout, self._hurried)
+        killed += stop_all(recorders, max(self.config.stop_timeout, RECORDER_STOP_TIMEOUT), self._hurried)
         if self.router is not None:
             killed += stop_all([self.router], self.config.stop_timeout, self._hurried)
         if killed:
-            log.warning("had to SIGKILL %s after %.0f s", ", ".join(killed), self.config.stop_timeout)
+            log.warning("had to SIGKILL %s: it did not stop in time", ", ".join(killed))
         everyone = ([self.router] if self.router else []) + self.children
         log.info("stopped (%s)", self.stop_reason or "done")
         self.output.end_progress()

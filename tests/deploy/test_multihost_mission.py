@@ -28,7 +28,7 @@ from tests.deploy.secure import make_pki, render_configs
 from tests.deploy.test_multihost import PORT, established
 from tests.procs import Proc, arroch
 
-pytestmark = pytest.mark.netns
+pytestmark = [pytest.mark.netns, pytest.mark.slow]
 MISSION_TIMEOUT = 150.0  # wall s for the whole mission; about 30 s on two cores not busy with other work
 UNAUTHORISED = ("nocert", "foreign", "intruder", "ar")
 

@@ -26,6 +26,11 @@ def up(spawn, run_dir: Path, *args: str) -> Proc:
     return spawn(arroch("up", "--progress", "line", "--run-dir", str(run_dir), *args), name="up")
 
 
+def children_up(spawn, run_dir: Path, router: str, namespace: str, *args: str) -> Proc:
+    """``arroch up`` on a router of the test's, with no ARROCH service: only the ``--child`` ones in ``args``."""
+    return up(spawn, run_dir, "--no-router", "--connect", router, "--namespace", namespace, "--services", "", *args)
+
+
 def started(proc: Proc) -> dict[str, list[int]]:
     """Every pid the supervisor reported starting, per child, in order."""
     pids: dict[str, list[int]] = {}
@@ -129,16 +134,11 @@ def test_up_merges_logs_restarts_killed_children_and_stops_cleanly_on_ctrl_c(spa
 
 
 def test_up_backs_off_then_gives_up_on_a_crash_loop(spawn, router, namespace, tmp_path):
-    sup = up(
+    sup = children_up(
         spawn,
         tmp_path,
-        "--no-router",
-        "--connect",
         router,
-        "--namespace",
         namespace,
-        "--services",
-        "",
         "--max-restarts",
         "2",
         "--child",
@@ -158,16 +158,11 @@ def test_up_backs_off_then_gives_up_on_a_crash_loop(spawn, router, namespace, tm
 
 
 def test_up_does_not_restart_a_child_with_a_configuration_error(spawn, router, namespace, tmp_path):
-    sup = up(
+    sup = children_up(
         spawn,
         tmp_path,
-        "--no-router",
-        "--connect",
         router,
-        "--namespace",
         namespace,
-        "--services",
-        "",
         "--child",
         f"bad={BAD_CONFIG}",
         "--child",
@@ -180,17 +175,58 @@ def test_up_does_not_restart_a_child_with_a_configuration_error(spawn, router, n
     assert wait_gone(started(sup)["idle"], 5) == []
 
 
+# A child that notes in a file when it is asked to stop, and leaves ``linger`` s later.
+NOTING_CHILD = """
+import signal, sys, time
+name, log, linger = sys.argv[1], sys.argv[2], float(sys.argv[3])
+def stop(*_):
+    with open(log, "a") as f:
+        f.write(f"{name} asked {time.time()}\\n")
+    time.sleep(linger)
+    with open(log, "a") as f:
+        f.write(f"{name} gone {time.time()}\\n")
+    sys.exit(0)
+signal.signal(signal.SIGTERM, stop)
+open(log, "a").write(f"{name} ready\\n")
+while True:
+    time.sleep(1)
+"""
+
+
+def test_the_recorder_is_stopped_after_the_services_that_publish(spawn, router, namespace, tmp_path):
+    """The recorder settles on what reached it once nothing is published any more: it is asked to stop
+    only once every other service has gone (a run's tail is not lost on a loaded machine)."""
+    script, log = tmp_path / "child.py", tmp_path / "stops.log"
+    script.write_text(NOTING_CHILD)
+    child = f"{{python}} {script} {{name}} {log} {{linger}}"
+    sup = children_up(
+        spawn,
+        tmp_path / "runs",
+        router,
+        namespace,
+        "--no-record",
+        "--child",
+        "recorder=" + child.format(python="{python}", name="recorder", linger=0),
+        "--child",
+        "world=" + child.format(python="{python}", name="world", linger=1.0),
+    )
+    deadline = time.monotonic() + 30
+    while not (log.exists() and log.read_text().count("ready") == 2):
+        assert time.monotonic() < deadline and sup.alive(), sup.output
+        time.sleep(0.05)
+    sup.signal(signal.SIGINT)
+    assert exit_code(sup) == 0, sup.output
+    stops = [line.split() for line in log.read_text().splitlines() if "ready" not in line]
+    at = {(name, what): float(when) for name, what, when in stops}
+    assert at[("recorder", "asked")] >= at[("world", "gone")], at
+
+
 def test_up_until_done_prints_the_metrics_and_writes_the_run_folder(spawn, router, namespace, client, tmp_path):
-    sup = up(
+    sup = children_up(
         spawn,
         tmp_path,
-        "--no-router",
-        "--connect",
         router,
-        "--namespace",
         namespace,
-        "--services",
-        "",
         "--until-done",
         "--child",
         f"idle={IDLE}",

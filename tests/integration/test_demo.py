@@ -29,7 +29,7 @@ from services.recorder.reading import channel_stats
 from tests.procs import Proc, arroch
 from tests.tablet.browser import Browser, chromium_path
 
-pytestmark = [pytest.mark.integration, pytest.mark.slow]
+pytestmark = [pytest.mark.integration, pytest.mark.slow(seconds=90)]  # wall s on two quiet cores
 
 TIMEOUT = 600.0  # wall s; the demo at --pace 30 takes about a minute on two idle cores, minutes on busy ones
 PACE = 30.0  # the test's pace (the default, 10, takes a minute more; the pacing is the same code)

@@ -49,11 +49,12 @@ from protocol.graph import (
 from runtime.transport import free_tcp_port
 from tests.procs import Proc, arroch
 
-pytestmark = pytest.mark.integration
+pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 DECLARED = ("publisher", "subscriber", "queryable")  # the admin space's words
 DIRECTION = {"publisher": "pub", "subscriber": "sub", "queryable": "serve"}
 OBSERVE_TIMEOUT = 90.0  # wall s for every declared use to show (the first overlay comes within ~10 s)
+ADMIN_TIMEOUT = 5.0  # wall s for one query of the router's admin space
 
 
 @dataclass(frozen=True)
@@ -154,11 +155,29 @@ def _listen(session: zenoh.Session, prefix: str) -> tuple[Heard, zenoh.Subscribe
     return heard, session.declare_subscriber(f"{prefix}**", on_sample)
 
 
+def _bounded_get(session: zenoh.Session, selector: str, timeout: float) -> list[zenoh.Reply]:
+    """The replies to ``selector`` that came within ``timeout`` (+1 s). The reply channel's iterator
+    waits for the query's end: a callback and a deadline cannot keep a failing run waiting."""
+    replies: list[zenoh.Reply] = []
+    done = threading.Event()
+    # The call itself on a thread of its own too: it was once seen to block (a deadlock in the
+    # router's session); then the test fails on what it could not see instead of hanging.
+    asking = threading.Thread(
+        target=session.get,
+        args=(selector,),
+        kwargs={"handler": zenoh.handlers.Callback(replies.append, done.set), "timeout": timeout},
+        daemon=True,
+    )
+    asking.start()
+    done.wait(timeout + 1.0)
+    return list(replies)
+
+
 def _declarations(session: zenoh.Session, prefix: str) -> dict[str, dict[str, set[str]]]:
     """Per client session id: per admin word (publisher, ...), the relative keys it declared."""
     out: dict[str, dict[str, set[str]]] = defaultdict(lambda: defaultdict(set))
     for word in DECLARED:
-        for reply in session.get(f"@/{session.zid()}/router/{word}/**", timeout=5.0):
+        for reply in _bounded_get(session, f"@/{session.zid()}/router/{word}/**", ADMIN_TIMEOUT):
             if reply.ok is None:
                 continue
             key = str(reply.ok.key_expr).split(f"/router/{word}/", 1)[1]
@@ -245,11 +264,25 @@ def test_conditions_named_here_exist_in_the_graph() -> None:
 
 
 def test_running_services_declare_what_the_graph_says(
-    admin_router: tuple[str, zenoh.Session], spawn: Callable[..., Proc], namespace: str, tmp_path: Path
+    admin_router: tuple[str, zenoh.Session],
+    spawn: Callable[..., Proc],
+    namespace: str,
+    tmp_path: Path,
+    request: pytest.FixtureRequest,
 ) -> None:
     endpoint, session = admin_router
     prefix = f"arroch/{namespace}/"
-    heard, _listener = _listen(session, prefix)
+    # What the services send is heard on a client session of its own: a Python callback on the
+    # router's session, run for every camera frame, once deadlocked the router's admin queries.
+    listener_session = zenoh.open(
+        zenoh.Config.from_json5(
+            json.dumps(
+                {"mode": "client", "connect": {"endpoints": [endpoint]}, "scouting": {"multicast": {"enabled": False}}}
+            )
+        )
+    )
+    request.addfinalizer(listener_session.close)
+    heard, _listener = _listen(listener_session, prefix)
     for run in RUNS:
         folder = tmp_path / run.node.name
         folder.mkdir()

@@ -20,7 +20,7 @@ import pytest
 
 from tests.procs import arroch
 
-pytestmark = pytest.mark.integration
+pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
 TIMEOUT = 120.0  # wall s; the mission takes about 3 s in lockstep, 36 s at 20x, on two cores
 REPEATS = 20  # the most times one robot may end the same action (same arguments); seen: 6

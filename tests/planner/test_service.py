@@ -116,6 +116,10 @@ def test_planner_answers_world_versions_and_new_constraints(spawn, router, names
     # late joiners get the current plan from the queryable
     replies = client.query(client.keys.plan(), TeamPlan, timeout=5)
     assert replies and replies[0].plan_id == third.plan_id
+    # and a lockstep simulator that missed them, each robot's current command (the plan's front action)
+    sent = client.query(client.keys.robot_command("*"), RobotCommand, timeout=5)
+    assert sorted(c.robot for c in sent) == sorted(SITE.robots)
+    assert all(c.action_id == third.robots[c.robot][0].action_id for c in sent)
 
 
 def test_unsatisfiable_constraints_give_a_conflict_event_and_the_planner_keeps_going(spawn, router, namespace, client):
@@ -386,4 +390,7 @@ def test_in_lockstep_the_plan_waits_for_the_feedback_ack_and_answers_the_constra
     answer = wait_for_message(every_plan, lambda p: p.world_version >= 2, timeout=30)
     assert (answer.world_version, answer.constraints_version) == (2, 1)
     time.sleep(0.5)
-    assert every_plan.empty(), "one plan answers the version and its constraints"
+    # The same plan published again is no second answer: the planner repeats a plan the simulator
+    # stays paused at (in case it was lost), which a loaded machine can make happen in this pause.
+    later = [p for p, _ in iter(lambda: None if every_plan.empty() else every_plan.get(), None)]
+    assert all(p.plan_id == answer.plan_id for p in later), "one plan answers the version and its constraints"

@@ -64,13 +64,15 @@ def test_defaults():
         [],
         [],
         False,
-        None,
+        False,
         None,
     )
     config = build_config(opts)
     assert get(config, "mode") == "client"
     assert get(config, "connect/endpoints") == [DEFAULT_ROUTER]  # client mode needs somewhere to go
     assert get(config, "scouting/multicast/enabled") is False
+    assert get(config, "transport/shared_memory/enabled") is False  # unlike Zenoh's default: it lost payloads
+    assert get(build_config(options_from(parse(), env={"ARROCH_ZENOH_SHM": "1"})), "transport/shared_memory/enabled")
 
 
 def test_environment_overrides_defaults():

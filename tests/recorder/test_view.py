@@ -26,6 +26,9 @@ pytestmark = [pytest.mark.integration, pytest.mark.slow]
 SUBPROTOCOL = "foxglove.sdk.v1"  # foxglove-sdk's name for the Foxglove WebSocket protocol
 MESSAGE_DATA = 0x01  # binary opcode: subscription id (u32), log time (u64), payload
 EVENTS, PLAN = "/arroch/event", "/arroch/plan"  # the messages as JSON
+# s without a message, after the replay ended, that ends the watch: a viewer's channels are not sent
+# in one order (mission_done may come before the last plans), so the end is when nothing more comes
+QUIET = 2.0
 
 
 async def watch(url: str, replay_argv: list[str]) -> tuple[dict[str, list], dict[str, dict], int]:
@@ -38,16 +41,20 @@ async def watch(url: str, replay_argv: list[str]) -> tuple[dict[str, list], dict
         assert ws.protocol == SUBPROTOCOL
         replay = None
         loop = asyncio.get_running_loop()
+        replay_ended: float | None = None  # loop time the replay process was seen to have exited
+        last_message = loop.time()
         deadline = loop.time() + 120
         while loop.time() < deadline:
-            if replay is not None and replay.returncode is not None:
-                if any(isinstance(e, dict) and e.get("kind") == "mission_done" for e in received.get(EVENTS, [])):
-                    break  # the last event of the run is there: the rest went before it
-                deadline = min(deadline, loop.time() + 10.0)  # what the viewer still has on its way
+            if replay is not None and replay.returncode is not None and replay_ended is None:
+                replay_ended = loop.time()
+                deadline = min(deadline, replay_ended + 10.0)  # what the viewer still has on its way
+            if replay_ended is not None and loop.time() - last_message > QUIET:
+                break  # nothing more for QUIET s after the replay ended: the viewer has sent it all
             try:
                 frame = await ws.receive(timeout=0.5)
             except TimeoutError:
                 continue
+            last_message = loop.time()
             if frame.type == aiohttp.WSMsgType.TEXT:
                 op = json.loads(frame.data)
                 if op["op"] == "advertise":

@@ -58,7 +58,7 @@ from tests.reliability.fuzzing import (
 from tests.reliability.missions import PACE
 from tests.restrictor.test_validate import INJECTIONS, NUMERIC_INJECTIONS
 
-pytestmark = [pytest.mark.integration, pytest.mark.slow]
+pytestmark = [pytest.mark.integration, pytest.mark.slow(seconds=40)]  # wall s on two quiet cores
 
 SERVICES = "planner,restrictor,sim,ar"
 MISSION_SEED = 1

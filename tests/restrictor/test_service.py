@@ -61,7 +61,11 @@ def wait_until_served(client: TestClient, timeout: float = 10.0) -> None:
 
 
 def query_set(client: TestClient) -> ConstraintSet:
-    [current] = client.query(client.keys.constraints(), ConstraintSet, timeout=3.0)
+    # A restrictor just up may not be reachable through the router yet: ask again until it answers.
+    deadline = time.monotonic() + 15.0
+    while not (replies := client.query(client.keys.constraints(), ConstraintSet, timeout=3.0)):
+        assert time.monotonic() < deadline, "no restrictor answered the constraints query"
+    [current] = replies
     return current
 
 

@@ -262,3 +262,33 @@ class StandInPlanner(Service):
             if self.accept_feedback and self.answered:
                 self._publish_plan(msg.stamp)
         return ack
+
+
+class LossyStandIn(StandInPlanner):
+    """The stand-in whose publications of some plans (and of those plans' commands) are lost on the
+    way, as they were once between a real planner and the simulator; like the planner, it answers
+    queries for its last plan and for each robot's last command."""
+
+    def __init__(self, *args: object, lose: frozenset[int] = frozenset({2, 4}), **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        self.lose = lose  # plan numbers whose publications never arrive
+        self.lost = 0
+        self.last_plan: TeamPlan | None = None
+        self.last_commands: dict[str, RobotCommand] = {}  # command key -> the command last sent on it
+
+    def setup(self) -> None:
+        super().setup()
+        self.serve(self.keys.plan(), lambda _query: self.last_plan)
+        self.serve_each(self.keys.robot_command(), lambda _query: list(self.last_commands.items()))
+
+    def publish(self, key: str, msg, *, stamp: bool = True, extra=None) -> None:  # noqa: ANN001
+        if stamp:
+            self.stamp(msg)  # as it went out: a query is answered with the very message
+        if isinstance(msg, TeamPlan):
+            self.last_plan = msg
+        elif isinstance(msg, RobotCommand):
+            self.last_commands[key] = msg
+        if self.plans in self.lose:
+            self.lost += 1
+            return
+        super().publish(key, msg, stamp=False, extra=extra)

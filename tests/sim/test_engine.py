@@ -7,6 +7,7 @@ import json
 import msgspec
 import pytest
 
+from protocol.codec import decode, encode
 from protocol.messages import Event, PlanStep, TeamPlan
 from protocol.site import load_site
 from runtime.lockstep import LockstepGate
@@ -118,22 +119,17 @@ def test_wall_pacer_follows_the_rate_and_drops_a_backlog():
 def test_every_event_a_mission_emits_crosses_the_wire():
     """Struct limits are checked on decoding only: an event the engine builds must also decode, or
     every receiver drops it (wall contacts once did: their position is [x, y], not a pose)."""
-    from protocol.codec import decode, encode
-    from protocol.events import RobotOverlap, WallContact
-    from services.sim.engine import SimEvent
-
     events = run_mission(Engine(load_site(None), method="arroch", seed=1))
-    # what goes wrong is rare in a scripted mission: one of each, shaped as the engine's watches make them
-    events += [
-        SimEvent(1.0, WallContact(place="corridor", depth=0.004, pose=[1.5, 2.25], action="approach"), robot="r0"),
-        SimEvent(
-            2.0,
-            RobotOverlap(
-                robots=["r0", "r1"], place="lab", depth=0.01, poses=[[1.0, 2.0], [1.3, 2.0]], actions=["", ""]
-            ),
-            robot="r0",
-        ),
-    ]
+    # What goes wrong is rare in a scripted mission: the engine's own watches report a robot put
+    # into a wall and two robots put onto each other.
+    engine = Engine(load_site(None), method="arroch", seed=1)
+    engine.start()
+    r0, r1, r2 = (engine.robots[rid] for rid in ("r0", "r1", "r2"))
+    walls = engine.wall_contacts.walls
+    r0.x = next(x for x in (r0.x + 0.01 * k for k in range(1, 2000)) if walls.depth(x, r0.y) > 0.01)
+    r2.x, r2.y = r1.x + 0.1, r1.y
+    engine.step()
+    events += engine.take_events()
     assert {"delivered", "mission_done", "wall_contact", "robot_overlap"} <= {e.kind for e in events}
     for event in events:
         msg = Event(data=event.data, robot=event.robot, door=event.door, object=event.object)  # as the sim sends it

@@ -13,7 +13,7 @@ from protocol.messages import Clock, ConstraintSet, DoorState, Event, RobotComma
 from protocol.site import load_site
 from tests.conftest import TestClient, wait_for_message
 from tests.procs import arroch
-from tests.sim.standin import StandInPlanner
+from tests.sim.standin import LossyStandIn, StandInPlanner
 
 pytestmark = pytest.mark.integration
 
@@ -54,7 +54,9 @@ def drain(q) -> list:
     return out
 
 
-def test_two_seeded_lockstep_runs_give_identical_event_logs(router, client, spawn, tmp_path):
+def test_two_seeded_lockstep_runs_give_identical_event_logs_even_when_plans_are_lost(router, client, spawn, tmp_path):
+    """The second run's planner loses two plans and their commands on the way: the simulator, paused
+    for them, asks for them again and takes them as if they had come, so nothing that happens differs."""
     site = load_site(None)
     human = tmp_path / "human.toml"
     human.write_text(HUMAN_TOML)
@@ -98,9 +100,13 @@ def test_two_seeded_lockstep_runs_give_identical_event_logs(router, client, spaw
                 later = drain(clocks) or [first]
                 assert all(c.time == 0.0 and c.paused and c.mode == "lockstep" for c in [first, *later])
                 assert later[-1].world_version == 1 and later[-1].awaiting == "plan"  # what the planner answers at once
-            with Running(StandInPlanner(site, namespace, router)) as planner:
-                assert sim.wait(60) == 0, sim.output
+            standin = StandInPlanner if run == 0 else LossyStandIn
+            with Running(standin(site, namespace, router)) as planner:
+                assert sim.wait(90) == 0, sim.output
                 feedback.append([(f.kind, dict(f.params), f.src) for f in planner.feedback])
+            if run == 1:
+                assert planner.lost >= 2, "the lossy stand-in lost nothing"
+                assert sim.output.count("asking the planner for its plan and commands again") >= 2, sim.output
             time.sleep(0.3)
             wire.append(drain(events))
             # Statuses, door states and poses went out too, with what the planner needs.

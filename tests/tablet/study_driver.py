@@ -133,20 +133,24 @@ class StudyPageDriver:
         self.wait("s.consent === 'given'" if agree else "s.screen === 'declined'")
         return True
 
-    def switch(self, view: str) -> None:
-        """Tap the tab of ``view``: ``puzzle``, or ``robots`` (also accepted: ``ar``, ``map``)."""
+    def switch(self, view: str) -> bool:
+        """Tap the tab of ``view``: ``puzzle``, or ``robots`` (also accepted: ``ar``, ``map``). False
+        when the trial ended first (the questionnaire replaces the tabs), as it may at any moment."""
         tab = "puzzle" if view == "puzzle" else "robots"
         # A person taps again when a tap did nothing: the page's layout can move between measuring
         # the tab and the click landing (a status line redrawn as the world starts), and the click
         # then lands beside the tab.
         for attempt in range(3):
-            self.tap(f"#tab-{tab}")
+            if self.state().get("screen") == "questionnaire":
+                return False
             try:
-                self.wait(f"s.tab === '{tab}'", timeout=10 if attempt < 2 else None)
-                return
+                self.tap(f"#tab-{tab}")  # (gone from the page if the trial has just ended)
+                self.wait(f"s.tab === '{tab}' || s.screen === 'questionnaire'", timeout=10 if attempt < 2 else None)
+                return self.state().get("tab") == tab
             except BrowserError:
                 if attempt == 2:
                     raise
+        return False
 
     def read_puzzle(self) -> list[int]:
         """For each slot, the slot its piece belongs in, as a person sees it: the piece's picture
@@ -178,6 +182,8 @@ class StudyPageDriver:
             puzzle = self.wait("s.puzzle && s.puzzle.picture && !s.puzzle.pending && s.puzzle")
             if puzzle["done"]:
                 break
+            if puzzle["locked"] and self.state().get("screen") == "questionnaire":
+                break  # the trial has just ended
             if puzzle["locked"]:
                 raise BrowserError(f"the puzzle is locked: {puzzle['locked']}")
             home = self.read_puzzle()

@@ -76,7 +76,9 @@ GUARDS: tuple[Guard, ...] = (
         "robot/*/command",
         "only the planner drives the robots, and only robots hear their commands",
         publishers=("planner",),
+        servers=("planner",),  # the command each robot is on, for a simulator that never got it
         readers=("sim",),
+        queriers=("sim",),
     ),
     Guard(
         "feedback",

@@ -27,6 +27,10 @@ class ObjectState:
     def id(self) -> str:
         return self.spec.id
 
+    @property
+    def owner(self) -> str:
+        return self.spec.robot
+
 
 class Objects:
     def __init__(self, specs: dict[str, ObjectSpec]) -> None:

@@ -31,6 +31,7 @@ from typing import Any
 
 from protocol.events import ActionDone, ActionFailed, Delivered, Loaded, RobotOutcome, WaitingAtDoor
 from protocol.messages import RobotCommand, RobotPose, RobotStatus
+from runtime.executor import Outcome, Robot, outcome_of
 from runtime.plane import wrap
 from runtime.pursuit import Path, integrate, path_crossings
 from runtime.ros2 import types as ros
@@ -38,7 +39,6 @@ from runtime.ros2.config import Ros2Config
 from runtime.ros2.node import RosNode, RosPublisher
 
 from .human import HUMAN_RADIUS
-from .robots import Outcome, Robot, outcome_of
 from .scan import Scanner
 
 log = logging.getLogger("arroch.sim")

@@ -7,10 +7,10 @@ from itertools import pairwise
 
 import pytest
 
+from runtime.executor.walls import WallDepth
 from runtime.pursuit import TRACKING_ERROR, ControllerConfig, Path, PurePursuit
 from services.planner.key_points import KeyPoints
 from services.planner.motion import MotionPlanner, polyline_distance
-from services.sim.walls import WallDepth
 from tests.planner.conftest import site_named
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from services.sim.waiting import Waits
+from runtime.executor.waiting import Waits
 from tests.sim.helpers import PASSIVE, Bot, command
 from tests.sim.test_make_way import crowd_engine
 

@@ -1,7 +1,7 @@
 """Robots are solid, and a robot kept back by others drives around them.
 
 Two rules for robots driving in the simulator, on top of the right of way
-(:mod:`services.sim.right_of_way`):
+(:mod:`.right_of_way`):
 
 - **Solid bodies.** No step may bring a robot's disc within ``contact_gap`` of another robot's
   disc while closing in on it, whatever produced the step (following the trajectory, backing away,
@@ -17,9 +17,9 @@ Two rules for robots driving in the simulator, on top of the right of way
   and tries again ``retry`` seconds later.
 
 Where there is no way around, the robot kept back asks the robot in its way to make way
-(:mod:`services.sim.make_way`). When nothing helps for ``give_up`` seconds (robots wedged in a
+(:mod:`.make_way`). When nothing helps for ``give_up`` seconds (robots wedged in a
 cluster, each waiting on the next, or behind one that waits for a door) the robot's action fails
-and the planner plans again from where the robots stand (:mod:`services.sim.robots`). A robot
+and the planner plans again from where the robots stand (:mod:`.executor`). A robot
 never pushes through another: solid bodies hold for every step.
 
 Both rules read other robots where they are now; robots are stepped one after another within a

@@ -1,11 +1,11 @@
 """A robot that cannot get past another asks it to make way.
 
-Driving around (:mod:`services.sim.avoidance`) needs room; where there is none - a robot standing
+Driving around (:mod:`.avoidance`) needs room; where there is none - a robot standing
 on the only way along a queue line, two robots meeting where neither can step aside, a robot
 parked on another's way out of a room - the robot kept back asks the one in its way to make way,
 as people do in a corridor. Robots are ranked, and only a robot of higher rank may ask:
 
-- a robot holding a doorway (it is crossing: :mod:`services.sim.doorways`) first,
+- a robot holding a doorway (it is crossing: :mod:`.doorways`) first,
 - then robots driving a trajectory,
 - then robots waiting for a door to open,
 - then parked robots (their action over, or stopped);
@@ -17,7 +17,7 @@ kept back always gets its way cleared when there is room anywhere nearby.
 
 A robot asked steps off the asker's way ahead (``horizon`` metres of its trajectory) to the nearest
 free point at least a robot's width from it (a robot off the way's points that the asker still
-stops for - its drive cuts a corner nearer than them - steps further: :mod:`.robots`), and waits
+stops for - its drive cuts a corner nearer than them - steps further: :mod:`.executor`), and waits
 there until the asker has gone past (it is no longer kept back and is ``passed`` metres away) or
 stopped driving; then it goes on with what it was doing (a driving robot plans its way back onto
 its trajectory).

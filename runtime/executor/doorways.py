@@ -49,7 +49,7 @@ def lane_rect(opening: Opening) -> tuple[float, float, float, float]:
 
 
 class Mover(Protocol):
-    """What the rule reads from a robot (:class:`services.sim.robots.Robot`)."""
+    """What the rule reads from a robot (:class:`.executor.Robot`)."""
 
     id: str
     x: float

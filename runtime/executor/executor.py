@@ -1,5 +1,12 @@
 """Executing RobotCommands: one state machine per robot (docs/services/robot.md, execution contract).
 
+One executor for every robot ARROCH drives: the simulator's robots (``services/sim/engine.py``
+steps them and applies each step's pose) and a real robot's (``arroch robot --ros2``,
+``services/robot/driver.py``: it sends each step's ``(v, omega)`` as the robot's Twist and takes its
+next pose from the robot's odometry). Each step is decided from the robot's pose, the doors and the
+objects (:mod:`.interfaces`) and the other robots of :attr:`RobotExecutor.fleet`, so a real robot
+yields, waits, drives around, makes way, queues and gives up exactly as a simulated one.
+
 An action runs through phases: *drive* (follow the trajectory with :class:`PurePursuit`), then,
 depending on the action, *wait for the door* (``opendoor``) or *dwell* (``load``/``unload``
 for ``duration``, else the site's ``load_time``), then done. A new command preempts the current
@@ -40,10 +47,9 @@ from runtime.plane import segment_distance
 from runtime.pursuit import ControllerConfig, Path, PurePursuit, Step, crossing_behind, path_crossings
 
 from .avoidance import Avoidance
-from .doors import Doors
 from .doorways import Doorways, in_lane
+from .interfaces import Doors, Objects
 from .make_way import MakeWay, Request, along
-from .objects import Objects
 from .right_of_way import RightOfWay
 from .waiting import Waits
 from .walls import WallDepth
@@ -224,8 +230,8 @@ class RobotExecutor:
                 raise CommandError(f"{cmd.action}: no object {target!r}")
             obj = self.objects[target]
             if cmd.action == "load":
-                if obj.spec.robot != robot.id:
-                    raise CommandError(f"load: object {target!r} belongs to robot {obj.spec.robot!r}")
+                if obj.owner != robot.id:
+                    raise CommandError(f"load: object {target!r} belongs to robot {obj.owner!r}")
                 if obj.delivered or obj.carrier is not None:
                     raise CommandError(
                         f"load: object {target!r} is "
@@ -516,10 +522,8 @@ class RobotExecutor:
                 continue
             if self._breaks_guard(robot, step, door.id, 0.0):
                 return True
-            moving = 0.0 < door.fraction < 1.0 or (door.fraction >= 1.0 and not door.target_open)
-            if moving and self.doors.doorway_clear(door, [(robot.x, robot.y)]):
-                if not self.doors.doorway_clear(door, [(step.x, step.y)]):
-                    return True
+            if self.doors.into_swing(door.id, (robot.x, robot.y), (step.x, step.y)):
+                return True
         return False
 
     def _into_wall(self, robot: Robot, step: Step) -> bool:

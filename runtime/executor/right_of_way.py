@@ -12,7 +12,7 @@ if it comes back to A (a cycle of robots waiting on one another), the robot with
 priority in the cycle (the smallest id) goes on instead of stopping; nor does a robot wait forever
 for one that is parked (its action over, waiting for nothing): once it has been stopped for
 ``patience`` seconds, it goes on past parked robots. Going on never means touching: robots are
-solid (:mod:`services.sim.avoidance`), so a robot that goes on comes up to the other and drives
+solid (:mod:`.avoidance`), so a robot that goes on comes up to the other and drives
 around it where there is room.
 """
 
@@ -27,7 +27,7 @@ PARKED = ("done", "idle", "failed")
 
 
 class Body(Protocol):
-    """What the rule reads from a robot (:class:`services.sim.robots.Robot`)."""
+    """What the rule reads from a robot (:class:`.executor.Robot`)."""
 
     id: str
     x: float

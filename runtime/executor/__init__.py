@@ -9,6 +9,6 @@ the other robots only over Zenoh, adds ``sensed`` (doors and objects as a robot 
 tables, exchanged between robot processes). docs/services/robot.md describes the whole.
 """
 
-from .executor import CommandError, Outcome, Robot, RobotConfig, RobotExecutor, outcome_of
+from .executor import CommandError, Outcome, Robot, RobotConfig, RobotExecutor, outcome_of, status_message
 
-__all__ = ["CommandError", "Outcome", "Robot", "RobotConfig", "RobotExecutor", "outcome_of"]
+__all__ = ["CommandError", "Outcome", "Robot", "RobotConfig", "RobotExecutor", "outcome_of", "status_message"]

@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from protocol.events import ActionDone, ActionFailed, Delivered, Loaded, RobotOutcome, WaitingAtDoor
-from protocol.messages import RobotCommand
+from protocol.messages import RobotCommand, RobotStatus
 from protocol.site.model import Site
 from runtime.clearance import wall_clearance
 from runtime.execution import REACH, START_TOLERANCE, command_problem, dwell_problem
@@ -83,6 +83,11 @@ class RobotConfig:
     robot_margin: float = 0.05  # m a driving robot keeps between its disc and another robot's
     guard_patience: float = 30.0  # s a drive may be refused by the shut-doorway or wall guard before it fails
     wall_tolerance: float = 0.05  # m a disc may reach into a wall (the pursuit's corner cut at a jamb)
+    # m added to ``robot_margin`` and to the closest two discs may come (``Avoidance.contact_gap``) for
+    # robots that see one another late (a real robot's driver sets it from its control period,
+    # services/robot/driver.py: the others' poses are predicted, and this is what the prediction may
+    # miss); 0 in the simulator, which steps every robot on the others' latest poses
+    allowance: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -133,6 +138,25 @@ def outcome_of(
     return Outcome(data, robot.id, door=door, object=object, new_world=new_world)
 
 
+def status_message(robot: Robot, world_version: int) -> RobotStatus:
+    """The robot's ``RobotStatus`` now, with the world version its sender last knew."""
+    cmd = robot.command
+    return RobotStatus(
+        robot=robot.id,
+        state=robot.state,
+        plan_id=cmd.plan_id if cmd else 0,
+        action_id=cmd.action_id if cmd else 0,
+        action=cmd.action if cmd else "",
+        args=list(cmd.args) if cmd else [],
+        progress=max(0.0, min(1.0, robot.progress)),
+        carrying=list(robot.carrying),
+        delivered=list(robot.delivered),
+        waiting_door=robot.waiting_door,
+        detail=robot.detail[:512],
+        world_version=world_version,
+    )
+
+
 class CommandError(Exception):
     """Why a command cannot be executed (the text goes into action_failed's reason)."""
 
@@ -174,7 +198,7 @@ class RobotExecutor:
         self.objects = objects
         self.config = config
         self.fleet: dict[str, Robot] = {}  # every robot, for the right of way (set by the engine)
-        self.right_of_way = RightOfWay(config.radius, config.robot_margin)
+        self.right_of_way = RightOfWay(config.radius, config.robot_margin + config.allowance)
         # where a robot's centre may go when it drives around another (doors open: shut ones are checked
         # apart): inflated as the motion planner's grid is, so a way around never touches a wall either
         self._free = site.occupancy_grid(
@@ -184,6 +208,7 @@ class RobotExecutor:
         )
         self._walls = WallDepth(site, config.radius)
         self.avoidance = Avoidance(site, self._free, config.radius, config.controller)
+        self.avoidance.contact_gap += config.allowance
         self.doorways = Doorways(site)
         self.avoidance.keep_out = lambda robot: self.doorways.held_lanes(robot, self.fleet)
         self.avoidance.passable = lambda opening_id: opening_id not in doors.doors or doors.passable(opening_id)
@@ -196,18 +221,7 @@ class RobotExecutor:
 
     def assign(self, robot: Robot, cmd: RobotCommand) -> list[Outcome]:
         """Start executing ``cmd`` (preempting what ran before). Returns what that caused at once."""
-        robot.command = cmd
-        robot.last_action_id = cmd.action_id
-        self.doorways.forget(robot.id)
-        self.avoidance.moving_on(robot.id)  # how long it was kept back on its last drive counts no more
-        robot.follower = None
-        robot.crossings = []
-        robot.refused_time = 0.0
-        robot.v = robot.omega = 0.0
-        robot.detail = ""
-        robot.progress = 0.0
-        robot.status_changed = True  # a new action_id, even if the state stays "moving"
-        self._set(robot, state="moving", waiting_door="")
+        self._take(robot, cmd)
         if cmd.action == "stop":
             robot.phase = "idle"
             self._set(robot, state="idle", detail="stopped")
@@ -222,6 +236,27 @@ class RobotExecutor:
             robot.crossings = self._crossings(robot.follower.path)
         robot.phase = "drive"
         return []
+
+    def refuse(self, robot: Robot, cmd: RobotCommand, reason: str) -> list[Outcome]:
+        """Take ``cmd`` and fail it at once, for a reason only the caller knows (a real robot whose
+        pose has not come yet)."""
+        self._take(robot, cmd)
+        return self._fail(robot, reason)
+
+    def _take(self, robot: Robot, cmd: RobotCommand) -> None:
+        """``cmd`` is the robot's command from now on: what ran before is over."""
+        robot.command = cmd
+        robot.last_action_id = cmd.action_id
+        self.doorways.forget(robot.id)
+        self.avoidance.moving_on(robot.id)  # how long it was kept back on its last drive counts no more
+        robot.follower = None
+        robot.crossings = []
+        robot.refused_time = 0.0
+        robot.v = robot.omega = 0.0
+        robot.detail = ""
+        robot.progress = 0.0
+        robot.status_changed = True  # a new action_id, even if the state stays "moving"
+        self._set(robot, state="moving", waiting_door="")
 
     def _check(self, robot: Robot, cmd: RobotCommand) -> None:
         target = cmd.args[0] if cmd.args else ""
@@ -600,6 +635,23 @@ class RobotExecutor:
             self.objects.place(oid, robot.x, robot.y, delivered_at=t)
             first = self._outcome(robot, Delivered, object=oid)
         return [first, *self._done(robot)]
+
+    # ------------------------------------------------------------------ what the executor is told
+
+    def fail(self, robot: Robot, reason: str) -> list[Outcome]:
+        """The robot's action fails for a reason the executor does not see itself (a real robot's
+        laser safety field blocked for too long): it stops, and the planner plans again."""
+        return self._fail(robot, reason)
+
+    def note(self, robot: Robot, detail: str) -> None:
+        """Say why a driving robot does not move though its executor drives it (an obstacle its laser
+        sees); "" when that is over."""
+        if robot.phase == "drive":
+            self._set(robot, detail=detail)
+
+    def making_way(self, robot: str) -> bool:
+        """Whether the robot answers a request to make way (it may move, whatever its phase)."""
+        return robot in self._made_way
 
     # ------------------------------------------------------------------ reporting
 

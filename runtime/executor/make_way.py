@@ -148,9 +148,17 @@ class MakeWay:
         request = self.requests.get(robot.id)
         if request is None:
             return None
+        if self._ended(request, robot, now, fleet):
+            del self.requests[robot.id]
+            return None
+        return request
+
+    def _ended(self, request: Request, robot: Body, now: float, fleet: Mapping[str, Body]) -> bool:
+        """Whether ``request`` to ``robot`` is over: its askers are gone or done driving, the one it
+        helped is done, it lasted ``longest``, or the asker stopped asking and is away."""
         asker = fleet.get(request.asker)
         first = fleet.get(request.first_asker)
-        gone = (
+        return (
             asker is None
             or first is None
             or first.phase != "drive"
@@ -161,10 +169,34 @@ class MakeWay:
                 and math.dist((asker.x, asker.y), (robot.x, robot.y)) > self.keep + self.passed
             )
         )
-        if gone:
-            del self.requests[robot.id]
-            return None
-        return request
+
+    def prune(self, asker: str, now: float, fleet: Mapping[str, Body]) -> None:
+        """Drop the requests ``asker`` made that are over. The robot asked drops them as it answers
+        (:meth:`request_for`); an asker that does not step the robot it asked (a robot process, which
+        steps only its own) drops them so, so that asking again is a new request."""
+        for asked, request in list(self.requests.items()):
+            if request.asker == asker:
+                other = fleet.get(asked)
+                if other is None or self._ended(request, other, now, fleet):
+                    del self.requests[asked]
+
+    def made_by(self, asker: str) -> dict[str, Request]:
+        """The requests ``asker`` made, by the robot asked."""
+        return {asked: r for asked, r in self.requests.items() if r.asker == asker}
+
+    def adopt(self, asker: str, made: Mapping[str, Request], now: float) -> None:
+        """Take ``made`` as the requests ``asker`` (another robot process's robot) has made now. A
+        robot already asked by someone else keeps that request while it is fresh and older (the
+        first robot to ask is answered first, as :meth:`ask` has it)."""
+        for asked, request in list(self.requests.items()):
+            if request.asker == asker and asked not in made:
+                del self.requests[asked]
+        for asked, request in made.items():
+            held = self.requests.get(asked)
+            fresh = held is not None and held.asker != asker and now - held.renewed <= self.linger
+            if fresh and (held.since, held.asker) <= (request.since, request.asker):
+                continue
+            self.requests[asked] = request
 
     def off_the_way(self, request: Request, x: float, y: float) -> bool:
         """Whether a robot at (x, y) leaves ``request``'s way free."""

@@ -1,6 +1,6 @@
 """Robots are solid, and a robot kept back by others drives around them.
 
-Two rules for robots driving in the simulator, on top of the right of way
+Two rules for driving robots, simulated or real (:mod:`.executor`), on top of the right of way
 (:mod:`.right_of_way`):
 
 - **Solid bodies.** No step may bring a robot's disc within ``contact_gap`` of another robot's
@@ -22,8 +22,11 @@ cluster, each waiting on the next, or behind one that waits for a door) the robo
 and the planner plans again from where the robots stand (:mod:`.executor`). A robot
 never pushes through another: solid bodies hold for every step.
 
-Both rules read other robots where they are now; robots are stepped one after another within a
-tick, so each sees the others' latest poses and the invariant holds after every robot's step.
+Both rules read other robots where they are now. In the simulator robots are stepped one after
+another within a tick, so each sees the others' latest poses and the invariant holds after every
+robot's step. A real robot's driver sees each other robot where its last pose, carried on at its
+velocity, puts it (:mod:`.peers`), and comes no nearer than ``contact_gap`` grown by
+``RobotConfig.allowance`` (what that prediction may miss).
 """
 
 from __future__ import annotations

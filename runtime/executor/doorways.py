@@ -10,6 +10,10 @@ opening's *lane* - the strip in front of the gap on both sides, ``LANE_DEPTH`` d
 gap and ``LANE_MARGIN`` more - or is told something else, or stops driving. Meanwhile no other robot
 steps into that lane, and one that is in it gets out of the way (:meth:`Doorways.lane_to_leave`).
 So two robots do not meet in a doorway or in front of one, whatever the timing of their commands.
+
+Between robot processes (``arroch robot``) each robot's asks and holds travel in its
+``RobotTraffic`` (:mod:`.traffic`, :meth:`Doorways.adopt`); two robots that each took an opening
+before hearing of the other settle it by :func:`_claim`, the same way in both processes.
 """
 
 from __future__ import annotations

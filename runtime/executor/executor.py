@@ -263,14 +263,14 @@ class RobotExecutor:
         if cmd.action in ("load", "unload"):
             if target not in self.objects:
                 raise CommandError(f"{cmd.action}: no object {target!r}")
-            obj = self.objects[target]
+            objects = self.objects
             if cmd.action == "load":
-                if obj.owner != robot.id:
-                    raise CommandError(f"load: object {target!r} belongs to robot {obj.owner!r}")
-                if obj.delivered or obj.carrier is not None:
+                if objects.owner(target) != robot.id:
+                    raise CommandError(f"load: object {target!r} belongs to robot {objects.owner(target)!r}")
+                if objects.delivered(target) or objects.carrier(target) is not None:
                     raise CommandError(
                         f"load: object {target!r} is "
-                        f"{'delivered' if obj.delivered else 'carried by ' + str(obj.carrier)}"
+                        f"{'delivered' if objects.delivered(target) else 'carried by ' + str(objects.carrier(target))}"
                     )
                 if len(robot.carrying) >= self.config.capacity:
                     raise CommandError(f"load: robot is full ({self.config.capacity} object(s))")
@@ -590,8 +590,8 @@ class RobotExecutor:
             robot.phase = "wait_open"
             return self._wait_open(robot, 0.0)
         # load / unload: check now that the dwell can succeed, so a doomed one fails at once.
-        obj = self.objects[cmd.args[0]]
-        problem = dwell_problem(self.site, robot.x, robot.y, cmd, (obj.x, obj.y), self.config.reach)
+        where = self.objects.position(cmd.args[0])
+        problem = dwell_problem(self.site, robot.x, robot.y, cmd, where, self.config.reach)
         if problem:
             return self._fail(robot, problem)
         robot.phase = "dwell"

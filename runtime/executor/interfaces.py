@@ -58,31 +58,22 @@ class Doors(Protocol):
         ...
 
 
-class Object(Protocol):
-    """One object as the executor reads it."""
-
-    @property
-    def owner(self) -> str:
-        """The robot that is to deliver it (``ObjectSpec.robot``)."""
-        ...
-
-    @property
-    def carrier(self) -> str | None: ...
-
-    @property
-    def delivered(self) -> bool: ...
-
-    @property
-    def x(self) -> float: ...
-
-    @property
-    def y(self) -> float: ...
-
-
 class Objects(Protocol):
     def __contains__(self, oid: object) -> bool: ...
 
-    def __getitem__(self, oid: str) -> Object: ...
+    def owner(self, oid: str) -> str:
+        """The robot that is to deliver it (``ObjectSpec.robot``)."""
+        ...
+
+    def carrier(self, oid: str) -> str | None:
+        """The robot carrying it, if any."""
+        ...
+
+    def delivered(self, oid: str) -> bool: ...
+
+    def position(self, oid: str) -> tuple[float, float]:
+        """Where it is (where the site file puts it, until a robot moves it)."""
+        ...
 
     def pick(self, oid: str, robot: str) -> None: ...
 

@@ -27,6 +27,10 @@ passes the request on: it asks the robot standing where it could go to make way 
 first asker's way and off its own way out - whatever that robot's rank, as long as it is not
 loading or unloading, holding a doorway, or already in the chain (``chain`` robots at most). The
 robots of a chain answer for the first asker: when its request ends, theirs do.
+
+Between robot processes (``arroch robot``) each asker's requests travel in its ``RobotTraffic``
+(:mod:`.traffic`): the robot asked answers a request it heard of (:meth:`MakeWay.adopt`), and the
+asker drops its own requests once over by the test the robot asked applies (:meth:`MakeWay.prune`).
 """
 
 from __future__ import annotations

@@ -8,18 +8,20 @@ knows the objects from the site file and from what its robot did.
   door is open (``DoorState.open``) only once it is passable. Asking an automatic door to open does
   nothing here: the simulator (``--robots none``, ``--ros2-bases``) or the building opens it for
   the robot whose command goes through it.
-- :class:`SiteObjects`: an object is where the site file puts it until its robot loads it;
-  whether it is carried or delivered is what this robot did (a driver restarted mid-mission starts
-  from the site file again, as it always has).
+- :class:`SiteObjects`: an object is where the site file puts it; whether it is carried or
+  delivered is what this robot did, as its ``carrying`` and ``delivered`` say (a driver restarted
+  mid-mission starts from the site file again, as it always has).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from protocol.messages import DoorState
 from protocol.site.model import Site
 from runtime.plane import Point
+
+from .executor import Robot
 
 
 @dataclass
@@ -56,33 +58,33 @@ class SensedDoors:
         return False  # no leaf is reported on the move: a door is open only once it is passable
 
 
-@dataclass
-class SiteObject:
-    owner: str
-    x: float
-    y: float
-    carrier: str | None = None
-    delivered: bool = False
-
-
-@dataclass
 class SiteObjects:
-    site: Site
-    items: dict[str, SiteObject] = field(init=False)
+    """The objects as the site file has them, and as this robot's own ``carrying`` and
+    ``delivered`` lists (which the executor keeps) say: picking one up and putting it down need not
+    be noted again."""
 
-    def __post_init__(self) -> None:
-        self.items = {oid: SiteObject(o.robot, *o.position) for oid, o in sorted(self.site.objects.items())}
+    def __init__(self, site: Site, robot: Robot) -> None:
+        self.specs = site.objects
+        self.robot = robot
 
     def __contains__(self, oid: object) -> bool:
-        return oid in self.items
+        return oid in self.specs
 
-    def __getitem__(self, oid: str) -> SiteObject:
-        return self.items[oid]
+    def owner(self, oid: str) -> str:
+        return self.specs[oid].robot
+
+    def carrier(self, oid: str) -> str | None:
+        return self.robot.id if oid in self.robot.carrying else None
+
+    def delivered(self, oid: str) -> bool:
+        return oid in self.robot.delivered
+
+    def position(self, oid: str) -> tuple[float, float]:
+        x, y = self.specs[oid].position
+        return x, y
 
     def pick(self, oid: str, robot: str) -> None:
-        self.items[oid].carrier = robot
+        """Noted by the executor in the robot's ``carrying``."""
 
     def place(self, oid: str, x: float, y: float, *, delivered_at: float | None = None) -> None:
-        obj = self.items[oid]
-        obj.carrier, obj.x, obj.y = None, x, y
-        obj.delivered = obj.delivered or delivered_at is not None
+        """Noted by the executor in the robot's ``delivered``."""

@@ -27,10 +27,6 @@ class ObjectState:
     def id(self) -> str:
         return self.spec.id
 
-    @property
-    def owner(self) -> str:
-        return self.spec.robot
-
 
 class Objects:
     def __init__(self, specs: dict[str, ObjectSpec]) -> None:
@@ -44,6 +40,20 @@ class Objects:
 
     def __getitem__(self, oid: str) -> ObjectState:
         return self.items[oid]
+
+    # what the executor reads (runtime/executor/interfaces.py)
+    def owner(self, oid: str) -> str:
+        return self.items[oid].spec.robot
+
+    def carrier(self, oid: str) -> str | None:
+        return self.items[oid].carrier
+
+    def delivered(self, oid: str) -> bool:
+        return self.items[oid].delivered
+
+    def position(self, oid: str) -> tuple[float, float]:
+        obj = self.items[oid]
+        return obj.x, obj.y
 
     def pick(self, oid: str, robot: str) -> None:
         obj = self.items[oid]

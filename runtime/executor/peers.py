@@ -109,6 +109,10 @@ class Peers:
         robots = {own.id: own, **{rid: p.robot for rid, p in self.peers.items() if p.pose is not None}}
         return {rid: robots[rid] for rid in sorted(robots)}
 
+    def heard(self) -> list[tuple[float, float]]:
+        """Where the robots heard of lately are, as the last refresh placed them."""
+        return [(p.robot.x, p.robot.y) for p in self.peers.values() if p.pose is not None and not p.stale]
+
     def refresh(self, executor: RobotExecutor, now: float, wall: float) -> list[str]:
         """Put what the other robots said into ``executor`` before a step at site time ``now``: each
         one's predicted pose, its phase and its rows of the tables; for one not heard of for

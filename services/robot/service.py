@@ -49,7 +49,11 @@ from .driver import Driver, DriverConfig
 
 WATCHDOG = 0.02  # wall s between checks of the pose's age and the planner's presence
 HEARTBEAT = 1.0  # wall s between republications of the status (late joiners)
-POSE_PERIOD = 0.05  # s (site and wall) between two RobotPose messages, as the simulator's 20 Hz
+POSE_PERIOD = 0.05  # s (site and wall) between two RobotPose messages of a robot at rest, as the simulator's 20 Hz
+# A robot that moved this far (m, rad) since its last RobotPose publishes one at once, whatever the
+# time: the other robots' drivers keep apart from where it is (in lockstep, site time runs faster
+# than 20 Hz of wall time, and a pose per 50 wall ms would be many ticks old)
+MOVED, TURNED = 0.01, 0.02
 STOP_REPEATS = 3  # zero Twists sent when shutting down (one lost sample must not leave the base moving)
 
 
@@ -104,6 +108,7 @@ class RobotService(Service):
         self._velocity = (0.0, 0.0)
         self._pose_at = -math.inf  # site time the last pose arrived
         self._last_pose_pub = (-math.inf, -math.inf)  # (site, wall) of the last RobotPose
+        self._last_pose: tuple[float, float, float] | None = None  # the pose it gave
         self._planners: set[str] = set()
         self._planner_seen = False
         self._planner_lock = threading.Lock()
@@ -411,10 +416,12 @@ class RobotService(Service):
             return
         now, wall = self.clock.now(), time.monotonic()
         due = now - self._last_pose_pub[0] >= POSE_PERIOD - 1e-9 and wall - self._last_pose_pub[1] >= POSE_PERIOD
-        if not (due or self.driver.changed):
-            return
-        self._last_pose_pub = (now, wall)
         x, y, theta = self.pose
+        last = self._last_pose
+        moved = last is None or math.dist((x, y), last[:2]) >= MOVED or abs(wrap(theta - last[2])) >= TURNED
+        if not (due or moved or self.driver.changed):
+            return
+        self._last_pose_pub, self._last_pose = (now, wall), self.pose
         self.publish(
             self.keys.robot_pose(self.robot),
             RobotPose(robot=self.robot, x=x, y=y, theta=theta, vel=velocity[0], omega=velocity[1]),

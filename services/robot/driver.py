@@ -28,6 +28,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+from msgspec.structs import astuple
+
 from protocol.messages import RobotCommand, RobotStatus, RobotTraffic
 from protocol.site.model import Site
 from runtime.executor import Outcome, Robot, RobotConfig, RobotExecutor, status_message
@@ -69,10 +71,6 @@ class Driver:
         self.executor.fleet = self.peers.fleet(self.robot)
         self._sent: tuple | None = None  # the traffic last published, without its envelope
         self.went_stale: list[str] = []  # robots the last step found not heard of for a while
-
-    @property
-    def id(self) -> str:
-        return self.robot.id
 
     @property
     def phase(self) -> str:
@@ -134,15 +132,7 @@ class Driver:
         """This robot's rows of the traffic tables when they changed since the last ones (``force``:
         anyway), else None."""
         msg = traffic_of(self.executor, self.robot.id)
-        content = (
-            msg.blocked_by,
-            msg.waits_for,
-            msg.crossing,
-            msg.asking,
-            msg.asked_at,
-            [(h.opening, h.at, h.entered) for h in msg.holds],
-            [(a.asked, a.way, a.since, a.renewed, a.root) for a in msg.asks],
-        )
+        content = astuple(msg)  # before the publisher stamps its envelope
         if not force and content == self._sent:
             return None
         self._sent = content

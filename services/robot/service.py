@@ -13,11 +13,13 @@ the map frame, possibly transient-local and sparse, with odometry carrying the p
 them); ``geometry_msgs/Twist`` or ``TwistStamped`` out on its ``cmd_vel``, one per pose received;
 ``sensor_msgs/LaserScan`` in (the safety field, :mod:`runtime.safety_field`), when configured.
 
-Safety: zero velocity goes out when the command ends or is refused, at a closed door, when no pose
-came for ``pose_timeout`` site seconds (checked every 20 ms of wall time), when the scan is stale
-or shows an obstacle in the stop zone (at once, on the scan), when the planner's liveliness token
-goes away (until a planner is back), and three times on SIGINT/SIGTERM before the session closes.
-docs/ros2.md has the details; the figures are in tests/ros2/test_safety.py and test_field.py.
+Safety: zero velocity goes out when the command ends or is refused, at a closed door, for another
+robot (the traffic rules), when no pose came for ``pose_timeout`` site seconds (checked every 20 ms
+of wall time), when the scan is stale or shows an obstacle in the stop zone (at once, on the scan;
+points on the robots it hears of are the traffic rules' business), when the planner's liveliness
+token goes away (until a planner is back), and three times on SIGINT/SIGTERM before the session
+closes. docs/ros2.md has the details; the figures are in tests/ros2/test_safety.py, test_field.py,
+test_driver.py and test_head_on.py.
 """
 
 from __future__ import annotations

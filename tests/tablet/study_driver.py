@@ -167,12 +167,21 @@ class StudyPageDriver:
         """Tap the piece in slot ``a``, then the one in slot ``b``; the puzzle state after the server answered."""
         before = self.wait("s.puzzle && !s.puzzle.pending && s.puzzle.picture && s.puzzle")
         refusals = len(self.state()["refusals"])
-        self.tap(f'#puzzle-board .tile[data-slot="{a}"]')
-        self.wait(f"s.puzzle.selected === {a}")
-        self.tap(f'#puzzle-board .tile[data-slot="{b}"]')
-        return self.wait(
-            f"!s.puzzle.pending && (s.puzzle.moves > {before['moves']} || s.refusals.length > {refusals}) && s.puzzle"
-        )
+        moved = f"s.puzzle.moves > {before['moves']} || s.refusals.length > {refusals}"
+        # A person taps again when a tap did nothing: the board can move between measuring a piece and
+        # the click landing (the view just switched), and a second tap on the first piece unselects it.
+        for attempt in range(3):
+            timeout = 10 if attempt < 2 else None
+            try:
+                if self.state()["puzzle"].get("selected") != a:
+                    self.tap(f'#puzzle-board .tile[data-slot="{a}"]')
+                    self.wait(f"s.puzzle.selected === {a}", timeout=timeout)
+                self.tap(f'#puzzle-board .tile[data-slot="{b}"]')
+                return self.wait(f"!s.puzzle.pending && ({moved}) && s.puzzle", timeout=timeout)
+            except BrowserError:
+                if attempt == 2:
+                    raise
+        raise AssertionError("unreachable")
 
     def solve_puzzle(self, max_moves: int | None = None) -> int:
         """Put pieces where they belong, one swap at a time (each sends the piece home), until the

@@ -37,10 +37,11 @@ def across(opening: Opening, x: float, y: float) -> float:
     return (y - opening.center[1]) if opening.axis == "x" else (x - opening.center[0])
 
 
-def in_lane(opening: Opening, x: float, y: float) -> bool:
-    """Whether (x, y) is in the lane through ``opening``."""
+def in_lane(opening: Opening, x: float, y: float, reach: float = 0.0) -> bool:
+    """Whether (x, y) is in the lane through ``opening`` (``reach``: whether a disc of that radius
+    there reaches into it along the wall)."""
     along = (x - opening.center[0]) if opening.axis == "x" else (y - opening.center[1])
-    return abs(along) <= opening.width / 2.0 + LANE_MARGIN and abs(across(opening, x, y)) <= LANE_DEPTH
+    return abs(along) <= opening.width / 2.0 + LANE_MARGIN + reach and abs(across(opening, x, y)) <= LANE_DEPTH
 
 
 def _claim(opening: Opening, at: tuple[float, float], entered: bool, robot: str) -> tuple:

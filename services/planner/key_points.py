@@ -7,9 +7,9 @@ Keep right: a robot waits to cross an opening beside it, to the right of the lan
 (:meth:`KeyPoints.beside`), so a robot coming through passes one waiting to go the other way. More
 robots waiting at one side queue in a line along the wall (:meth:`KeyPoints.queue_spots`; the
 dispatcher sends each to the first free one), with a spot for every robot of the site where the wall
-is long enough, none in another opening's lane and none where it leaves no way past it. Each robot unloads at its own slot in the destination
-room (:meth:`KeyPoints.drop_point`), so a robot that has finished and stays there is under nobody's
-slot.
+is long enough, none in another opening's lane and none where it leaves no way past it. Each robot
+unloads at its own slot in the destination room (:meth:`KeyPoints.drop_point`), so a robot that has
+finished and stays there is under nobody's slot.
 """
 
 from __future__ import annotations

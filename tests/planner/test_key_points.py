@@ -6,9 +6,9 @@ from __future__ import annotations
 import math
 
 from protocol.site import loads_site
+from runtime.executor.doorways import in_lane
 from runtime.site.generate import generate_site
 from services.planner.dispatcher import Dispatcher
-from runtime.executor.doorways import in_lane
 from services.planner.key_points import DROP_SPACING, PASSING_ROOM, QUEUE_SPACING
 from services.planner.motion import MotionPlanner
 from services.planner.plan import RobotPlan, Step

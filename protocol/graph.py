@@ -41,6 +41,7 @@ from .messages import (
     RobotCommand,
     RobotPose,
     RobotStatus,
+    RobotTraffic,
     StudyControl,
     TeamPlan,
 )
@@ -264,6 +265,7 @@ RECORDED: tuple[tuple[str, type[Message]], ...] = tuple(
         (_keys.robot_pose(), RobotPose),
         (_keys.robot_status(), RobotStatus),
         (_keys.robot_command(), RobotCommand),
+        (_keys.robot_traffic(), RobotTraffic),
         (_keys.door_state(), DoorState),
         (_keys.door_sensor(), DoorState),
         (_keys.plan(), TeamPlan),
@@ -313,8 +315,12 @@ ROBOT = ServiceNode(
     (
         sub(_keys.robot_command(), RobotCommand, "its own commands (robot/<id>/command)"),
         sub(_keys.door_state(), DoorState, "doors ahead: wait at a closed one"),
+        sub(_keys.robot_pose(), RobotPose, "the other robots: where each is (the traffic rules)"),
+        sub(_keys.robot_status(), RobotStatus, "the other robots: what each does (the traffic rules)"),
+        sub(_keys.robot_traffic(), RobotTraffic, "the other robots' rows of the traffic rules' tables"),
         pub(_keys.robot_pose(), RobotPose, "its pose in the site frame (robot/<id>/pose)"),
         pub(_keys.robot_status(), RobotStatus, "its status (robot/<id>/status)"),
+        pub(_keys.robot_traffic(), RobotTraffic, "its rows of the traffic rules' tables (robot/<id>/traffic)"),
         Endpoint("pub", f"{_ROBOT_NS}/cmd_vel", "ROS 2 geometry_msgs/Twist(Stamped)", "velocity commands"),
         Endpoint("sub", f"{_ROBOT_NS}/<pose topic>", "ROS 2 pose type (configured)", "localisation"),
         Endpoint("sub", f"{_ROBOT_NS}/<odom topic>", "ROS 2 nav_msgs/Odometry", "odometry", "odom_topic set"),

@@ -42,6 +42,10 @@ class Keys:
     def robot_command(self, robot: str = "*") -> str:
         return self._k("robot", robot if robot == "*" else _chunk(robot, "robot id"), "command")
 
+    def robot_traffic(self, robot: str = "*") -> str:
+        """What a robot process's executor tells the others about the traffic rules (RobotTraffic)."""
+        return self._k("robot", robot if robot == "*" else _chunk(robot, "robot id"), "traffic")
+
     def door_state(self, door: str = "*") -> str:
         return self._k("door", door if door == "*" else _chunk(door, "door id"), "state")
 

@@ -219,6 +219,47 @@ class RobotCommand(Message):
     duration: Float(0.0, 1e6) = 0.0  # for load/unload: time spent in place after the path
 
 
+MAX_WAY = 1000  # points of a way a robot asks another to clear (3 m at 0.1 m, and the ways a chain adds)
+
+
+class DoorwayHold(Struct, kw_only=True):
+    """An opening a robot holds for its crossing (one crossing robot at a time), where its centre was
+    when it got it, and whether it has been in the opening's lane since."""
+
+    opening: Ident
+    at: List(Float(-COORD, COORD), 2, lengths=(2,))
+    entered: bool = False
+
+
+class MakeWayAsk(Struct, kw_only=True):
+    """A robot's request that robot ``asked`` get off ``way`` (points [x, y] of the asker's way
+    ahead), asked at ``since`` and last renewed at ``renewed``; ``root``: the robot whose way a chain
+    of requests clears ("" when it is the asker's own)."""
+
+    asked: Ident
+    way: Rows(2, MAX_WAY, -COORD, COORD) = []
+    since: Float(-TIME, TIME)
+    renewed: Float(-TIME, TIME)
+    root: Ident = ""
+
+
+class RobotTraffic(Message):
+    """What one robot's executor tells the others about the traffic rules it follows
+    (runtime/executor/traffic.py): the robot it stops for (right of way), the robot it waits for
+    (queues and cycles), the opening its gothrough crosses and whether it asks for it or holds it,
+    and the requests to make way it made. Robot processes (``arroch robot``) publish it on every
+    change and once a second, and merge the others' into their executor's tables; "" means none."""
+
+    robot: Ident
+    blocked_by: Ident = ""
+    waits_for: Ident = ""
+    crossing: Ident = ""  # the opening the robot's command goes through
+    asking: Ident = ""  # the opening it asks to cross (it waits for it)
+    asked_at: Float(-TIME, TIME) = 0.0  # site time it asked
+    holds: List(DoorwayHold, 8) = []
+    asks: List(MakeWayAsk, 32) = []
+
+
 class TeamPlan(Message):
     plan_id: Int(0, 2**63 - 1)
     world_version: Int(0, 2**63 - 1) = 0
@@ -412,6 +453,7 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     RobotPose,
     RobotStatus,
     RobotCommand,
+    RobotTraffic,
     TeamPlan,
     Intent,
     DoorState,

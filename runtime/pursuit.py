@@ -5,7 +5,14 @@ Pure pursuit steers toward a point ``lookahead`` metres further along the path; 
 reaches it is ``2 sin(alpha) / d`` (``alpha`` the bearing of that point, ``d`` its distance). The
 robot drives at ``speed`` unless the curvature would need more than ``max_turn_rate``: then it slows
 down so as to keep the curvature (it never widens a corner by turning less). A bearing beyond
-``turn_in_place`` (e.g. the first row points behind the robot) is met by turning on the spot.
+``turn_in_place`` (e.g. the first row points behind the robot) is met by turning on the spot, until
+the bearing is within ``aligned``.
+
+Corners: pure pursuit cuts a corner, by about 1 mm per degree the path turns there with a 0.3 m
+lookahead (0.06 m at 90°), and beside a doorway's jamb the cut side is the
+wall. So the lookahead point never passes a *sharp* vertex (one where the path turns more than
+``turn_in_place``) before the robot has reached it: the robot drives to the vertex, turns on the
+spot to the next leg and goes on. Only corners up to ``turn_in_place`` are taken along an arc.
 
 The path is followed in space, not in time: a trajectory's timestamps are the planner's forecast,
 and a robot held at a door is late on them by the time it waited. The one exception is a *hold*:
@@ -25,6 +32,17 @@ from dataclasses import dataclass
 
 from .plane import line_side, segment_intersection, wrap
 
+# m: the farthest the controller takes the robot's centre from its path while it follows it, at
+# 0.5 m/s, 1.5 rad/s, 0.3 m lookahead, 20 Hz. Measured (tests/sim/test_controller.py,
+# test_tracking_error_stays_within_its_bound, which fails when the controller strays farther): a
+# corner of up to ``turn_in_place`` (10°) taken along an arc cuts at most 0.0099 m; a sharper one is
+# driven to its vertex and turned on the spot, then left with a bulge under 0.004 m; a bearing of up
+# to ``turn_in_place`` met along an arc (a robot taking up its path again from beside it, its
+# heading a little off) swings it out by at most 0.0162 m. The motion planners keep this between
+# paths and walls (runtime/clearance.py).
+TRACKING_ERROR = 0.02
+CORNER_REACHED = 0.005  # m from a sharp vertex at which the robot turns on the spot to the next leg
+
 
 @dataclass(frozen=True)
 class ControllerConfig:
@@ -33,7 +51,10 @@ class ControllerConfig:
     lookahead: float = 0.3  # m; shorter cuts corners less but reacts more sharply
     goal_tolerance: float = 0.02  # m from the last row counts as arrived
     heading_tolerance: float = 0.03  # rad from the last row's theta counts as aligned
-    turn_in_place: float = 1.0  # rad of bearing beyond which the robot turns on the spot
+    # rad of bearing (or of a path's turn at a vertex) beyond which the robot turns on the spot: a
+    # corner taken along an arc is cut by ~1 mm per degree (TRACKING_ERROR)
+    turn_in_place: float = math.radians(10.0)
+    aligned: float = 0.05  # rad of bearing within which a turn on the spot ends
     align_final_heading: bool = True  # turn to the last row's theta after arriving
 
 
@@ -154,6 +175,17 @@ class Step:
     held: bool = False  # stopped by ``s_limit`` short of the end
 
 
+def sharp_vertices(path: Path, angle: float) -> list[float]:
+    """Arc lengths of the inner vertices where ``path`` turns by more than ``angle`` rad."""
+    found = []
+    for i in range(1, len(path.points) - 1):
+        (ax, ay), (bx, by), (cx, cy) = path.points[i - 1], path.points[i], path.points[i + 1]
+        turn = wrap(math.atan2(cy - by, cx - bx) - math.atan2(by - ay, bx - ax))
+        if abs(turn) > angle:
+            found.append(path.s[i])
+    return found
+
+
 class PurePursuit:
     """Follows one path; keeps the progress along it between steps."""
 
@@ -163,6 +195,8 @@ class PurePursuit:
         self.s = 0.0  # progress: arc length of the closest path point
         self.cross_track = 0.0  # distance from that point at the last step
         self.aligning = False
+        self.turning = False  # turning on the spot until the bearing is within ``aligned``
+        self._corners = sharp_vertices(path, config.turn_in_place)  # not reached yet, in path order
 
     def step(self, x: float, y: float, theta: float, dt: float, s_limit: float = math.inf) -> Step:
         cfg, path = self.config, self.path
@@ -189,21 +223,41 @@ class PurePursuit:
         allowed = s_limit - self.s
         if allowed <= 0.005:
             return Step(x, y, theta, 0.0, 0.0, held=True)
-        tx, ty = path.point_at(self.s + cfg.lookahead) if path.length - self.s > cfg.lookahead else path.end
+        corner = self._next_corner(x, y)
+        ahead = self.s + cfg.lookahead
+        if corner is not None and corner < ahead:
+            tx, ty = path.point_at(corner)  # not past a sharp vertex: that would cut it
+        else:
+            tx, ty = path.point_at(ahead) if path.length - self.s > cfg.lookahead else path.end
         ld = math.hypot(tx - x, ty - y)
         alpha = wrap(math.atan2(ty - y, tx - x) - theta) if ld > 1e-9 else 0.0
-        if abs(alpha) > cfg.turn_in_place:
+        self.turning = abs(alpha) > (cfg.aligned if self.turning else cfg.turn_in_place)
+        if self.turning:
             omega = max(-cfg.max_turn_rate, min(cfg.max_turn_rate, alpha / dt))
             return Step(x, y, wrap(theta + omega * dt), 0.0, omega)
         curvature = 2.0 * math.sin(alpha) / ld if ld > 1e-9 else 0.0
         v = cfg.speed
         if abs(curvature) * v > cfg.max_turn_rate:
             v = cfg.max_turn_rate / abs(curvature)
-        # Never overshoot the end of the path or the limit (a closed door ahead).
+        # Never overshoot the end of the path, a sharp vertex or the limit (a closed door ahead).
         v = min(v, d_end / dt, allowed / dt)
+        if corner is not None and corner < ahead:
+            v = min(v, ld / dt)
         omega = curvature * v
         nx, ny, nth = integrate(x, y, theta, v, omega, dt)
         return Step(nx, ny, nth, v, omega)
+
+    def _next_corner(self, x: float, y: float) -> float | None:
+        """Arc length of the next sharp vertex the robot has not reached (reached: progress at it, or
+        the robot within ``CORNER_REACHED`` of it), or None."""
+        while self._corners:
+            s = self._corners[0]
+            cx, cy = self.path.point_at(s)
+            if self.s < s - 1e-9 and math.hypot(cx - x, cy - y) > CORNER_REACHED:
+                return s
+            self._corners.pop(0)
+            self.turning = True  # at the vertex: on the spot to the next leg (an arc from here bulges out)
+        return None
 
 
 def integrate(x: float, y: float, theta: float, v: float, omega: float, dt: float) -> tuple[float, float, float]:

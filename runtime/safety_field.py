@@ -18,14 +18,24 @@ cruising speed (``resume_speed``), not creeping up to whoever stepped in front o
 
 Turning on the spot sweeps nothing outside the disc: only a point inside the grown disc (something
 touching) stops a turn.
+
+Other robots are not the field's business: the executor keeps robots apart by where they report
+they are (its traffic rules: margin, driving around, making way), so the points of a scan that lie
+on a robot the driver hears of are left out first (:func:`without_robots`). What no robot reports -
+a person, a robot whose driver has gone silent, a box - stops the robot.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+
+# m beyond a robot's radius within which a scan's point belongs to that robot: how far apart two
+# robots' own ideas of where they are may be (localisation, the pose's age), and the scan's noise
+ROBOT_REACH = 0.1
 
 
 @dataclass(frozen=True)
@@ -80,6 +90,20 @@ def scan_points(
     angles = angle_min + angle_increment * np.arange(r.size)
     ok = np.isfinite(r) & (r >= range_min) & (r <= range_max)
     return np.column_stack((r[ok] * np.cos(angles[ok]), r[ok] * np.sin(angles[ok])))
+
+
+def without_robots(
+    points: np.ndarray, pose: tuple[float, float, float], robots: Sequence[tuple[float, float]], reach: float
+) -> np.ndarray:
+    """The points of a scan (robot frame, the robot at ``pose`` in the map) that are not within
+    ``reach`` of another robot's centre (``robots``, map frame)."""
+    if points.size == 0 or not robots:
+        return points
+    x, y, theta = pose
+    c, s = math.cos(theta), math.sin(theta)
+    centres = np.array([(c * (rx - x) + s * (ry - y), -s * (rx - x) + c * (ry - y)) for rx, ry in robots])
+    gaps = np.hypot(points[:, None, 0] - centres[None, :, 0], points[:, None, 1] - centres[None, :, 1])
+    return points[(gaps > reach).all(axis=1)]
 
 
 def clearance_ahead(points: np.ndarray, radius: float, backwards: bool, cfg: FieldConfig) -> float:

@@ -6,9 +6,10 @@ Keep right: a robot waits to cross an opening beside it, to the right of the lan
 (:meth:`KeyPoints.wait_point`), and a gothrough ends on the lane on the far side
 (:meth:`KeyPoints.beside`), so a robot coming through passes one waiting to go the other way. More
 robots waiting at one side queue in a line along the wall (:meth:`KeyPoints.queue_spots`; the
-dispatcher sends each to the first free one). Each robot unloads at its own slot in the destination
-room (:meth:`KeyPoints.drop_point`), so a robot that has finished and stays there is under nobody's
-slot.
+dispatcher sends each to the first free one), with a spot for every robot of the site where the wall
+is long enough, none in another opening's lane and none where it leaves no way past it. Each robot
+unloads at its own slot in the destination room (:meth:`KeyPoints.drop_point`), so a robot that has
+finished and stays there is under nobody's slot.
 """
 
 from __future__ import annotations
@@ -17,7 +18,8 @@ import itertools
 import math
 from dataclasses import dataclass, field
 
-from protocol.site import Site
+from protocol.site import Opening, Site
+from runtime.executor.doorways import in_lane
 
 from .motion import MotionPlanner, Point
 
@@ -27,7 +29,12 @@ BESIDE_MARGIN = 0.35  # m between the robot's edge and the wall when standing be
 WAIT_CLEARANCE = 0.15
 WAIT_BESIDE_GAP = 0.2  # m beyond a wide gap's half-width (a crossing robot holds the lane in front of the gap)
 QUEUE_SPACING = 0.65  # m between the spots where robots queue at an opening (two radii and a margin)
-QUEUE_LENGTH = 6  # spots per side of an opening
+# spots per side of an opening, at least; as many as the site has robots where there is room (with
+# six, the seventh robot to queue was sent to the sixth's spot and twelve robots jammed a corridor)
+QUEUE_LENGTH = 6
+QUEUE_COLUMNS = 3  # how far along the wall the line may run: this many spots' lengths per spot wanted
+# m of the room left between a queued robot and the far wall beyond two radii: a robot gets past it
+PASSING_ROOM = 0.3
 KEEP_CLEAR = 1.0  # m between a drop point and the points beside an opening
 HUMAN_CLEAR = 0.8  # m between a drop point and where the human works
 DROP_SPACING = 1.3  # m between drop points in a destination room: a robot passes between two robots parked at them
@@ -67,27 +74,42 @@ class KeyPoints:
     def queue_spots(self, opening: str, room: str) -> list[Point]:
         """Where robots in ``room`` wait to cross ``opening``, first to last: its wait point, then
         further along the wall to the right of the lane and back from it, each QUEUE_SPACING from
-        the others and off every opening's lane; robots queueing at a door do not stand in a heap."""
+        the others, no robot's disc in another opening's lane, and room left to pass a queued robot;
+        robots queueing at a door do not stand in a heap, in a doorway's way or across a corridor."""
         key = ("queue", opening, room)
         spots = self._queues.get(key)
         if spots is None:
             first = self.wait_point(opening, room)
             spots = [first]
             side = self.site.opening(opening)
+            wanted = max(QUEUE_LENGTH, len(self.site.robots))
+            radius = self.params.robot_radius
+            others = [o for o in self.site.openings.values() if o.id != opening]
             # a line along the wall (a block of spots would stand in the way into the room), then
             # a second line where the wall is short
-            for row, col in itertools.product(range(2), range(QUEUE_LENGTH)):
+            for row, col in itertools.product(range(2), range(QUEUE_COLUMNS * wanted)):
                 if (row, col) == (0, 0):
                     continue
                 lateral = self._wait_offset(opening) + col * QUEUE_SPACING
-                p = side.aside(room, self.beside_distance + row * QUEUE_SPACING, lateral)
-                free = self.motion.is_free(p) and self.site.rooms[room].contains(*p)
+                distance = self.beside_distance + row * QUEUE_SPACING
+                p = side.aside(room, distance, lateral)
+                free = (
+                    self.motion.is_free(p)
+                    and self.site.rooms[room].contains(*p)
+                    and not any(in_lane(o, *p, reach=radius) for o in others)
+                    and self._room_beyond(side, room, distance) >= 3.0 * radius + PASSING_ROOM
+                )
                 if free and all(math.dist(p, q) >= QUEUE_SPACING - 1e-6 for q in spots):
                     spots.append(p)
-                if len(spots) == QUEUE_LENGTH:
+                if len(spots) == wanted:
                     break
             self._queues[key] = spots
         return spots
+
+    def _room_beyond(self, side: Opening, room: str, distance: float) -> float:
+        """How far ``room`` reaches, across the wall of ``side``, beyond a point ``distance`` from it."""
+        x0, y0, x1, y1 = self.site.rooms[room].rect
+        return ((y1 - y0) if side.axis == "x" else (x1 - x0)) - distance
 
     def _wait_offset(self, opening: str) -> float:
         return wait_offset(self.params.robot_radius, self.site.opening(opening).width)

@@ -1,9 +1,10 @@
 """Motion planner P^m: shortest collision-free paths on the site's occupancy grid, and timed trajectories.
 
 The grid is the site's, with every door open (plans go through doors) and obstacles inflated by
-the robot radius plus a small clearance, so a path is safe for the robot's centre anywhere on a
-free cell. Every motion a plan needs stays inside one room (approach, load, unload) or crosses one
-opening in a straight line (gothrough); rooms are rectangles, so a straight segment between two
+the robot radius plus a clearance: the controller's tracking error and the grid's discretisation
+(runtime/clearance.py), so a robot following a path whose cells are free never touches a wall.
+Every motion a plan needs stays inside one room (approach, load, unload) or crosses one opening
+(gothrough); rooms are rectangles, so a straight segment between two
 free points is usually free. The planner checks that segment against the grid first and falls back
 to A* (8-connected, octile heuristic, confined to the rooms the two points lie in) with line-of-sight
 shortening only when it is blocked, e.g. from a start pose pressed against a wall.
@@ -23,11 +24,14 @@ from itertools import pairwise
 import numpy as np
 
 from protocol.site import Site
+from runtime.clearance import wall_clearance
 
 Point = tuple[float, float]
 
-GRID_RESOLUTION = 0.05  # m per cell: an 0.8 m door inflated by 2 x 0.27 m keeps ~5 free cells
-CLEARANCE = 0.02  # m added to the robot radius
+GRID_RESOLUTION = 0.05  # m per cell: an 0.8 m door inflated by 2 x 0.316 m keeps at least 3 free cells
+# m added to the robot radius: pure pursuit's tracking error (0.02) and this grid's discretisation
+# (0.046), runtime/clearance.py
+CLEARANCE = wall_clearance(GRID_RESOLUTION)
 SAMPLE_SPACING = 0.5  # m between trajectory rows along a straight piece
 SNAP_LIMIT = 1.5  # m: how far a key point may move to reach free space
 
@@ -45,7 +49,9 @@ class Path:
 class MotionPlanner:
     """Paths and trajectories on one site. Not thread-safe (its caches are plain dicts)."""
 
-    def __init__(self, site: Site, *, resolution: float = GRID_RESOLUTION, clearance: float = CLEARANCE) -> None:
+    def __init__(self, site: Site, *, resolution: float = GRID_RESOLUTION, clearance: float | None = None) -> None:
+        if clearance is None:
+            clearance = wall_clearance(resolution)
         self.site = site
         self.speed = site.params.robot_speed
         self.grid = site.occupancy_grid(

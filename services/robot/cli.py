@@ -18,11 +18,13 @@ def register(subparsers: Any) -> None:
         "robot",
         help="drive one real robot through ROS 2 (cmd_vel out, odometry/localisation in)",
         description=(
-            "Follow this robot's RobotCommands with the simulator's pure-pursuit controller, sending "
-            "geometry_msgs/Twist on its cmd_vel and reading its pose from nav_msgs/Odometry or "
-            "geometry_msgs/PoseWithCovarianceStamped, over Zenoh in rmw_zenoh's or zenoh-bridge-ros2dds's "
-            "key format. Publishes RobotPose and RobotStatus as the simulator does. Stops the robot when its "
-            "command ends or is refused, at a closed door, when its pose goes stale, when the planner dies, on SIGTERM."
+            "Execute this robot's RobotCommands with the simulator's executor (runtime/executor: pure pursuit, "
+            "holds, doors, and the traffic rules that keep robots apart, over the other robots' poses, statuses "
+            "and RobotTraffic), sending geometry_msgs/Twist on its cmd_vel and reading its pose from "
+            "nav_msgs/Odometry or geometry_msgs/PoseWithCovarianceStamped, over Zenoh in rmw_zenoh's or "
+            "zenoh-bridge-ros2dds's key format. Publishes RobotPose, RobotStatus and RobotTraffic. Stops the robot "
+            "when its command ends or is refused, at a closed door, for another robot, when its pose goes stale, "
+            "when the planner dies, on SIGTERM."
         ),
     )
     add_common_arguments(parser)

@@ -3,17 +3,23 @@
 ARROCH side: ``robot/<rid>/command`` (RobotCommand) in; ``robot/<rid>/pose`` (RobotPose) and
 ``robot/<rid>/status`` (RobotStatus) out, as the simulator publishes them; ``door/*/state`` in (a
 closed door stops the robot); the planner's liveliness token watched (a planner that dies stops it).
+The other robots: their ``robot/*/pose``, ``robot/*/status`` and ``robot/*/traffic`` in, this
+robot's ``robot/<rid>/traffic`` (RobotTraffic) out, on every change and once a second: the
+executor's traffic rules (right of way, driving around, making way, doorways, queues) run across
+robot processes (:mod:`.driver`, :mod:`runtime.executor.traffic`).
 ROS 2 side: the robot's pose in (``nav_msgs/Odometry`` in the odom frame, moved into the map frame
 by a fixed map→odom transform or one from ``tf``; or ``geometry_msgs/PoseWithCovarianceStamped`` in
 the map frame, possibly transient-local and sparse, with odometry carrying the pose between two of
 them); ``geometry_msgs/Twist`` or ``TwistStamped`` out on its ``cmd_vel``, one per pose received;
 ``sensor_msgs/LaserScan`` in (the safety field, :mod:`runtime.safety_field`), when configured.
 
-Safety: zero velocity goes out when the command ends or is refused, at a closed door, when no pose
-came for ``pose_timeout`` site seconds (checked every 20 ms of wall time), when the scan is stale
-or shows an obstacle in the stop zone (at once, on the scan), when the planner's liveliness token
-goes away (until a planner is back), and three times on SIGINT/SIGTERM before the session closes.
-docs/ros2.md has the details; the figures are in tests/ros2/test_safety.py and test_field.py.
+Safety: zero velocity goes out when the command ends or is refused, at a closed door, for another
+robot (the traffic rules), when no pose came for ``pose_timeout`` site seconds (checked every 20 ms
+of wall time), when the scan is stale or shows an obstacle in the stop zone (at once, on the scan;
+points on the robots it hears of are the traffic rules' business), when the planner's liveliness
+token goes away (until a planner is back), and three times on SIGINT/SIGTERM before the session
+closes. docs/ros2.md has the details; the figures are in tests/ros2/test_safety.py, test_field.py,
+test_driver.py and test_head_on.py.
 """
 
 from __future__ import annotations
@@ -28,15 +34,16 @@ from typing import Any
 import numpy as np
 import zenoh
 
-from protocol.messages import DoorState, RobotCommand, RobotPose
+from protocol.messages import DoorState, RobotCommand, RobotPose, RobotStatus, RobotTraffic
 from protocol.site.model import Site
+from runtime.executor import RobotConfig
 from runtime.plane import wrap
 from runtime.pursuit import ControllerConfig
 from runtime.ros2 import types as ros
 from runtime.ros2.config import RobotLink
 from runtime.ros2.keys import TopicNaming
 from runtime.ros2.node import RosNode
-from runtime.safety_field import FieldConfig, Verdict, limit, scan_points
+from runtime.safety_field import ROBOT_REACH, FieldConfig, Verdict, limit, scan_points, without_robots
 from runtime.service import Service
 from runtime.transport import ZenohOptions
 
@@ -44,7 +51,11 @@ from .driver import Driver, DriverConfig
 
 WATCHDOG = 0.02  # wall s between checks of the pose's age and the planner's presence
 HEARTBEAT = 1.0  # wall s between republications of the status (late joiners)
-POSE_PERIOD = 0.05  # s (site and wall) between two RobotPose messages, as the simulator's 20 Hz
+POSE_PERIOD = 0.05  # s (site and wall) between two RobotPose messages of a robot at rest, as the simulator's 20 Hz
+# A robot that moved this far (m, rad) since its last RobotPose publishes one at once, whatever the
+# time: the other robots' drivers keep apart from where it is (in lockstep, site time runs faster
+# than 20 Hz of wall time, and a pose per 50 wall ms would be many ticks old)
+MOVED, TURNED = 0.01, 0.02
 STOP_REPEATS = 3  # zero Twists sent when shutting down (one lost sample must not leave the base moving)
 
 
@@ -81,12 +92,14 @@ class RobotService(Service):
         self.driver = Driver(
             robot,
             site,
-            DriverConfig(
-                controller=ControllerConfig(speed=speed, max_turn_rate=link.max_turn_rate),
-                radius=p.robot_radius,
-                load_time=p.load_time,
-                capacity=p.robot_capacity,
-                control_period=link.control_period,
+            DriverConfig.for_robot(
+                RobotConfig(
+                    controller=ControllerConfig(speed=speed, max_turn_rate=link.max_turn_rate),
+                    radius=p.robot_radius,
+                    load_time=p.load_time,
+                    capacity=p.robot_capacity,
+                ),
+                link.control_period,
             ),
         )
         start = site.robots[robot].start
@@ -97,7 +110,7 @@ class RobotService(Service):
         self._velocity = (0.0, 0.0)
         self._pose_at = -math.inf  # site time the last pose arrived
         self._last_pose_pub = (-math.inf, -math.inf)  # (site, wall) of the last RobotPose
-        self._doors_open: dict[str, bool] = {}
+        self._last_pose: tuple[float, float, float] | None = None  # the pose it gave
         self._planners: set[str] = set()
         self._planner_seen = False
         self._planner_lock = threading.Lock()
@@ -116,6 +129,12 @@ class RobotService(Service):
         self._stopped_by_field = False  # it waits for the way to clear at cruising speed before going on
         self._speed = 0.0  # m/s the robot goes at (odometry's, else the last command's)
         self._bad_logged: set[str] = set()
+        peers = self.driver.peers
+        self._peer_inputs: dict[type, tuple[Any, str]] = {
+            RobotPose: (peers.pose, "peer_poses_refused"),
+            RobotStatus: (peers.status, "peer_statuses_refused"),
+            RobotTraffic: (peers.traffic, "traffic_refused"),
+        }
 
     # ------------------------------------------------------------------ set-up
 
@@ -139,15 +158,20 @@ class RobotService(Service):
             node.subscribe(link.tf_topic, ros.TF_MESSAGE, self._on_tf)
         self.subscribe(keys.door_state(), DoorState, self._on_door, ordered=True)
         self.subscribe(keys.robot_command(self.robot), RobotCommand, self._on_command, ordered=True)
+        # The other robots (latest per robot: a step reads where each is now, not where it was).
+        self.subscribe(keys.robot_pose(), RobotPose, self._on_peer, latest=True)
+        self.subscribe(keys.robot_status(), RobotStatus, self._on_peer, latest=True)
+        self.subscribe(keys.robot_traffic(), RobotTraffic, self._on_peer, latest=True)
         self.advertise(keys.robot_pose(self.robot))
         self.advertise(keys.robot_status(self.robot))
+        self.advertise(keys.robot_traffic(self.robot))
         self.hold(
             self.session.liveliness().declare_subscriber(
                 keys.liveliness("planner"), self._on_planner_token, history=True
             )
         )
         self.every(WATCHDOG, self._watchdog)
-        self.every(HEARTBEAT, lambda: self._publish_status(force=True), first=0.0)
+        self.every(HEARTBEAT, self._heartbeat, first=0.0)
         self.log.info(
             "robot %s: %s on %s (%s, domain %d), pose from %s",
             self.robot,
@@ -222,9 +246,10 @@ class RobotService(Service):
         self._pose_at = self.clock.now()
         self.count("poses")
         v, omega = self._control()
-        self._send(v, omega)
+        self._send(v, omega)  # first: the base waits for it
         self._publish_pose(velocity)
         self._publish_status()
+        self._publish_traffic()
 
     def _on_scan(self, msg: Any, key: str) -> None:
         try:
@@ -237,7 +262,8 @@ class RobotService(Service):
         v, omega = self._velocity
         if v != 0.0 or omega != 0.0:
             # Someone stepping in front of the robot stops it now, not at the next pose.
-            verdict = limit(points, v, omega, max(abs(v), abs(self._speed)), self.site.params.robot_radius, self.field)
+            speed = max(abs(v), abs(self._speed))
+            verdict = limit(self._unknown(points), v, omega, speed, self.site.params.robot_radius, self.field)
             if verdict.stop:
                 self._stopped_by_field = True
                 self._send(0.0, 0.0)
@@ -258,7 +284,19 @@ class RobotService(Service):
                     self.count("transforms_not_finite")
 
     def _on_door(self, msg: DoorState, key: str) -> None:
-        self._doors_open[msg.door] = msg.open
+        if not self.driver.doors.heard(msg):
+            self._bad("doors_unknown", f"the state of door {msg.door!r}, which is not on site {self.site.name}")
+
+    def _on_peer(self, msg: RobotPose | RobotStatus | RobotTraffic, key: str) -> None:
+        """Another robot's pose, status or traffic: the fleet the executor keeps this robot apart from."""
+        owner = key.split("/")[-2]  # .../robot/<rid>/<pose|status|traffic>
+        if owner == self.robot:
+            return  # its own, heard back
+        take, counter = self._peer_inputs[type(msg)]
+        problem = f"robot: {msg.robot!r} on robot {owner!r}'s key" if msg.robot != owner else ""
+        problem = problem or take(msg, time.monotonic())
+        if problem:
+            self._bad(counter, f"a {msg.TYPE} ({problem})")
 
     def _on_command(self, cmd: RobotCommand, key: str) -> None:
         if cmd.robot != self.robot:
@@ -269,7 +307,7 @@ class RobotService(Service):
         self.count(f"commands_{result}")
         if result == "refused":
             self.log.warning(
-                "command %d (%s %s) refused: %s", cmd.action_id, cmd.action, cmd.args, self.driver.s.detail
+                "command %d (%s %s) refused: %s", cmd.action_id, cmd.action, cmd.args, self.driver.robot.detail
             )
             self._send(0.0, 0.0)
         self._publish_status()
@@ -287,9 +325,10 @@ class RobotService(Service):
 
     def _hold_reason(self, now: float) -> str:
         # Staleness matters while the driver would move the robot; at rest it is sending zero anyway.
-        if self.pose is not None and self.driver.phase == "drive" and now - self._pose_at > self.link.pose_timeout:
+        moving = self.driver.may_move
+        if self.pose is not None and moving and now - self._pose_at > self.link.pose_timeout:
             return f"pose stale ({now - self._pose_at:.2f} s old)"
-        if self.link.scan_topic and self.driver.phase == "drive" and now - self._scan_at > self.link.scan_timeout:
+        if self.link.scan_topic and moving and now - self._scan_at > self.link.scan_timeout:
             return "no scan" if self._scan_at == -math.inf else f"scan stale ({now - self._scan_at:.2f} s old)"
         if self.options.hold_without_planner:
             with self._planner_lock:
@@ -303,11 +342,17 @@ class RobotService(Service):
         self._note_hold(reason)
         if reason or self.pose is None:
             return 0.0, 0.0
-        v, omega = self.driver.control(self.pose, now, lambda door: self._doors_open.get(door, False))
-        if not self.link.scan_topic or self.driver.phase != "drive":
+        step, outcomes = self.driver.control(self.pose, now, time.monotonic())
+        for rid in self.driver.went_stale:
+            self.log.warning("robot %s: nothing heard of robot %s for a while: a parked obstacle now", self.robot, rid)
+        for outcome in outcomes:
+            if outcome.kind == "action_failed":
+                self.log.info("robot %s: action %s failed: %s", self.robot, outcome.data.action_id, outcome.data.reason)
+        v, omega = step.v, step.omega
+        if not self.link.scan_topic or not self.driver.may_move:
             return v, omega
         verdict = limit(
-            self._scan,
+            self._unknown(self._scan),
             v,
             omega,
             max(abs(self._speed), abs(self._velocity[0])),
@@ -316,6 +361,12 @@ class RobotService(Service):
         )
         self._note_field(verdict if (v or omega) and (verdict.v, verdict.omega) == (0.0, 0.0) else None, now)
         return verdict.v, verdict.omega
+
+    def _unknown(self, points: np.ndarray) -> np.ndarray:
+        """The scan's points that are on no robot the driver hears of (those the traffic rules keep apart)."""
+        if self.pose is None:
+            return points
+        return without_robots(points, self.pose, self.driver.peers.heard(), self.site.params.robot_radius + ROBOT_REACH)
 
     def _note_field(self, verdict: Verdict | None, now: float) -> None:
         """Track how long the field has held the robot (``verdict`` None: it is not holding it);
@@ -367,10 +418,12 @@ class RobotService(Service):
             return
         now, wall = self.clock.now(), time.monotonic()
         due = now - self._last_pose_pub[0] >= POSE_PERIOD - 1e-9 and wall - self._last_pose_pub[1] >= POSE_PERIOD
-        if not (due or self.driver.changed):
-            return
-        self._last_pose_pub = (now, wall)
         x, y, theta = self.pose
+        last = self._last_pose
+        moved = last is None or math.dist((x, y), last[:2]) >= MOVED or abs(wrap(theta - last[2])) >= TURNED
+        if not (due or moved or self.driver.changed):
+            return
+        self._last_pose_pub, self._last_pose = (now, wall), self.pose
         self.publish(
             self.keys.robot_pose(self.robot),
             RobotPose(robot=self.robot, x=x, y=y, theta=theta, vel=velocity[0], omega=velocity[1]),
@@ -379,8 +432,17 @@ class RobotService(Service):
     def _publish_status(self, force: bool = False) -> None:
         if not (force or self.driver.changed):
             return
-        self.driver.changed = False
         self.publish(self.keys.robot_status(self.robot), self.driver.status(getattr(self.clock, "world_version", 0)))
+
+    def _publish_traffic(self, force: bool = False) -> None:
+        traffic = self.driver.traffic(force=force)
+        if traffic is not None:
+            self.publish(self.keys.robot_traffic(self.robot), traffic)
+
+    def _heartbeat(self) -> None:
+        """Status and traffic again, for late joiners (and the others' watch of this robot)."""
+        self._publish_status(force=True)
+        self._publish_traffic(force=True)
 
 
 def _compose(a: tuple[float, float, float], b: tuple[float, float, float]) -> tuple[float, float, float]:

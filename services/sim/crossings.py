@@ -1,7 +1,7 @@
 """A safety invariant checked every tick: no robot's footprint enters the doorway of a closed door.
 
 The executor keeps robots off doors that are not passable (they stop short and wait, and a hard
-guard refuses any step toward a shut gap; see :mod:`services.sim.robots`). This watch checks the
+guard refuses any step toward a shut gap; see :mod:`runtime.executor.executor`). This watch checks the
 outcome independently of how it is achieved: after each tick, a robot whose disc overlaps a door's
 gap (the segment between its jambs, where the closed leaf stands) while that door is not passable
 (closed, opening, or closing) is *in a closed doorway*. Each entry counts once, however many ticks
@@ -17,10 +17,10 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 
+from runtime.executor import Robot
 from runtime.plane import segment_distance
 
 from .doors import Doors
-from .robots import Robot
 
 # Overlap below this (m) is touching, not entering: a robot stopped exactly at the guard distance
 # must not count, and neither must float rounding on a robot grazing a jamb.

@@ -16,7 +16,7 @@ closing; ``door_opened`` fires when it becomes passable, ``door_closed`` when it
 (from then on no robot may enter). The doorway is clear when every robot's disc keeps
 ``clear_margin`` from the gap and from the area the leaf sweeps on its swing side (a quarter disc
 of the leaf's length about the hinge), so a leaf never closes onto a robot. Robots waiting for a
-door stop further out than the gap's margin (see :mod:`services.sim.robots`), so a queue of
+door stop further out than the gap's margin (see :mod:`runtime.executor.executor`), so a queue of
 waiting robots on the far side never props a door open.
 
 Opening is not held back: a robot waiting on the swing side within the leaf's reach overlaps the
@@ -149,6 +149,14 @@ class Doors:
         door.opened_by = by
         door.target_open = True
         return True
+
+    def into_swing(self, door_id: str, before: Point, after: Point) -> bool:
+        """Whether a disc stepping from ``before`` to ``after`` enters the doorway (the gap's margin,
+        or the area the leaf sweeps) of a door whose leaf is on the move, having been clear of it
+        (the executor refuses such a step: :mod:`runtime.executor.interfaces`)."""
+        door = self.doors[door_id]
+        moving = 0.0 < door.fraction < 1.0 or (door.fraction >= 1.0 and not door.target_open)
+        return moving and self.doorway_clear(door, [before]) and not self.doorway_clear(door, [after])
 
     def doorway_clear(self, door: Door, robots: Iterable[tuple[float, float]]) -> bool:
         a, b = door.gap

@@ -45,6 +45,7 @@ from protocol.events import (
 )
 from protocol.messages import RobotCommand, TeamPlan
 from protocol.site.model import Site
+from runtime.executor import Outcome, Robot, RobotConfig, RobotExecutor
 from runtime.pursuit import ControllerConfig
 
 from .crossings import ClosedDoorWatch
@@ -54,7 +55,6 @@ from .metrics import MetricsRecorder
 from .objects import Objects
 from .overlaps import OverlapWatch
 from .participant import HUMAN_MODES, ParticipantHuman, Refused
-from .robots import Outcome, Robot, RobotConfig, RobotExecutor
 from .streams import Streams
 from .walls import WallWatch
 

@@ -41,6 +41,20 @@ class Objects:
     def __getitem__(self, oid: str) -> ObjectState:
         return self.items[oid]
 
+    # what the executor reads (runtime/executor/interfaces.py)
+    def owner(self, oid: str) -> str:
+        return self.items[oid].spec.robot
+
+    def carrier(self, oid: str) -> str | None:
+        return self.items[oid].carrier
+
+    def delivered(self, oid: str) -> bool:
+        return self.items[oid].delivered
+
+    def position(self, oid: str) -> tuple[float, float]:
+        obj = self.items[oid]
+        return obj.x, obj.y
+
     def pick(self, oid: str, robot: str) -> None:
         obj = self.items[oid]
         obj.carrier = robot

@@ -15,13 +15,10 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from protocol.site.model import Site
+from runtime.executor import Robot
 from runtime.plane import segment_distance
-
-if TYPE_CHECKING:  # for type hints only: .walls, which the executor (.robots) imports, imports this
-    from .robots import Robot
 
 # Overlap below this (m) is touching, not colliding (float rounding of two robots at the limit).
 TOLERANCE = 1e-3

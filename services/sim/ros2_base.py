@@ -17,8 +17,9 @@ within ``auto_open_distance`` of a door its current command's trajectory goes th
   start pose) every tick, and, for a robot with a ``scan_topic``, a ``sensor_msgs/LaserScan`` of
   the walls, door leaves, other robots and the human (:mod:`.scan`) just before it. In
   lockstep, while the driver says the robot executes an action, each tick waits for the Twist that
-  answers the last odometry, so the driver controls the robot at every tick as the simulator's
-  own executor would, whatever the machine's load.
+  answers the last odometry (sending the odometry again after :data:`REASK` without one: either
+  may have been dropped), so the driver's executor, the simulator's own, controls the robot at
+  every tick as for a simulated robot, whatever the machine's load.
 """
 
 from __future__ import annotations
@@ -29,8 +30,9 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from protocol.events import ActionDone, ActionFailed, Delivered, Loaded, RobotOutcome, WaitingAtDoor
+from protocol.events import ActionDone, ActionFailed, Delivered, Loaded, WaitingAtDoor
 from protocol.messages import RobotCommand, RobotPose, RobotStatus
+from runtime.executor import Outcome, Robot, outcome_of
 from runtime.plane import wrap
 from runtime.pursuit import Path, integrate, path_crossings
 from runtime.ros2 import types as ros
@@ -38,18 +40,22 @@ from runtime.ros2.config import Ros2Config
 from runtime.ros2.node import RosNode, RosPublisher
 
 from .human import HUMAN_RADIUS
-from .robots import Outcome, Robot, outcome_of
 from .scan import Scanner
 
 log = logging.getLogger("arroch.sim")
 
 HEARTBEAT = 1.0  # wall s between odometry messages of bases at rest
 ANSWER_TIMEOUT = 2.0  # wall s lockstep waits for a driver's Twist before going on without it
+# wall s after which lockstep sends a base's odometry again while no Twist answered it: ROS 2
+# publishers drop samples under congestion (rmw_zenoh's keep-last publishers do), the odometry's
+# or the Twist, and a wait for an answer that will never come would stall site time
+REASK = 0.25
 CMD_VEL_TIMEOUT = 0.5  # s of site time after which a base stops on its own without a new Twist
 # Driver states in which its robot does something as site time passes (drives, dwells): in lockstep
 # every tick waits for its answer then, so the driver acts at the tick it must. A robot waiting at a
 # door is not waited for (robots wait for the human's door for minutes): it hears of the door's
-# opening a few ticks late, as a real robot would.
+# opening a few ticks late, as a real robot would. A base that moves is waited for whatever its
+# driver's state (a parked robot making way for another drives off its way).
 EXECUTING = ("moving", "loading", "unloading")
 
 
@@ -68,6 +74,7 @@ class RosBase:
     twist_at: float = -math.inf  # site time the last Twist arrived
     awaiting: bool = False  # lockstep: an odometry went out and its Twist has not come yet
     awaiting_since: float = 0.0  # wall (monotonic) time it went out
+    asked_at: float = 0.0  # wall time the odometry awaiting an answer was last sent
     silent: bool = False  # its driver missed ANSWER_TIMEOUT: not waited for until it answers again
     twists: int = 0
 
@@ -130,11 +137,11 @@ class ExternalRobot:
         for oid in st.carrying:
             if oid not in robot.carrying and oid in objects:
                 objects.pick(oid, self.id)
-                self._pending.append(self._outcome(st, Loaded, object=oid))
+                self._pending.append(outcome_of(robot, Loaded, st, object=oid))
         for oid in st.delivered:
             if oid not in robot.delivered and oid in objects:
                 objects.place(oid, robot.x, robot.y, delivered_at=self.engine.time)
-                self._pending.append(self._outcome(st, Delivered, object=oid))
+                self._pending.append(outcome_of(robot, Delivered, st, object=oid))
         robot.carrying, robot.delivered = list(st.carrying), list(st.delivered)
         robot.state, robot.waiting_door, robot.detail, robot.progress = (
             st.state,
@@ -145,16 +152,16 @@ class ExternalRobot:
         robot.last_action_id = max(robot.last_action_id, st.action_id)
         if st.state == "waiting_at_door" and (st.action_id, st.waiting_door) != self.waiting_reported:
             self.waiting_reported = (st.action_id, st.waiting_door)
-            self._pending.append(self._outcome(st, WaitingAtDoor, door=st.waiting_door))
+            self._pending.append(outcome_of(robot, WaitingAtDoor, st, door=st.waiting_door))
         if st.action_id > self.reported_action and (
             st.state in ("done", "failed") or (st.state == "idle" and st.action == "stop")
         ):
             self.reported_action = st.action_id
             if st.state == "failed":
-                self._pending.append(self._outcome(st, ActionFailed, new_world=True, reason=st.detail or "failed"))
+                self._pending.append(outcome_of(robot, ActionFailed, st, new_world=True, reason=st.detail or "failed"))
             else:
                 # A stop is what the planner asked for: no new world version (as the simulator's robots).
-                self._pending.append(self._outcome(st, ActionDone, new_world=st.action != "stop"))
+                self._pending.append(outcome_of(robot, ActionDone, st, new_world=st.action != "stop"))
 
     def on_pose(self, pose: RobotPose) -> None:
         self.pose = pose
@@ -200,19 +207,6 @@ class ExternalRobot:
             if math.dist((robot.x, robot.y), engine.doors[door_id].opening.center) <= reach:
                 engine.doors.request_open(door_id, self.id)
 
-    def _outcome(
-        self,
-        st: RobotStatus,
-        kind: type[RobotOutcome],
-        *,
-        door: str = "",
-        object: str = "",
-        new_world: bool = False,
-        reason: str = "",
-    ) -> Outcome:
-        robot = self.engine.robots[self.id]
-        return outcome_of(robot, kind, st, door=door, object=object, new_world=new_world, reason=reason)
-
 
 class ExternalRobots:
     """Every robot the simulator does not drive, with its Zenoh (and ROS 2) I/O."""
@@ -225,9 +219,11 @@ class ExternalRobots:
         for rid in robots:
             engine.external[rid] = self.robots[rid]
         self.scanner: Scanner | None = None
+        self.count: Any = lambda counter: None  # the service's counters (set up in setup())
 
     def setup(self, service: Any) -> None:
         keys = service.keys
+        self.count = service.count
         for rid, ext in self.robots.items():
             service.subscribe(
                 keys.robot_status(rid), RobotStatus, lambda st, key, ext=ext: ext.on_status(st), ordered=True
@@ -292,14 +288,16 @@ class ExternalRobots:
 
     def after_tick(self) -> None:
         """Publish each base's odometry (the robots' new poses); in lockstep, wait for the answers
-        of the bases whose driver is moving them."""
+        of the bases whose driver executes an action, and of the bases that move."""
         now = self.engine.time
         for rid, ext in self.robots.items():
             if ext.base is not None:
                 self.publish_scan(rid, now)
                 ext.base.publish_odometry(now, self.engine.robots[rid])
-                ext.base.awaiting = self.lockstep and ext.driver_state in EXECUTING and not ext.base.silent
-                ext.base.awaiting_since = time.monotonic()
+                base = ext.base
+                moving = base.velocity(now) != (0.0, 0.0)
+                base.awaiting = self.lockstep and (ext.driver_state in EXECUTING or moving) and not base.silent
+                base.awaiting_since = base.asked_at = time.monotonic()
 
     def blocker(self) -> str:
         """What lockstep waits for from the robots' drivers ("" for nothing)."""
@@ -315,5 +313,10 @@ class ExternalRobots:
                     ANSWER_TIMEOUT,
                 )
                 base.awaiting, base.silent = False, True
+            elif base is not None and base.awaiting and wall - base.asked_at >= REASK:
+                base.asked_at = wall  # the odometry or its Twist was dropped, or is late: ask again
+                self.count("odometry_sent_again")
+                self.publish_scan(rid, self.engine.time)
+                base.publish_odometry(self.engine.time, self.engine.robots[rid])
         waiting = [rid for rid, ext in self.robots.items() if ext.base is not None and ext.base.awaiting]
         return f"cmd_vel of {', '.join(waiting)} answering the last odometry" if waiting else ""

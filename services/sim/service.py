@@ -67,11 +67,11 @@ from protocol.messages import (
     ParticipantAction,
     RobotCommand,
     RobotPose,
-    RobotStatus,
     StudyControl,
     TeamPlan,
 )
 from protocol.site.model import Site
+from runtime.executor import status_message
 from runtime.lockstep import COMMAND, OPEN, PLAN, LockstepGate, Wait, simulator_waits
 from runtime.service import Service
 from runtime.transport import ZenohOptions
@@ -524,22 +524,7 @@ class SimService(Service):
             if not (everything or r.status_changed) or rid in self.engine.external:
                 continue
             r.status_changed = False
-            cmd = r.command
-            status = RobotStatus(
-                robot=rid,
-                state=r.state,
-                plan_id=cmd.plan_id if cmd else 0,
-                action_id=cmd.action_id if cmd else 0,
-                action=cmd.action if cmd else "",
-                args=list(cmd.args) if cmd else [],
-                progress=max(0.0, min(1.0, r.progress)),
-                carrying=list(r.carrying),
-                delivered=list(r.delivered),
-                waiting_door=r.waiting_door,
-                detail=r.detail[:512],
-                world_version=version,
-            )
-            self.publish(self.keys.robot_status(rid), status)
+            self.publish(self.keys.robot_status(rid), status_message(r, version))
         doors = self.engine.doors
         changed = set(doors.doors) if everything else self.engine.door_changed
         for did in sorted(changed):

@@ -67,6 +67,14 @@ def test_default_mission_completes(spawn, tmp_path: Path, mode: list[str]):
     assert overlaps == kinds["robot_overlap"] == sum(metrics["robot_overlaps_by_place"].values())
     if "lockstep" in mode:
         assert overlaps == 0, metrics["robot_overlaps_by_place"]
+    # robot-wall contacts likewise; the motion planner's clearance (runtime/clearance.py) keeps every
+    # disc off the walls in lockstep (7 contacts, 8 mm deep, with the old 0.02 m clearance), and the
+    # wall guard bounds the depth whatever happens at a fixed rate
+    walls = metrics["wall_contacts"]
+    assert walls == kinds["wall_contact"] == sum(metrics["wall_contacts_by_place"].values())
+    assert metrics["wall_depth_max"] <= metrics["params"]["robot_motion"]["wall_tolerance"] + 1e-6
+    if "lockstep" in mode:
+        assert walls == 0 and metrics["wall_depth_max"] == 0.0, metrics["wall_contacts_by_place"]
     failed = [e["data"] for e in events if e["kind"] == "action_failed"]
     if "lockstep" in mode:
         assert failed == []

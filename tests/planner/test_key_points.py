@@ -6,9 +6,10 @@ from __future__ import annotations
 import math
 
 from protocol.site import loads_site
+from runtime.executor.doorways import in_lane
 from runtime.site.generate import generate_site
 from services.planner.dispatcher import Dispatcher
-from services.planner.key_points import DROP_SPACING, QUEUE_SPACING
+from services.planner.key_points import DROP_SPACING, PASSING_ROOM, QUEUE_SPACING
 from services.planner.motion import MotionPlanner
 from services.planner.plan import RobotPlan, Step
 from services.planner.problem import ProblemBuilder
@@ -48,6 +49,25 @@ def test_queue_spots_stand_in_a_line_apart_and_off_every_lane(office):
             assert all(math.dist(a, b) >= QUEUE_SPACING - 1e-6 for i, a in enumerate(spots) for b in spots[i + 1 :])
             assert all(builder.motion.is_free(p) and office.rooms[room].contains(*p) for p in spots[1:])
             assert all(lane_offset(opening, p) >= opening.width / 2 for p in spots)
+            radius = office.params.robot_radius
+            others = [o for o in office.openings.values() if o.id != opening.id]
+            assert not any(in_lane(o, *p, reach=radius) for o in others for p in spots[1:])
+
+
+def test_twelve_robots_queue_along_a_corridors_wall_and_leave_a_way_past():
+    # the 12-robot site where six spots sent the seventh robot onto the sixth's spot, and a second
+    # line in the middle of the 2 m corridor left no way past: the corridor jammed
+    site = loads_site(generate_site(12, 3, seed=281555893))
+    builder = ProblemBuilder(site, MotionPlanner(site))
+    spots = builder.queue_spots("d_storage", "corridor")
+    x0, y0, x1, y1 = site.rooms["corridor"].rect
+    radius = site.params.robot_radius
+    assert len(spots) > 6
+    assert all(y1 - p[1] >= 3 * radius + PASSING_ROOM for p in spots)  # a robot gets past each
+    doors = [o for o in site.openings.values() if o.id != "d_storage"]
+    assert not any(in_lane(o, *p, reach=radius) for o in doors for p in spots)
+    inside = builder.queue_spots("d_storage", "storage")  # a 4 m deep room has room for a second line
+    assert len(inside) == len(site.robots)
 
 
 def test_every_robot_has_its_own_drop_slot_in_a_crowded_storage_room():

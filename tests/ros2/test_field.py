@@ -24,7 +24,7 @@ from protocol.messages import Event, RobotCommand, RobotPose, RobotStatus
 from protocol.site import load_site
 from runtime.ros2 import types as ros
 from runtime.ros2.config import load_ros2_config
-from runtime.safety_field import FieldConfig, limit, scan_points, stop_distance
+from runtime.safety_field import ROBOT_REACH, FieldConfig, limit, scan_points, stop_distance, without_robots
 from services.sim.human import HUMAN_RADIUS
 from tests.conftest import wait_for_message
 from tests.procs import arroch
@@ -80,6 +80,18 @@ def test_slow_zone_caps_the_speed_and_nothing_beside_or_behind_counts():
     assert limit(beside, -0.2, 0.0, 0.2, RADIUS, cfg).stop  # ... but backing up into her stops it
     touching = np.array([[0.0, grown - 0.01]])
     assert limit(touching, 0.0, 1.0, 0.0, RADIUS, cfg).stop  # a turn with someone touching the disc
+
+
+def test_points_on_a_robot_the_driver_hears_of_are_left_to_the_traffic_rules():
+    """The robot at (2, 5) facing +y: a robot reported at (2, 6) is 1 m ahead; the scan's returns off
+    its front are left out, a person 0.4 m to the robot's right is not."""
+    pose = (2.0, 5.0, math.pi / 2)
+    other_front = np.array([[1.0 - RADIUS, 0.0], [1.0 - RADIUS + 0.02, 0.1]])  # robot frame: x ahead
+    person = np.array([[0.0, -0.4]])
+    points = np.vstack([other_front, person])
+    kept = without_robots(points, pose, [(2.0, 6.0)], RADIUS + ROBOT_REACH)
+    assert kept.tolist() == person.tolist()
+    assert without_robots(points, pose, [], RADIUS + ROBOT_REACH) is points
 
 
 def test_a_scan_that_cannot_be_read_names_its_field():

@@ -71,14 +71,19 @@ def test_a_mission_through_ros2(spawn, tmp_path: Path, key_format: str):
     delivered = [o for r in metrics["robots"].values() for o in r["delivered"]]
     assert sorted(delivered) == sorted(site.objects)
     assert metrics["closed_door_crossings"] == 0
+    # The drivers keep the bases apart (the simulator only integrates their Twists and counts contacts).
+    assert metrics["robot_overlaps"] == 0, metrics["robot_overlaps_by_place"]
     events = [json.loads(line) for line in (run / "events.jsonl").read_text().splitlines()]
     kinds = Counter(e["kind"] for e in events)
     assert kinds["mission_done"] == 1 and kinds["delivered"] == len(site.objects) and kinds["closed_door_crossing"] == 0
     # The drivers run in wall time beside a lockstep sim: a command can be planned from a pose a few
     # tenths of a second old, and the driver's safety check then refuses it (the planner plans anew).
-    # Seen once in CI (a gothrough whose trajectory missed the doorway); anything else is a bug.
+    # Seen once in CI (a gothrough whose trajectory missed the doorway). The drivers keep the robots
+    # apart by the simulator's traffic rules from news a tick or two late, so a wait among robots
+    # may end as the simulator's own robots' last resort does (kept back, the planner plans anew).
+    # Anything else is a bug.
     failed = [e["data"] for e in events if e["kind"] == "action_failed"]
-    stale = ("trajectory starts", "does not cross")
+    stale = ("trajectory starts", "does not cross", "kept back by robots")
     assert len(failed) <= 3 and all(any(r in f.get("reason", "") for r in stale) for f in failed), failed
     assert kinds["action_done"] < 300  # about 110 for 9 deliveries: no action repeated without progress
     assert "lockstep stalled" not in proc.output

@@ -170,3 +170,22 @@ def test_bad_odometry_is_dropped_and_counted(spawn, router, namespace, client, b
     assert stats["bad_messages"] >= 1 and stats["poses_not_finite"] >= 1, stats
     assert driver.alive()
     drive(client, base)  # and it still drives
+
+
+def test_bad_traffic_is_dropped_and_counted(spawn, router, namespace, client, base):
+    """Another robot's RobotTraffic that cannot be read, names a robot the site does not have, or
+    comes on another robot's key: dropped and counted, and the driver still drives."""
+    from protocol.messages import Event, RobotTraffic
+
+    driver = start_driver(spawn, router, namespace)
+    base.first_zero_after(0.0, timeout=10)
+    keys = client.keys
+    client.session.put(keys.robot_traffic("r1"), b"\x00not a traffic message")
+    client.publish(keys.robot_traffic("r1"), RobotTraffic(robot="r1", blocked_by="r9"))
+    client.publish(keys.robot_traffic("r2"), RobotTraffic(robot="r1"))
+    time.sleep(0.5)
+    (stats,) = [e.data for e in client.query(keys.stats("robot"), Event)]
+    assert stats["bad_messages"] >= 1 and stats["traffic_refused"] == 2, stats
+    assert "(counted as traffic_refused)" in driver.output
+    assert driver.alive()
+    drive(client, base)

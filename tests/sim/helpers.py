@@ -138,7 +138,7 @@ def run_mission(engine: Engine, *, max_time: float = 7200.0, planner: ScriptedPl
 
 @dataclass
 class Bot:
-    """A robot as the traffic rules see it (services.sim.right_of_way.Body): its id, where it is, its phase."""
+    """A robot as the traffic rules see it (runtime.executor.right_of_way.Body): its id, where it is, its phase."""
 
     id: str
     x: float

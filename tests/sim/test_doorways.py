@@ -3,7 +3,7 @@ kept until the holder is through and out of the lane, and nobody else steps into
 
 from __future__ import annotations
 
-from services.sim.doorways import Doorways, in_lane
+from runtime.executor.doorways import Doorways, in_lane
 from tests.sim.helpers import Bot, small_site
 
 

@@ -8,10 +8,10 @@ import math
 from itertools import pairwise
 
 from protocol.site import loads_site
+from runtime.executor.make_way import MakeWay, Request
 from runtime.pursuit import Path, Step
 from services.sim.engine import Engine
 from services.sim.human import HumanConfig
-from services.sim.make_way import MakeWay, Request
 from tests.sim.helpers import PASSIVE, SMALL_SITE, Bot, command
 from tests.sim.test_overlaps import engine, overlaps
 

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import math
 
-from services.sim.avoidance import REACHED
-from services.sim.doorways import in_lane
+from runtime.executor.avoidance import REACHED
+from runtime.executor.doorways import in_lane
 from services.sim.engine import Engine
 from tests.sim.helpers import command, small_site
 

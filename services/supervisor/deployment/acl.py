@@ -104,6 +104,7 @@ GUARDS: tuple[Guard, ...] = (
     Guard("intent/*", "only the planner announces robot intents", publishers=("planner",)),
     Guard("robot/*/pose", "robot poses come from the robots (or the simulator)", publishers=("sim",)),
     Guard("robot/*/status", "robot statuses come from the robots (or the simulator)", publishers=("sim",)),
+    Guard("robot/*/traffic", "the traffic rules' tables come from the robots' drivers", publishers=("sim",)),
     Guard("door/*/state", "door states come from the simulator or door sensors", publishers=("sim",)),
     Guard(
         "door/*/sensor",

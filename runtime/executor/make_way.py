@@ -1,11 +1,11 @@
 """A robot that cannot get past another asks it to make way.
 
-Driving around (:mod:`services.sim.avoidance`) needs room; where there is none - a robot standing
+Driving around (:mod:`.avoidance`) needs room; where there is none - a robot standing
 on the only way along a queue line, two robots meeting where neither can step aside, a robot
 parked on another's way out of a room - the robot kept back asks the one in its way to make way,
 as people do in a corridor. Robots are ranked, and only a robot of higher rank may ask:
 
-- a robot holding a doorway (it is crossing: :mod:`services.sim.doorways`) first,
+- a robot holding a doorway (it is crossing: :mod:`.doorways`) first,
 - then robots driving a trajectory,
 - then robots waiting for a door to open,
 - then parked robots (their action over, or stopped);
@@ -17,7 +17,7 @@ kept back always gets its way cleared when there is room anywhere nearby.
 
 A robot asked steps off the asker's way ahead (``horizon`` metres of its trajectory) to the nearest
 free point at least a robot's width from it (a robot off the way's points that the asker still
-stops for - its drive cuts a corner nearer than them - steps further: :mod:`.robots`), and waits
+stops for - its drive cuts a corner nearer than them - steps further: :mod:`.executor`), and waits
 there until the asker has gone past (it is no longer kept back and is ``passed`` metres away) or
 stopped driving; then it goes on with what it was doing (a driving robot plans its way back onto
 its trajectory).
@@ -27,6 +27,10 @@ passes the request on: it asks the robot standing where it could go to make way 
 first asker's way and off its own way out - whatever that robot's rank, as long as it is not
 loading or unloading, holding a doorway, or already in the chain (``chain`` robots at most). The
 robots of a chain answer for the first asker: when its request ends, theirs do.
+
+Between robot processes (``arroch robot``) each asker's requests travel in its ``RobotTraffic``
+(:mod:`.traffic`): the robot asked answers a request it heard of (:meth:`MakeWay.adopt`), and the
+asker drops its own requests once over by the test the robot asked applies (:meth:`MakeWay.prune`).
 """
 
 from __future__ import annotations
@@ -148,9 +152,17 @@ class MakeWay:
         request = self.requests.get(robot.id)
         if request is None:
             return None
+        if self._ended(request, robot, now, fleet):
+            del self.requests[robot.id]
+            return None
+        return request
+
+    def _ended(self, request: Request, robot: Body, now: float, fleet: Mapping[str, Body]) -> bool:
+        """Whether ``request`` to ``robot`` is over: its askers are gone or done driving, the one it
+        helped is done, it lasted ``longest``, or the asker stopped asking and is away."""
         asker = fleet.get(request.asker)
         first = fleet.get(request.first_asker)
-        gone = (
+        return (
             asker is None
             or first is None
             or first.phase != "drive"
@@ -161,10 +173,34 @@ class MakeWay:
                 and math.dist((asker.x, asker.y), (robot.x, robot.y)) > self.keep + self.passed
             )
         )
-        if gone:
-            del self.requests[robot.id]
-            return None
-        return request
+
+    def prune(self, asker: str, now: float, fleet: Mapping[str, Body]) -> None:
+        """Drop the requests ``asker`` made that are over. The robot asked drops them as it answers
+        (:meth:`request_for`); an asker that does not step the robot it asked (a robot process, which
+        steps only its own) drops them so, so that asking again is a new request."""
+        for asked, request in list(self.requests.items()):
+            if request.asker == asker:
+                other = fleet.get(asked)
+                if other is None or self._ended(request, other, now, fleet):
+                    del self.requests[asked]
+
+    def made_by(self, asker: str) -> dict[str, Request]:
+        """The requests ``asker`` made, by the robot asked."""
+        return {asked: r for asked, r in self.requests.items() if r.asker == asker}
+
+    def adopt(self, asker: str, made: Mapping[str, Request], now: float) -> None:
+        """Take ``made`` as the requests ``asker`` (another robot process's robot) has made now. A
+        robot already asked by someone else keeps that request while it is fresh and older (the
+        first robot to ask is answered first, as :meth:`ask` has it)."""
+        for asked, request in list(self.requests.items()):
+            if request.asker == asker and asked not in made:
+                del self.requests[asked]
+        for asked, request in made.items():
+            held = self.requests.get(asked)
+            fresh = held is not None and held.asker != asker and now - held.renewed <= self.linger
+            if fresh and (held.since, held.asker) <= (request.since, request.asker):
+                continue
+            self.requests[asked] = request
 
     def off_the_way(self, request: Request, x: float, y: float) -> bool:
         """Whether a robot at (x, y) leaves ``request``'s way free."""

@@ -10,6 +10,10 @@ opening's *lane* - the strip in front of the gap on both sides, ``LANE_DEPTH`` d
 gap and ``LANE_MARGIN`` more - or is told something else, or stops driving. Meanwhile no other robot
 steps into that lane, and one that is in it gets out of the way (:meth:`Doorways.lane_to_leave`).
 So two robots do not meet in a doorway or in front of one, whatever the timing of their commands.
+
+Between robot processes (``arroch robot``) each robot's asks and holds travel in its
+``RobotTraffic`` (:mod:`.traffic`, :meth:`Doorways.adopt`); two robots that each took an opening
+before hearing of the other settle it by :func:`_claim`, the same way in both processes.
 """
 
 from __future__ import annotations
@@ -33,10 +37,25 @@ def across(opening: Opening, x: float, y: float) -> float:
     return (y - opening.center[1]) if opening.axis == "x" else (x - opening.center[0])
 
 
-def in_lane(opening: Opening, x: float, y: float) -> bool:
-    """Whether (x, y) is in the lane through ``opening``."""
+def in_lane(opening: Opening, x: float, y: float, reach: float = 0.0) -> bool:
+    """Whether (x, y) is in the lane through ``opening`` (``reach``: whether a disc of that radius
+    there reaches into it along the wall)."""
     along = (x - opening.center[0]) if opening.axis == "x" else (y - opening.center[1])
-    return abs(along) <= opening.width / 2.0 + LANE_MARGIN and abs(across(opening, x, y)) <= LANE_DEPTH
+    return abs(along) <= opening.width / 2.0 + LANE_MARGIN + reach and abs(across(opening, x, y)) <= LANE_DEPTH
+
+
+def _claim(opening: Opening, at: tuple[float, float], entered: bool, robot: str) -> tuple:
+    """Orders two claims to one opening, the first keeps it: a robot that has been in the lane (it
+    is crossing), then the one that got it nearer the opening (it stood in the other's way), then
+    the smaller id."""
+    return (not entered, round(math.dist(at, opening.center), 3), robot)
+
+
+def _put(table: dict, key: str, value: object) -> None:
+    if value is None:
+        table.pop(key, None)
+    else:
+        table[key] = value
 
 
 def lane_rect(opening: Opening) -> tuple[float, float, float, float]:
@@ -48,8 +67,27 @@ def lane_rect(opening: Opening) -> tuple[float, float, float, float]:
     return (cx - LANE_DEPTH, cy - half, cx + LANE_DEPTH, cy + half)
 
 
+@dataclass(frozen=True)
+class Hold:
+    """An opening a robot holds: where its centre was when it got it, whether it has been in the lane."""
+
+    opening: str
+    at: tuple[float, float]
+    entered: bool = False
+
+
+@dataclass(frozen=True)
+class DoorwayRows:
+    """What one robot has of the doorways' table: the opening its command goes through (``""``:
+    none), the one it asks for and since when, the ones it holds."""
+
+    crossing: str = ""
+    asking: tuple[str, float] | None = None
+    holds: tuple[Hold, ...] = ()
+
+
 class Mover(Protocol):
-    """What the rule reads from a robot (:class:`services.sim.robots.Robot`)."""
+    """What the rule reads from a robot (:class:`.executor.Robot`)."""
 
     id: str
     x: float
@@ -112,14 +150,18 @@ class Doorways:
 
     def lane_taken(self, robot: Mover, x: float, y: float, fleet: Mapping[str, Mover]) -> bool:
         """Whether stepping to (x, y) takes ``robot`` into the lane of an opening another robot holds."""
+        return bool(self.lane_holder(robot, x, y, fleet))
+
+    def lane_holder(self, robot: Mover, x: float, y: float, fleet: Mapping[str, Mover]) -> str:
+        """The robot holding the opening whose lane stepping to (x, y) takes ``robot`` into, else ""."""
         self._release(fleet)
         for opening_id, holder in self.holders.items():
             if holder == robot.id:
                 continue
             opening = self.site.opening(opening_id)
             if in_lane(opening, x, y) and not in_lane(opening, robot.x, robot.y):
-                return True
-        return False
+                return holder
+        return ""
 
     def held_lanes(self, robot: Mover, fleet: Mapping[str, Mover]) -> list[tuple[float, float, float, float]]:
         """The lanes (x0, y0, x1, y1) of the openings other robots hold: ``robot`` may not step in."""
@@ -135,6 +177,39 @@ class Doorways:
             if holder != robot.id and in_lane(opening, robot.x, robot.y):
                 return opening
         return None
+
+    # ------------------------------------------------------------------ between robot processes
+
+    def rows(self, robot: str) -> DoorwayRows:
+        """``robot``'s rows of the table, for the other robot processes (:mod:`.traffic`)."""
+        mine = sorted(o for o, holder in self.holders.items() if holder == robot)
+        holds = tuple(Hold(o, self._granted_at[o], o in self._entered) for o in mine)
+        return DoorwayRows(self._told.get(robot, ""), self._asked.get(robot), holds)
+
+    def adopt(self, robot: str, rows: DoorwayRows) -> None:
+        """Take ``rows`` as what ``robot`` (another process's) has now. Two robots that both hold an
+        opening (each granted it before hearing of the other) settle it by :func:`_claim`, the same
+        way in both processes: the one that loses gives it up (this process's robot asks again at
+        its next step, and waits)."""
+        _put(self._told, robot, rows.crossing or None)
+        _put(self._asked, robot, rows.asking)
+        kept = {h.opening for h in rows.holds}
+        for opening_id, holder in list(self.holders.items()):
+            if holder == robot and opening_id not in kept:
+                del self.holders[opening_id]
+        for hold in rows.holds:
+            holder = self.holders.get(hold.opening)
+            if holder is not None and holder != robot:
+                opening = self.site.opening(hold.opening)
+                known = _claim(opening, self._granted_at[hold.opening], hold.opening in self._entered, holder)
+                if known <= _claim(opening, hold.at, hold.entered, robot):
+                    continue  # the holder we know of keeps it (the other learns so from its traffic)
+            if holder != robot:
+                self._entered.discard(hold.opening)  # a new holder: its own way into the lane counts
+            self.holders[hold.opening] = robot
+            self._granted_at[hold.opening] = hold.at
+            if hold.entered:
+                self._entered.add(hold.opening)
 
     def _release(self, fleet: Mapping[str, Mover]) -> None:
         """Free the openings whose holder is through (it was in the lane and is out), was told

@@ -1,4 +1,4 @@
-"""Right of way between robots executing in the simulator: a robot keeps a safety margin.
+"""Right of way between driving robots, simulated or real: a robot keeps a safety margin.
 
 The planner sends each robot to its own spot (queue spots at openings, drop slots), but execution
 drifts from the plan: a robot runs ahead of its schedule when an action ends early, or falls behind
@@ -12,8 +12,9 @@ if it comes back to A (a cycle of robots waiting on one another), the robot with
 priority in the cycle (the smallest id) goes on instead of stopping; nor does a robot wait forever
 for one that is parked (its action over, waiting for nothing): once it has been stopped for
 ``patience`` seconds, it goes on past parked robots. Going on never means touching: robots are
-solid (:mod:`services.sim.avoidance`), so a robot that goes on comes up to the other and drives
-around it where there is room.
+solid (:mod:`.avoidance`), so a robot that goes on comes up to the other and drives
+around it where there is room. Robots of separate processes (``arroch robot``) follow one another's
+``blocked_by`` through their ``RobotTraffic`` (:mod:`.traffic`).
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ PARKED = ("done", "idle", "failed")
 
 
 class Body(Protocol):
-    """What the rule reads from a robot (:class:`services.sim.robots.Robot`)."""
+    """What the rule reads from a robot (:class:`.executor.Robot`)."""
 
     id: str
     x: float

@@ -1,5 +1,12 @@
 """Executing RobotCommands: one state machine per robot (docs/services/robot.md, execution contract).
 
+One executor for every robot ARROCH drives: the simulator's robots (``services/sim/engine.py``
+steps them and applies each step's pose) and a real robot's (``arroch robot --ros2``,
+``services/robot/driver.py``: it sends each step's ``(v, omega)`` as the robot's Twist and takes its
+next pose from the robot's odometry). Each step is decided from the robot's pose, the doors and the
+objects (:mod:`.interfaces`) and the other robots of :attr:`RobotExecutor.fleet`, so a real robot
+yields, waits, drives around, makes way, queues and gives up exactly as a simulated one.
+
 An action runs through phases: *drive* (follow the trajectory with :class:`PurePursuit`), then,
 depending on the action, *wait for the door* (``opendoor``) or *dwell* (``load``/``unload``
 for ``duration``, else the site's ``load_time``), then done. A new command preempts the current
@@ -32,22 +39,28 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from protocol.events import ActionDone, ActionFailed, Delivered, Loaded, RobotOutcome, WaitingAtDoor
-from protocol.messages import RobotCommand
+from protocol.messages import RobotCommand, RobotStatus
 from protocol.site.model import Site
+from runtime.clearance import wall_clearance
 from runtime.execution import REACH, START_TOLERANCE, command_problem, dwell_problem
 from runtime.plane import segment_distance
 from runtime.pursuit import ControllerConfig, Path, PurePursuit, Step, crossing_behind, path_crossings
 
 from .avoidance import Avoidance
-from .doors import Doors
 from .doorways import Doorways, in_lane
+from .interfaces import Doors, Objects
 from .make_way import MakeWay, Request, along
-from .objects import Objects
 from .right_of_way import RightOfWay
+from .waiting import Waits
 from .walls import WallDepth
 
 QUEUE_DISTANCE = 1.5  # m from the end of its approach within which a robot kept back queues there
 BOX_SLACK = 1e-9  # m: the door guard's quick box test errs on the side of the exact one
+# m: cells of the grid a robot driving around others keeps to. Half the motion planner's: the clearance
+# it needs for the same guarantee (runtime/clearance.py) is 0.043 m instead of 0.066, so a robot in a
+# 2 m corridor still finds where to step aside between a robot passing down the middle and the wall
+# (twelve robots on the planner's grid jammed the corridor within a minute)
+FREE_RESOLUTION = 0.025
 
 
 def _crossing(robot: Robot) -> str:
@@ -70,6 +83,11 @@ class RobotConfig:
     robot_margin: float = 0.05  # m a driving robot keeps between its disc and another robot's
     guard_patience: float = 30.0  # s a drive may be refused by the shut-doorway or wall guard before it fails
     wall_tolerance: float = 0.05  # m a disc may reach into a wall (the pursuit's corner cut at a jamb)
+    # m added to ``robot_margin`` and to the closest two discs may come (``Avoidance.contact_gap``) for
+    # robots that see one another late (a real robot's driver sets it from its control period,
+    # services/robot/driver.py: the others' poses are predicted, and this is what the prediction may
+    # miss); 0 in the simulator, which steps every robot on the others' latest poses
+    allowance: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -120,6 +138,25 @@ def outcome_of(
     return Outcome(data, robot.id, door=door, object=object, new_world=new_world)
 
 
+def status_message(robot: Robot, world_version: int) -> RobotStatus:
+    """The robot's ``RobotStatus`` now, with the world version its sender last knew."""
+    cmd = robot.command
+    return RobotStatus(
+        robot=robot.id,
+        state=robot.state,
+        plan_id=cmd.plan_id if cmd else 0,
+        action_id=cmd.action_id if cmd else 0,
+        action=cmd.action if cmd else "",
+        args=list(cmd.args) if cmd else [],
+        progress=max(0.0, min(1.0, robot.progress)),
+        carrying=list(robot.carrying),
+        delivered=list(robot.delivered),
+        waiting_door=robot.waiting_door,
+        detail=robot.detail[:512],
+        world_version=world_version,
+    )
+
+
 class CommandError(Exception):
     """Why a command cannot be executed (the text goes into action_failed's reason)."""
 
@@ -161,15 +198,22 @@ class RobotExecutor:
         self.objects = objects
         self.config = config
         self.fleet: dict[str, Robot] = {}  # every robot, for the right of way (set by the engine)
-        self.right_of_way = RightOfWay(config.radius, config.robot_margin)
-        # where a robot's centre may go when it drives around another (doors open: shut ones are checked apart)
-        self._free = site.occupancy_grid(resolution=0.05, open_doors=tuple(site.door_leaves), inflate=config.radius)
+        self.right_of_way = RightOfWay(config.radius, config.robot_margin + config.allowance)
+        # where a robot's centre may go when it drives around another (doors open: shut ones are checked
+        # apart): inflated as the motion planner's grid is, so a way around never touches a wall either
+        self._free = site.occupancy_grid(
+            resolution=FREE_RESOLUTION,
+            open_doors=tuple(site.door_leaves),
+            inflate=config.radius + wall_clearance(FREE_RESOLUTION),
+        )
         self._walls = WallDepth(site, config.radius)
         self.avoidance = Avoidance(site, self._free, config.radius, config.controller)
+        self.avoidance.contact_gap += config.allowance
         self.doorways = Doorways(site)
         self.avoidance.keep_out = lambda robot: self.doorways.held_lanes(robot, self.fleet)
         self.avoidance.passable = lambda opening_id: opening_id not in doors.doors or doors.passable(opening_id)
         self.make_way = MakeWay(config.radius, self.doorways.holds)
+        self.waits = Waits()
         self._made_way: set[str] = set()  # robots answering a request to make way
         self._passed_on: dict[str, float] = {}  # robot -> when it last looked for a robot boxing it in
 
@@ -177,18 +221,7 @@ class RobotExecutor:
 
     def assign(self, robot: Robot, cmd: RobotCommand) -> list[Outcome]:
         """Start executing ``cmd`` (preempting what ran before). Returns what that caused at once."""
-        robot.command = cmd
-        robot.last_action_id = cmd.action_id
-        self.doorways.forget(robot.id)
-        self.avoidance.moving_on(robot.id)  # how long it was kept back on its last drive counts no more
-        robot.follower = None
-        robot.crossings = []
-        robot.refused_time = 0.0
-        robot.v = robot.omega = 0.0
-        robot.detail = ""
-        robot.progress = 0.0
-        robot.status_changed = True  # a new action_id, even if the state stays "moving"
-        self._set(robot, state="moving", waiting_door="")
+        self._take(robot, cmd)
         if cmd.action == "stop":
             robot.phase = "idle"
             self._set(robot, state="idle", detail="stopped")
@@ -204,19 +237,40 @@ class RobotExecutor:
         robot.phase = "drive"
         return []
 
+    def refuse(self, robot: Robot, cmd: RobotCommand, reason: str) -> list[Outcome]:
+        """Take ``cmd`` and fail it at once, for a reason only the caller knows (a real robot whose
+        pose has not come yet)."""
+        self._take(robot, cmd)
+        return self._fail(robot, reason)
+
+    def _take(self, robot: Robot, cmd: RobotCommand) -> None:
+        """``cmd`` is the robot's command from now on: what ran before is over."""
+        robot.command = cmd
+        robot.last_action_id = cmd.action_id
+        self.doorways.forget(robot.id)
+        self.avoidance.moving_on(robot.id)  # how long it was kept back on its last drive counts no more
+        robot.follower = None
+        robot.crossings = []
+        robot.refused_time = 0.0
+        robot.v = robot.omega = 0.0
+        robot.detail = ""
+        robot.progress = 0.0
+        robot.status_changed = True  # a new action_id, even if the state stays "moving"
+        self._set(robot, state="moving", waiting_door="")
+
     def _check(self, robot: Robot, cmd: RobotCommand) -> None:
         target = cmd.args[0] if cmd.args else ""
         if cmd.action in ("load", "unload"):
             if target not in self.objects:
                 raise CommandError(f"{cmd.action}: no object {target!r}")
-            obj = self.objects[target]
+            objects = self.objects
             if cmd.action == "load":
-                if obj.spec.robot != robot.id:
-                    raise CommandError(f"load: object {target!r} belongs to robot {obj.spec.robot!r}")
-                if obj.delivered or obj.carrier is not None:
+                if objects.owner(target) != robot.id:
+                    raise CommandError(f"load: object {target!r} belongs to robot {objects.owner(target)!r}")
+                if objects.delivered(target) or objects.carrier(target) is not None:
                     raise CommandError(
                         f"load: object {target!r} is "
-                        f"{'delivered' if obj.delivered else 'carried by ' + str(obj.carrier)}"
+                        f"{'delivered' if objects.delivered(target) else 'carried by ' + str(objects.carrier(target))}"
                     )
                 if len(robot.carrying) >= self.config.capacity:
                     raise CommandError(f"load: robot is full ({self.config.capacity} object(s))")
@@ -233,7 +287,10 @@ class RobotExecutor:
 
     def step(self, robot: Robot, now: float, dt: float) -> list[Outcome]:
         """Advance one robot by ``dt``; ``now`` is the time at the start of the step."""
-        if self._making_way(robot, now, dt):
+        making_way = self._making_way(robot, now, dt)
+        if making_way or robot.phase != "drive":
+            self.waits.off(robot.id)  # it waits for no robot: it makes way, dwells or waits for a door
+        if making_way:
             return []
         if robot.phase == "drive":
             return self._drive(robot, now, dt)
@@ -260,8 +317,13 @@ class RobotExecutor:
                 robot.yield_time += dt
                 return []
         opening_id = _crossing(robot)
+        kept_back_by = self.waits.waits_for.get(robot.id, "")  # last step's (it may still drive around it)
+        self.waits.off(robot.id)  # until a robot keeps it back below
         if opening_id and not self.doorways.may_cross(robot, opening_id, now, self.fleet):
             robot.v = robot.omega = 0.0  # another robot has the doorway: wait where it is
+            holder = self.doorways.holders.get(opening_id)
+            if holder is not None:
+                self.waits.on(robot.id, holder)
             robot.yield_time += dt
             self.avoidance.moving_on(robot.id)
             return []
@@ -296,26 +358,31 @@ class RobotExecutor:
         if step.held:
             self.right_of_way.forget(robot.id)  # waits for a door or a hold, not for a robot
             self.avoidance.moving_on(robot.id)
-        elif self.doorways.lane_taken(robot, step.x, step.y, self.fleet):
+        elif holder := self.doorways.lane_holder(robot, step.x, step.y, self.fleet):
             # the way ahead crosses a doorway's lane another robot holds: wait for it, like for a door
+            self.waits.on(robot.id, holder)
             robot.v = robot.omega = 0.0
             robot.yield_time += dt
             self.avoidance.moving_on(robot.id)
             return []
         elif (
-            self.right_of_way.blocker(robot, step.x, step.y, self.fleet, now)
-            or not self.avoidance.clear(robot, step.x, step.y, self.fleet)
+            (blocker := self.right_of_way.blocker(robot, step.x, step.y, self.fleet, now))
+            or (blocker := self.avoidance.closing_in_on(robot, step.x, step.y, self.fleet))
             or self.avoidance.driving_around(robot.id)
         ):
+            self.waits.on(robot.id, blocker or kept_back_by)
             if self._goal_taken(robot, follower, now):
                 robot.v = robot.omega = 0.0
                 return self._arrived(robot, now + dt)
-            if self.avoidance.mark_kept_back(robot, now) >= self.avoidance.give_up:
-                # wedged among robots (or behind one that waits for a door) with no way around and
+            kept = self.avoidance.mark_kept_back(robot, now)
+            stuck = kept >= self.avoidance.give_up and self.waits.stuck(robot.id, self.fleet)
+            if stuck or kept >= self.waits.patience:
+                # wedged among robots (a cycle, or behind a parked one) with no way around and
                 # nobody making way: it never pushes through; the planner plans again from here
                 robot.v = robot.omega = 0.0
                 self.avoidance.moving_on(robot.id)
-                return self._fail(robot, f"kept back by robots for {self.avoidance.give_up:g} s")
+                waited = self.avoidance.give_up if stuck else self.waits.patience
+                return self._fail(robot, f"kept back by robots for {waited:g} s")
             step = self._kept_back(robot, follower, now, dt)
             robot.yield_time += dt
         elif step.v > 0.0:
@@ -490,10 +557,8 @@ class RobotExecutor:
                 continue
             if self._breaks_guard(robot, step, door.id, 0.0):
                 return True
-            moving = 0.0 < door.fraction < 1.0 or (door.fraction >= 1.0 and not door.target_open)
-            if moving and self.doors.doorway_clear(door, [(robot.x, robot.y)]):
-                if not self.doors.doorway_clear(door, [(step.x, step.y)]):
-                    return True
+            if self.doors.into_swing(door.id, (robot.x, robot.y), (step.x, step.y)):
+                return True
         return False
 
     def _into_wall(self, robot: Robot, step: Step) -> bool:
@@ -525,8 +590,8 @@ class RobotExecutor:
             robot.phase = "wait_open"
             return self._wait_open(robot, 0.0)
         # load / unload: check now that the dwell can succeed, so a doomed one fails at once.
-        obj = self.objects[cmd.args[0]]
-        problem = dwell_problem(self.site, robot.x, robot.y, cmd, (obj.x, obj.y), self.config.reach)
+        where = self.objects.position(cmd.args[0])
+        problem = dwell_problem(self.site, robot.x, robot.y, cmd, where, self.config.reach)
         if problem:
             return self._fail(robot, problem)
         robot.phase = "dwell"
@@ -570,6 +635,23 @@ class RobotExecutor:
             self.objects.place(oid, robot.x, robot.y, delivered_at=t)
             first = self._outcome(robot, Delivered, object=oid)
         return [first, *self._done(robot)]
+
+    # ------------------------------------------------------------------ what the executor is told
+
+    def fail(self, robot: Robot, reason: str) -> list[Outcome]:
+        """The robot's action fails for a reason the executor does not see itself (a real robot's
+        laser safety field blocked for too long): it stops, and the planner plans again."""
+        return self._fail(robot, reason)
+
+    def note(self, robot: Robot, detail: str) -> None:
+        """Say why a driving robot does not move though its executor drives it (an obstacle its laser
+        sees); "" when that is over."""
+        if robot.phase == "drive":
+            self._set(robot, detail=detail)
+
+    def making_way(self, robot: str) -> bool:
+        """Whether the robot answers a request to make way (it may move, whatever its phase)."""
+        return robot in self._made_way
 
     # ------------------------------------------------------------------ reporting
 

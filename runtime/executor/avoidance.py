@@ -1,7 +1,7 @@
 """Robots are solid, and a robot kept back by others drives around them.
 
-Two rules for robots driving in the simulator, on top of the right of way
-(:mod:`services.sim.right_of_way`):
+Two rules for driving robots, simulated or real (:mod:`.executor`), on top of the right of way
+(:mod:`.right_of_way`):
 
 - **Solid bodies.** No step may bring a robot's disc within ``contact_gap`` of another robot's
   disc while closing in on it, whatever produced the step (following the trajectory, backing away,
@@ -17,13 +17,16 @@ Two rules for robots driving in the simulator, on top of the right of way
   and tries again ``retry`` seconds later.
 
 Where there is no way around, the robot kept back asks the robot in its way to make way
-(:mod:`services.sim.make_way`). When nothing helps for ``give_up`` seconds (robots wedged in a
+(:mod:`.make_way`). When nothing helps for ``give_up`` seconds (robots wedged in a
 cluster, each waiting on the next, or behind one that waits for a door) the robot's action fails
-and the planner plans again from where the robots stand (:mod:`services.sim.robots`). A robot
+and the planner plans again from where the robots stand (:mod:`.executor`). A robot
 never pushes through another: solid bodies hold for every step.
 
-Both rules read other robots where they are now; robots are stepped one after another within a
-tick, so each sees the others' latest poses and the invariant holds after every robot's step.
+Both rules read other robots where they are now. In the simulator robots are stepped one after
+another within a tick, so each sees the others' latest poses and the invariant holds after every
+robot's step. A real robot's driver sees each other robot where its last pose, carried on at its
+velocity, puts it (:mod:`.peers`), and comes no nearer than ``contact_gap`` grown by
+``RobotConfig.allowance`` (what that prediction may miss).
 """
 
 from __future__ import annotations
@@ -60,7 +63,9 @@ class Detour:
 @dataclass
 class Avoidance:
     site: Site
-    free: OccupancyGrid  # where a robot's centre may be (walls and open leaves inflated by its radius)
+    # where a robot's centre may be: walls and open leaves inflated by its radius and the motion
+    # planner's wall clearance (runtime/clearance.py), so ways around robots keep it too
+    free: OccupancyGrid
     radius: float
     controller: ControllerConfig
     contact_gap: float = 0.005  # m: the closest two discs may come while closing in
@@ -86,14 +91,19 @@ class Avoidance:
 
     def clear(self, robot: Body, x: float, y: float, fleet: Mapping[str, Body]) -> bool:
         """Whether stepping to (x, y) keeps ``robot`` from touching any other robot."""
+        return not self.closing_in_on(robot, x, y, fleet)
+
+    def closing_in_on(self, robot: Body, x: float, y: float, fleet: Mapping[str, Body]) -> str:
+        """The first robot (in fleet order) that stepping to (x, y) would bring ``robot`` within
+        ``contact_gap`` of while closing in, else ""."""
         limit = 2.0 * self.radius + self.contact_gap
         for other in fleet.values():
             if other.id == robot.id:
                 continue
             after = math.hypot(x - other.x, y - other.y)
             if after < limit and after < math.hypot(robot.x - other.x, robot.y - other.y) - 1e-9:
-                return False
-        return True
+                return other.id
+        return ""
 
     # ------------------------------------------------------------------ driving around
 
@@ -373,9 +383,22 @@ class Avoidance:
         def cell(p: tuple[float, float]) -> tuple[int, int]:
             return (min(max(int((p[1] - y0) / res), 0), ny - 1), min(max(int((p[0] - x0) / res), 0), nx - 1))
 
+        def centre(c: tuple[int, int]) -> tuple[float, float]:
+            return (x0 + (c[1] + 0.5) * res, y0 + (c[0] + 0.5) * res)
+
         a, b = cell(start), cell(goal)
         if blocked[b]:
             return []
+        leave: list[tuple[float, float]] = []
+        if not cells[a]:
+            # within the walls' clearance (pushed there, or beside a jamb): every cell around may be
+            # in it too, so the way first leaves it through the nearest cell that is not
+            rows, cols = np.nonzero(~blocked)
+            if rows.size == 0:
+                return []
+            nearest = int(np.argmin((rows - a[0]) ** 2 + (cols - a[1]) ** 2))
+            a = (int(rows[nearest]), int(cols[nearest]))
+            leave = [centre(a)]
         came: dict[tuple[int, int], tuple[int, int]] = {}
         cost = {a: 0.0}
         heap = [(0.0, a)]
@@ -397,8 +420,27 @@ class Avoidance:
         while route[-1] != a:
             route.append(came[route[-1]])
         route.reverse()
-        points = [(x0 + (c[1] + 0.5) * res, y0 + (c[0] + 0.5) * res) for c in _corners(route, blocked)]
-        return [*([backed] if backed else []), *points, goal]
+
+        def straight(a: tuple[int, int], b: tuple[int, int]) -> bool:
+            # over free cells of this grid, and of the fine grid the robot's steps keep to: a leg
+            # cutting a corner of the fine grid's free space would come nearer a wall than its clearance
+            return _straight(a, b, blocked) and self._leg_free(centre(a), centre(b))
+
+        points = [centre(c) for c in _corners(route, straight)]
+        return [*([backed] if backed else []), *leave, *points, goal]
+
+    def _leg_free(self, a: tuple[float, float], b: tuple[float, float]) -> bool:
+        """Whether every point of the straight leg a-b lies on a free cell of ``free`` (sampled at a
+        quarter cell)."""
+        grid = self.free
+        count = max(math.ceil(math.dist(a, b) / (grid.resolution * 0.25)), 1)
+        t = np.linspace(0.0, 1.0, count + 1)
+        cols = np.floor((a[0] + (b[0] - a[0]) * t - grid.origin[0]) / grid.resolution).astype(np.int64)
+        rows = np.floor((a[1] + (b[1] - a[1]) * t - grid.origin[1]) / grid.resolution).astype(np.int64)
+        ny, nx = grid.occupied.shape
+        if rows.min() < 0 or cols.min() < 0 or rows.max() >= ny or cols.max() >= nx:
+            return False
+        return not bool(grid.occupied[rows, cols].any())
 
     def _backed_off(self, robot: Body, others: list[tuple[float, float]]) -> tuple[float, float] | None:
         """Where a robot nearer than ``keep`` to other robots first backs off to before it drives a
@@ -428,14 +470,16 @@ class Avoidance:
         return point
 
 
-def _corners(route: list[tuple[int, int]], blocked: np.ndarray) -> list[tuple[int, int]]:
+def _corners(
+    route: list[tuple[int, int]], straight: Callable[[tuple[int, int], tuple[int, int]], bool]
+) -> list[tuple[int, int]]:
     """The cells of ``route`` (after its first, before its last) where it must turn: from each kept
-    cell the next is the farthest one reached in a straight line over free cells only, so the
+    cell the next is the farthest one reached in a ``straight`` line (over free cells only), so the
     straight legs between them never cut across a blocked cell."""
     kept, here = [], 0
     while here < len(route) - 1:
         nxt = here + 1
-        while nxt + 1 < len(route) and _straight(route[here], route[nxt + 1], blocked):
+        while nxt + 1 < len(route) and straight(route[here], route[nxt + 1]):
             nxt += 1
         if nxt < len(route) - 1:
             kept.append(route[nxt])

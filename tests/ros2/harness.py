@@ -11,16 +11,19 @@ the site's walls, and a person the test places) just before each odometry messag
 
 from __future__ import annotations
 
+import itertools
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from protocol.messages import Clock, RobotCommand
-from protocol.site import load_site
+from protocol.site import Site, load_site
 from runtime.pursuit import integrate
 from runtime.ros2 import types as ros
 from runtime.ros2.config import Ros2Config
+from runtime.ros2.keys import TopicNaming
 from runtime.ros2.node import RosNode
 from services.sim.human import HUMAN_RADIUS
 from services.sim.scan import Scanner
@@ -171,3 +174,42 @@ def straight_command(
     c, s = math.cos(th), math.sin(th)
     rows = [[0.1 * i, x + c * (i * length / 20 - offset), y + s * (i * length / 20 - offset), th] for i in range(21)]
     return RobotCommand(robot=robot, plan_id=1, action_id=action_id, action="approach", args=[opening], trajectory=rows)
+
+
+class OdometryWatch:
+    """Each base's pose in the site frame from its own nav_msgs/Odometry (odom frame: its start pose),
+    read as any ROS 2 node would, and the closest any two bases came, taken at the odometry stamps
+    every base reported: contacts counted from the bases' own odometry, not the simulator's count."""
+
+    def __init__(self, client: TestClient, site: Site, naming: Callable[[str], TopicNaming]) -> None:
+        self.site = site
+        self.lock = threading.Lock()
+        self.by_stamp: dict[float, dict[str, tuple[float, float]]] = {}
+        self.closest = math.inf
+        self.closest_pair: tuple[str, str] = ("", "")
+        self.samples = 0  # stamps at which every base reported
+        self.contacts = 0  # of those, the ones with two discs overlapping
+        for rid in site.robots:
+            key = naming(rid).subscription_key(f"/{rid}/odom", ros.ODOMETRY)
+            client.hold(client.session.declare_subscriber(key, lambda s, rid=rid: self._on(rid, s)))
+
+    def _on(self, rid: str, sample) -> None:  # noqa: ANN001
+        msg = ros.deserialize(sample.payload.to_bytes(), ros.ODOMETRY)
+        p = ros.pose_2d(msg, ros.ODOMETRY)
+        ox, oy, oth = self.site.robots[rid].start
+        c, s = math.cos(oth), math.sin(oth)
+        where = (ox + c * p.x - s * p.y, oy + s * p.x + c * p.y)
+        stamp = round(ros.seconds(msg.header.stamp), 3)
+        with self.lock:
+            at = self.by_stamp.setdefault(stamp, {})
+            at[rid] = where
+            if len(at) < len(self.site.robots):
+                return
+            del self.by_stamp[stamp]
+            self.samples += 1
+            touching = 2.0 * self.site.params.robot_radius
+            pairs = [(math.dist(at[a], at[b]), (a, b)) for a, b in itertools.combinations(sorted(at), 2)]
+            nearest, pair = min(pairs)
+            if nearest < self.closest:
+                self.closest, self.closest_pair = nearest, pair
+            self.contacts += nearest < touching

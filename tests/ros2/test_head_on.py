@@ -12,7 +12,6 @@ says their discs never touched."""
 from __future__ import annotations
 
 import math
-import threading
 import time
 from pathlib import Path
 
@@ -20,10 +19,10 @@ import pytest
 
 from protocol.messages import Event, RobotCommand, RobotStatus, RobotTraffic
 from protocol.site import loads_site
-from runtime.ros2 import types as ros
 from runtime.ros2.config import load_ros2_config
 from tests.conftest import wait_for_message
 from tests.procs import arroch
+from tests.ros2.harness import OdometryWatch
 from tests.sim.helpers import SMALL_SITE
 
 pytestmark = pytest.mark.integration
@@ -46,35 +45,6 @@ WAYS = {"r0": [(1.0, 5.0), (3.0, 5.0), (3.0, 7.5)], "r1": [(3.0, 9.0), (3.0, 5.0
 TIMEOUT = 40.0  # wall s for both to arrive once commanded (about 15 here)
 
 
-class Odometry:
-    """Each base's pose in the site frame from its own nav_msgs/Odometry (odom frame: its start pose),
-    and the closest the two came, taken at the odometry stamps both bases reported."""
-
-    def __init__(self, client, config) -> None:  # noqa: ANN001
-        self.lock = threading.Lock()
-        self.by_stamp: dict[float, dict[str, tuple[float, float]]] = {}
-        self.closest = math.inf
-        self.samples = 0
-        for rid in SITE.robots:
-            key = config.naming(rid).subscription_key(f"/{rid}/odom", ros.ODOMETRY)
-            client.hold(client.session.declare_subscriber(key, lambda s, rid=rid: self._on(rid, s)))
-
-    def _on(self, rid: str, sample) -> None:  # noqa: ANN001
-        msg = ros.deserialize(sample.payload.to_bytes(), ros.ODOMETRY)
-        p = ros.pose_2d(msg, ros.ODOMETRY)
-        ox, oy, oth = SITE.robots[rid].start
-        c, s = math.cos(oth), math.sin(oth)
-        where = (ox + c * p.x - s * p.y, oy + s * p.x + c * p.y)
-        stamp = round(ros.seconds(msg.header.stamp), 3)
-        with self.lock:
-            at = self.by_stamp.setdefault(stamp, {})
-            at[rid] = where
-            if len(at) == len(SITE.robots):
-                self.closest = min(self.closest, math.dist(*at.values()))
-                self.samples += 1
-                del self.by_stamp[stamp]
-
-
 def test_two_drivers_pass_head_on_through_a_doorway_without_touching(spawn, router, namespace, client, tmp_path: Path):
     site_file = tmp_path / "headon.toml"
     site_file.write_text(SITE_TOML)
@@ -82,7 +52,7 @@ def test_two_drivers_pass_head_on_through_a_doorway_without_touching(spawn, rout
     cfg_file.write_text(ROS2_TOML)
     config = load_ros2_config(cfg_file)
     common = ("--site", str(site_file), "--connect", router, "--namespace", namespace, "--ros2-config", str(cfg_file))
-    odometry = Odometry(client, config)
+    odometry = OdometryWatch(client, SITE, config.naming)
     statuses = client.collect(client.keys.robot_status(), RobotStatus)
     traffic = client.collect(client.keys.robot_traffic(), RobotTraffic)
     events = client.collect(client.keys.event(), Event)

@@ -18,7 +18,9 @@ from pathlib import Path
 import pytest
 
 from protocol.site import loads_site
+from runtime.ros2.config import Ros2Config
 from tests.procs import arroch
+from tests.ros2.harness import OdometryWatch
 from tests.ros2.two_robots import SITE_TOML as TWO_ROBOTS
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow(seconds=40)]  # wall s on two quiet cores
@@ -27,12 +29,14 @@ TIMEOUT = 300.0  # wall s, a guard: the mission takes about 17 s alone on two co
 
 
 @pytest.mark.parametrize("key_format", ["rmw_zenoh", "ros2dds"])
-def test_a_mission_through_ros2(spawn, tmp_path: Path, key_format: str):
+def test_a_mission_through_ros2(spawn, router, namespace, client, tmp_path: Path, key_format: str):
     site = loads_site(TWO_ROBOTS, "two_robots.toml")
+    # the bases' own odometry, as a ROS 2 node on the same Zenoh network reads it
+    odometry = OdometryWatch(client, site, Ros2Config(key_format=key_format, domain=7).naming)
     (tmp_path / "site.toml").write_text(TWO_ROBOTS)
     site_args = f" --site {tmp_path / 'site.toml'}"
     run_dir = tmp_path / "runs"
-    ros2 = f"--key-format {key_format} --domain 7{site_args}"
+    ros2 = f"--key-format {key_format} --domain 7{site_args} --connect {{connect}} --namespace {{namespace}}"
     drivers = [
         f"--child={rid}={{python}} -m services.cli robot --ros2 --robot {rid} {ros2}" for rid in sorted(site.robots)
     ]
@@ -40,6 +44,7 @@ def test_a_mission_through_ros2(spawn, tmp_path: Path, key_format: str):
         arroch(
             "up",
             *site_args.split(),
+            *("--no-router", "--connect", router, "--namespace", namespace),
             "--services",
             "planner,restrictor",
             "--mode",
@@ -87,3 +92,7 @@ def test_a_mission_through_ros2(spawn, tmp_path: Path, key_format: str):
     assert len(failed) <= 3 and all(any(r in f.get("reason", "") for r in stale) for f in failed), failed
     assert kinds["action_done"] < 300  # about 110 for 9 deliveries: no action repeated without progress
     assert "lockstep stalled" not in proc.output
+    # No contact by the bases' own odometry either, at every site instant both reported.
+    assert odometry.samples > 1000, odometry.samples
+    assert odometry.contacts == 0, (odometry.closest, odometry.closest_pair)
+    print(f"{key_format}: closest {odometry.closest:.3f} m by odometry over {odometry.samples} instants")

@@ -17,8 +17,8 @@ the next crossing's door is not passable, the robot may go no further than ``rad
 stop_margin`` short of the closed leaf's line; held there it is ``waiting_at_door``. A hard guard
 backs this up: a step that would bring the robot's disc within ``guard_margin`` of a shut door's
 gap, closer than it was, is refused (the robot still turns where it stands). Walls likewise: a
-step that takes a disc into a wall (more than ``wall_tolerance``, 0), deeper than it was, is
-refused (a corner cut beside a doorway, a step out of another robot's way beside a jamb), and the
+step that takes a disc more than ``wall_tolerance`` into a wall, deeper than it was, is refused
+(the pursuit's corner cut beside a doorway, heading back onto a trajectory from off it), and the
 robot plans its way back on the grid (:meth:`Avoidance.rejoin`). A drive refused so for
 ``guard_patience`` in a row (a door it does not go through, a wall it has no way round) fails.
 Robots never touch (:mod:`.avoidance`): a robot kept back by others that drives around nothing and
@@ -82,7 +82,7 @@ class RobotConfig:
     reach: float = REACH  # m from the robot's centre within which it can pick up an object
     robot_margin: float = 0.05  # m a driving robot keeps between its disc and another robot's
     guard_patience: float = 30.0  # s a drive may be refused by the shut-doorway or wall guard before it fails
-    wall_tolerance: float = 0.0  # m a disc may reach into a wall
+    wall_tolerance: float = 0.05  # m a disc may reach into a wall (the pursuit's corner cut at a jamb)
     # m added to ``robot_margin`` and to the closest two discs may come (``Avoidance.contact_gap``) for
     # robots that see one another late (a real robot's driver sets it from its control period,
     # services/robot/driver.py: the others' poses are predicted, and this is what the prediction may

@@ -41,10 +41,10 @@ def test_same_building_and_object_places_as_the_papers_site_only_destinations_di
 
 
 def test_the_planner_reorders_the_deliveries_around_a_declared_window() -> None:
-    # One robot, two objects: one goes into her storage room, the other to another room. Seed 1 is a building in which,
+    # One robot, two objects: one goes into her storage room, the other to another room. Seed 2 is a building in which,
     # free to, the robot delivers into storage first (checked below). With her door unavailable for the first 200 s,
     # the better order is the other errand first: it fills the wait, and the storage delivery follows the window.
-    site = loads_site(generate_detour_site(1, 2, 1, 0.5), "unit.toml")
+    site = loads_site(generate_detour_site(1, 2, 2, 0.5), "unit.toml")
     planner = TaskPlanner(site, PlannerSettings(time_limit=60.0, joint_time_limit=60.0))
     world = initial_world(site)
     destination = {o.id: o.deliver_to for o in site.objects.values()}

@@ -18,6 +18,7 @@ EXPECTED = {
     "clock": ((), "clock"),
     "robot_pose": (("r0",), "robot/r0/pose"),
     "robot_status": (("r0",), "robot/r0/status"),
+    "robot_traffic": (("r0",), "robot/r0/traffic"),
     "robot_command": (("r0",), "robot/r0/command"),
     "door_state": (("d_storage",), "door/d_storage/state"),
     "door_sensor": (("d_storage",), "door/d_storage/sensor"),
@@ -82,6 +83,7 @@ def test_invalid_chunks_refused(bad):
     for build in (
         keys.robot_pose,
         keys.robot_status,
+        keys.robot_traffic,
         keys.robot_command,
         keys.door_state,
         keys.intent,

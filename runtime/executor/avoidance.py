@@ -49,7 +49,11 @@ Rect = tuple[float, float, float, float]  # x0, y0, x1, y1
 
 REACHED = 0.08  # m: a way's point this near the robot is reached
 BACK_OFF = 0.1  # m: the shortest back-off from a robot before a way (longer than REACHED: it is driven)
-RING = (0.7, 1.0, 1.3, 1.6)  # m: how far from where it stands a robot looks for a free point to step to
+# m: how far from where it stands a robot looks for a free point to step to. Out to 3 m: in a corridor
+# lined by a queue, the nearest free point is past the queue's end (twelve robots, trials 0-3 of
+# arroch experiment robots --robots 12 --objects 3 --seed 0: failed actions 8/2/6/12 -> 1/4/5/1 with
+# rings to 3 m; to 5 m, robots sent far off to make way jammed the corridor, 4/4/39/0)
+RING = (0.7, 1.0, 1.3, 1.6, 2.0, 2.5, 3.0)
 NEIGHBOURS = [(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr, dc) != (0, 0)]
 
 

@@ -382,7 +382,8 @@ class RobotExecutor:
                 robot.v = robot.omega = 0.0
                 self.avoidance.moving_on(robot.id)
                 waited = self.avoidance.give_up if stuck else self.waits.patience
-                return self._fail(robot, f"kept back by robots for {waited:g} s")
+                chain = " -> ".join(self.waits.chain(robot.id))
+                return self._fail(robot, f"kept back by robots for {waited:g} s (waiting: {chain})")
             step = self._kept_back(robot, follower, now, dt)
             robot.yield_time += dt
         elif step.v > 0.0:

@@ -41,17 +41,23 @@ class Waits:
         """``robot`` waits for no robot this step (it drives, waits for a door or a hold, or dwells)."""
         self.waits_for.pop(robot, None)
 
+    def chain(self, robot: str) -> list[str]:
+        """The robots ``robot`` waits on, one after another, up to the first met twice (a cycle)."""
+        chain = [robot]
+        nxt = self.waits_for.get(robot)
+        while nxt is not None:
+            chain.append(nxt)
+            if nxt in chain[:-1]:
+                break
+            nxt = self.waits_for.get(nxt)
+        return chain
+
     def stuck(self, robot: str, fleet: Mapping[str, Body]) -> bool:
         """Whether the wait of ``robot`` (kept back by robots) cannot end by itself: the chain of
         robots waiting from it comes back into itself, ends at a parked robot, or is unknown."""
-        chain = [robot]
-        nxt = self.waits_for.get(robot)
-        if nxt is None:
+        chain = self.chain(robot)
+        if len(chain) == 1:
             return True  # kept back with nobody noted: nothing says it is a queue
-        while nxt is not None:
-            other = fleet.get(nxt)
-            if nxt in chain or other is None or other.phase in PARKED:
-                return True
-            chain.append(nxt)
-            nxt = self.waits_for.get(nxt)
-        return False
+        if chain[-1] in chain[:-1]:
+            return True  # a cycle
+        return any(fleet.get(r) is None or fleet[r].phase in PARKED for r in chain[1:])

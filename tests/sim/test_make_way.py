@@ -166,7 +166,7 @@ def test_a_robot_asked_that_is_boxed_in_passes_the_request_on():
     # Without passing it on, r2 has nowhere to go and r0 gives up after give_up: its action fails
     # (for a new plan), where it stands, touching nobody.
     e, least, failed = drive_through_a_boxed_in_robot(chain=0)
-    assert [(ev.robot, ev.data.reason) for ev in failed] == [("r0", "kept back by robots for 12 s")]
+    assert [(ev.robot, ev.data.reason) for ev in failed] == [("r0", "kept back by robots for 12 s (waiting: r0 -> r2)")]
     assert least >= 0.5 and e.summary()["robot_overlaps"] == 0 and e.robots["r0"].phase == "failed"
 
 

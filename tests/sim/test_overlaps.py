@@ -178,7 +178,7 @@ def test_a_robot_wedged_for_long_never_pushes_through_its_action_fails_for_a_new
         assert math.dist((r0.x, r0.y), (r1.x, r1.y)) >= 0.5  # never touches r1
     assert not [ev for ev in events if ev.kind == "robot_overlap"] and e.summary()["robot_overlaps"] == 0
     (failed,) = [ev for ev in events if ev.kind == "action_failed"]
-    assert failed.robot == "r0" and failed.data.reason == "kept back by robots for 12 s"
+    assert failed.robot == "r0" and failed.data.reason == "kept back by robots for 12 s (waiting: r0 -> r1)"
     assert 12.0 <= failed.time <= 30.0  # given up 12 s after it last got 0.5 m anywhere
     assert r0.phase == "failed" and r0.y < 5.5  # where it was kept back, waiting for a new plan
 

@@ -118,6 +118,7 @@ class TrialRun:
         self._stop_at: float | None = None
         self._last_control = 0.0
         self._pause_said = False  # a pause went out (it may still be on its way to the world)
+        self._last_said = ""  # the last control said, "pause" or "resume" ("" before any)
         self._unanswered_since: float | None = None
         self._warned_unanswered = False
         self._world_exit_noted = False
@@ -287,8 +288,14 @@ class TrialRun:
         # A pause must be seen taken. A resume need not be when the world was never told to pause (no
         # HumanState yet counts as running); once a pause went out it may still be on its way, so the
         # world must be seen running.
+        # A resume is said after the last pause whatever the world shows: a HumanState saying "not
+        # paused" may be older than a pause still on its way (seen under load: she consented, the
+        # world had not yet heard the pauses said while it waited, and took them after). Controls from
+        # one sender arrive in order, so the last said is the one the world ends with.
         if want_paused:
             settled = self.world_paused is True
+        elif self._last_said == "pause":
+            settled = False
         else:
             settled = self.world_paused is False if self._pause_said else not self.world_paused
         if settled:
@@ -315,6 +322,7 @@ class TrialRun:
             self._pause_said = True
         else:
             self.service.send_control("resume")
+        self._last_said = "pause" if paused else "resume"
         self._last_control = now
 
     # ------------------------------------------------------------------ the end

@@ -477,6 +477,27 @@ def test_the_world_is_held_paused_until_she_consents(tmp_path: Path) -> None:
     assert run.outcome is None
 
 
+def test_consent_given_before_the_world_took_the_pauses_still_resumes_it(tmp_path: Path) -> None:
+    # Under load the world may not have heard the pauses said while she read the form: its HumanState
+    # still says "not paused" when she consents. A resume goes out at once all the same (controls
+    # arrive in order: the pauses land first, then the resume), and it is said again while the world
+    # shows itself paused.
+    run, service, _ = trial_run(tmp_path, consent=True)
+    run.tick()
+    run.on_message(stamped(HumanState(paused=False), 0.0), "human/state")
+    assert service.sent == [("control", "pause", "waiting for her consent")]
+    run.on_message(act("consent", note="given"), "participant/action")
+    assert service.sent[-1] == ("control", "resume", "")
+    run.on_message(stamped(HumanState(paused=True), 0.0), "human/state")  # the late pause taken
+    run._last_control = 0.0
+    run.tick()
+    assert service.sent[-1] == ("control", "resume", "") and len(service.sent) == 3
+    run.on_message(stamped(HumanState(paused=False), 0.0), "human/state")
+    run._last_control = 0.0
+    run.tick()
+    assert len(service.sent) == 3  # the world runs: nothing more to say
+
+
 def test_refused_consent_ends_the_trial_and_aborts_the_world(tmp_path: Path) -> None:
     run, service, _ = trial_run(tmp_path, consent=True)
     run.on_message(act("consent", note="refused"), "participant/action")

@@ -30,6 +30,9 @@ from playwright.sync_api import Page
 
 from tests.tablet.browser import Browser, BrowserError
 
+#: Seconds a person waits for the puzzle to be unlocked before calling it locked.
+LOCK_PATIENCE = 10.0
+
 #: Blocks a side when a piece is compared with the picture (mean colour per block).
 GRID = 6
 
@@ -194,7 +197,13 @@ class StudyPageDriver:
             if puzzle["locked"] and self.state().get("screen") == "questionnaire":
                 break  # the trial has just ended
             if puzzle["locked"]:
-                raise BrowserError(f"the puzzle is locked: {puzzle['locked']}")
+                # a person waits a moment for a lock to be lifted: a world that took a late pause takes
+                # the resume said after it a moment later (services/study/trial.py)
+                try:
+                    self.wait("!s.puzzle.locked || s.screen === 'questionnaire'", timeout=LOCK_PATIENCE)
+                except BrowserError:
+                    raise BrowserError(f"the puzzle is locked: {puzzle['locked']}") from None
+                continue
             home = self.read_puzzle()
             wrong = [s for s, h in enumerate(home) if h != s]
             if not wrong:

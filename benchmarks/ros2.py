@@ -43,7 +43,7 @@ from runtime.ros2.config import Ros2Config  # noqa: E402
 from runtime.transport import free_tcp_port  # noqa: E402
 from tests.conftest import TestClient  # noqa: E402
 from tests.procs import Proc, arroch  # noqa: E402
-from tests.ros2.harness import FakeBase, OdometryWatch, straight_command  # noqa: E402
+from tests.ros2.harness import FakeBase, OdometryWatch, ros2_mission, straight_command  # noqa: E402
 
 
 def micro(fn, number: int = 200) -> float:  # noqa: ANN001
@@ -98,10 +98,6 @@ def mission_figures(key_format: str) -> dict:
     site = load_site()
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     namespace = f"b{uuid.uuid4().hex[:8]}"
-    ros2 = f"--key-format {key_format} --domain 7 --connect {{connect}} --namespace {{namespace}}"
-    drivers = [
-        f"--child={rid}={{python}} -m services.cli robot --ros2 --robot {rid} {ros2}" for rid in sorted(site.robots)
-    ]
     router = Proc(arroch("router", "--listen", endpoint), name="router")
     client = None
     up = None
@@ -113,13 +109,13 @@ def mission_figures(key_format: str) -> dict:
             odometry = OdometryWatch(client, site, Ros2Config(key_format=key_format, domain=7).naming)
             started = time.monotonic()
             up = Proc(
-                arroch(
-                    "up",
-                    *("--no-router", "--connect", endpoint, "--namespace", namespace),
-                    *("--services", "planner,restrictor", "--mode", "lockstep", "--seed", "1", "--until-done"),
-                    *("--run-dir", tmp, "--progress", "off", "--timeout", f"{MISSION_TIMEOUT:g}"),
-                    f"--child=world={{python}} -m services.cli sim --mode lockstep --seed 1 --ros2-bases {ros2}",
-                    *drivers,
+                ros2_mission(
+                    list(site.robots),
+                    key_format,
+                    connect=endpoint,
+                    namespace=namespace,
+                    run_dir=tmp,
+                    timeout=MISSION_TIMEOUT,
                 ),
                 name="up",
             )

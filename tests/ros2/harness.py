@@ -28,6 +28,7 @@ from runtime.ros2.node import RosNode
 from services.sim.human import HUMAN_RADIUS
 from services.sim.scan import Scanner
 from tests.conftest import TestClient
+from tests.procs import arroch
 
 PERIOD = 0.05  # s between odometry messages (and clock messages)
 
@@ -213,3 +214,29 @@ class OdometryWatch:
             if nearest < self.closest:
                 self.closest, self.closest_pair = nearest, pair
             self.contacts += nearest < touching
+
+
+def ros2_mission(
+    robots: list[str],
+    key_format: str,
+    *,
+    connect: str,
+    namespace: str,
+    run_dir: str,
+    timeout: float,
+    site_file: str = "",
+) -> list[str]:
+    """``arroch up`` for a lockstep mission with every robot a ROS 2 base: the planner and restrictor,
+    ``arroch sim --ros2-bases`` as the world and one ``arroch robot --ros2`` per robot as children, on
+    ROS 2 domain 7, connected to the router at ``connect`` (the mission test and benchmarks/ros2.py)."""
+    site_args = f" --site {site_file}" if site_file else ""
+    ros2 = f"--key-format {key_format} --domain 7{site_args} --connect {{connect}} --namespace {{namespace}}"
+    return arroch(
+        "up",
+        *site_args.split(),
+        *("--no-router", "--connect", connect, "--namespace", namespace),
+        *("--services", "planner,restrictor", "--mode", "lockstep", "--seed", "1", "--until-done"),
+        *("--run-dir", run_dir, "--progress", "off", "--timeout", f"{timeout:g}"),
+        f"--child=world={{python}} -m services.cli sim --mode lockstep --seed 1 --ros2-bases {ros2}",
+        *(f"--child={rid}={{python}} -m services.cli robot --ros2 --robot {rid} {ros2}" for rid in sorted(robots)),
+    )

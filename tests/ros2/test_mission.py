@@ -19,8 +19,7 @@ import pytest
 
 from protocol.site import loads_site
 from runtime.ros2.config import Ros2Config
-from tests.procs import arroch
-from tests.ros2.harness import OdometryWatch
+from tests.ros2.harness import OdometryWatch, ros2_mission
 from tests.ros2.two_robots import SITE_TOML as TWO_ROBOTS
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow(seconds=40)]  # wall s on two quiet cores
@@ -34,32 +33,16 @@ def test_a_mission_through_ros2(spawn, router, namespace, client, tmp_path: Path
     # the bases' own odometry, as a ROS 2 node on the same Zenoh network reads it
     odometry = OdometryWatch(client, site, Ros2Config(key_format=key_format, domain=7).naming)
     (tmp_path / "site.toml").write_text(TWO_ROBOTS)
-    site_args = f" --site {tmp_path / 'site.toml'}"
     run_dir = tmp_path / "runs"
-    ros2 = f"--key-format {key_format} --domain 7{site_args} --connect {{connect}} --namespace {{namespace}}"
-    drivers = [
-        f"--child={rid}={{python}} -m services.cli robot --ros2 --robot {rid} {ros2}" for rid in sorted(site.robots)
-    ]
     proc = spawn(
-        arroch(
-            "up",
-            *site_args.split(),
-            *("--no-router", "--connect", router, "--namespace", namespace),
-            "--services",
-            "planner,restrictor",
-            "--mode",
-            "lockstep",
-            "--seed",
-            "1",
-            "--until-done",
-            "--run-dir",
-            str(run_dir),
-            "--progress",
-            "off",
-            "--timeout",
-            f"{TIMEOUT:g}",
-            f"--child=world={{python}} -m services.cli sim --mode lockstep --seed 1 --ros2-bases {ros2}",
-            *drivers,
+        ros2_mission(
+            list(site.robots),
+            key_format,
+            connect=router,
+            namespace=namespace,
+            run_dir=str(run_dir),
+            timeout=TIMEOUT,
+            site_file=str(tmp_path / "site.toml"),
         ),
         name="up",
     )

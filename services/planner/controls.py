@@ -16,6 +16,7 @@ atomics, so none is shared between threads).
 
 from __future__ import annotations
 
+import atexit
 import os
 import queue
 import sys
@@ -31,6 +32,8 @@ Statements = Callable[[str], Sequence[ast.AST]]  # encoding part -> its statemen
 KEPT_KEYS = 4  # kinds of Control kept ready (a planner uses one or two at a time)
 ONLY_HERE = 3  # sys.getrefcount of a list item that nothing else refers to, inside a comprehension
 FREE_POLL = 0.005  # s between looks at Controls given back while their callers still hold them
+CLOSE_WAIT = 10.0  # s the process waits at exit for the helper to finish the Control it is making
+_STOP = object()  # the order that ends the helper thread
 
 
 def make(key: Key, statements: Statements) -> clingo.Control:
@@ -78,6 +81,18 @@ class ControlShop:
             self._thread.start()
         self._orders.put(item)
 
+    def close(self) -> None:
+        """End the helper thread and wait for it (run at exit).
+
+        A daemon thread still inside clingo when the interpreter finalizes is ended by a forced unwind
+        that clingo's C++ catches: the process aborts ("FATAL: exception not rethrown", exit -6) after
+        its work is done. Stopping the helper first lets the process exit with its own status."""
+        thread = self._thread
+        if thread is None or not thread.is_alive():
+            return
+        self._orders.put(_STOP)
+        thread.join(CLOSE_WAIT)
+
     def _run(self) -> None:
         used: list[clingo.Control] = []  # given back, freed once nobody else holds them
         while True:
@@ -85,6 +100,10 @@ class ControlShop:
                 item = self._orders.get(timeout=FREE_POLL if used else None)
             except queue.Empty:
                 item = None
+            if item is _STOP:
+                with self._lock:
+                    self._ready.clear()
+                return
             # Free only a Control the caller no longer holds (only the list, the loop variable and the
             # argument refer to it): the last reference dropped is where clingo frees it, here.
             used = [c for c in used if sys.getrefcount(c) > ONLY_HERE]
@@ -115,6 +134,7 @@ class ControlShop:
 def shop(statements: Statements) -> ControlShop:
     """The process's shop (reset in a forked child)."""
     made = ControlShop(statements)
+    atexit.register(made.close)
     if hasattr(os, "register_at_fork"):
         os.register_at_fork(after_in_child=made._after_fork)
     return made

@@ -6,8 +6,11 @@ from __future__ import annotations
 
 import gc
 import hashlib
+import subprocess
+import sys
 import threading
 import time
+from pathlib import Path
 
 import clingo
 import pytest
@@ -100,3 +103,34 @@ def test_a_control_given_back_is_freed_on_the_helper_thread(monkeypatch: pytest.
         time.sleep(0.01)
     assert len(freed) >= 5
     assert set(freed) == {"clingo-controls"}
+
+
+EXITS_WHILE_MAKING = """
+import time
+import clingo.ast as ast
+from services.planner.controls import shop
+
+PROGRAM = "\\n".join(f"p({i}) :- q({i}), not r({i})." for i in range(20000))
+
+def statements(part):  # parsing calls back into Python from clingo's C++, in the helper thread
+    parsed = []
+    ast.parse_string(PROGRAM, parsed.append)
+    return parsed
+
+made = shop(statements)
+made.take([], ["rules"])   # made here; orders the next Control of this kind: the helper starts parsing
+time.sleep(0.05)
+print("done")
+"""
+
+
+def test_a_process_exiting_while_the_helper_makes_a_control_exits_cleanly(tmp_path):
+    # A daemon thread inside a clingo callback at finalization is ended by a forced unwind that clingo's
+    # C++ catches: the process aborted ("FATAL: exception not rethrown", -6) after its work was done.
+    script = tmp_path / "exits.py"
+    script.write_text(EXITS_WHILE_MAKING)
+    root = Path(__file__).resolve().parents[2]
+    out = subprocess.run([sys.executable, str(script)], cwd=root, env={"PYTHONPATH": str(root)},
+                         capture_output=True, text=True, timeout=120)
+    assert (out.returncode, out.stdout.strip()) == (0, "done"), out.stderr
+    assert "FATAL" not in out.stderr

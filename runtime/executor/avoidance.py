@@ -55,6 +55,8 @@ BACK_OFF = 0.1  # m: the shortest back-off from a robot before a way (longer tha
 # rings to 3 m; to 5 m, robots sent far off to make way jammed the corridor, 4/4/39/0)
 RING = (0.7, 1.0, 1.3, 1.6, 2.0, 2.5, 3.0)
 NEIGHBOURS = [(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr, dc) != (0, 0)]
+STEP = {(dr, dc): math.hypot(dr, dc) for dr, dc in NEIGHBOURS}
+EIGHT_WAY = np.ones((3, 3), dtype=bool)  # cells touching at a corner are connected, as NEIGHBOURS
 
 
 @dataclass
@@ -252,12 +254,16 @@ class Avoidance:
             for r in RING
             for k in range(16)
         )
+        field: Field | None = None  # made once, for the first spot worth a search: the same for every spot
         for _, _, p in spots:
             if not (outside(*p) and room.contains(*p) and self.free.is_free(*p)):
                 continue
             if any(math.dist(p, o) < keep for o in others):
                 continue
-            points = self._search(robot, (room,), p, others)
+            field = field or self._field(robot, (room,), others)
+            if not field.reaches(p):
+                continue  # (a search would look through every cell it reaches to find that out)
+            points = self._route(field, p)
             if points:
                 return points
         return []
@@ -366,6 +372,10 @@ class Avoidance:
     ) -> list[tuple[float, float]]:
         """A* on the cells of ``rooms`` from the robot to ``goal``, robots' discs (grown by
         ``clearance``) and the areas kept out (but one it stands in) as obstacles."""
+        return self._route(self._field(robot, rooms, others), goal)
+
+    def _field(self, robot: Body, rooms: tuple[Room, ...], others: list[tuple[float, float]]) -> Field:
+        """The cells of ``rooms`` a way of ``robot`` may cross, and where it starts."""
         backed = self._backed_off(robot, others)
         start = backed or (robot.x, robot.y)
         cells, (x0, y0) = self._room_cells(rooms)
@@ -383,55 +393,37 @@ class Avoidance:
         for ax, ay, bx, by in self.keep_out(robot):
             if not (ax <= robot.x <= bx and ay <= robot.y <= by):
                 blocked = blocked | ((cx >= ax) & (cx <= bx) & (cy >= ay) & (cy <= by))
-
-        def cell(p: tuple[float, float]) -> tuple[int, int]:
-            return (min(max(int((p[1] - y0) / res), 0), ny - 1), min(max(int((p[0] - x0) / res), 0), nx - 1))
-
-        def centre(c: tuple[int, int]) -> tuple[float, float]:
-            return (x0 + (c[1] + 0.5) * res, y0 + (c[0] + 0.5) * res)
-
-        a, b = cell(start), cell(goal)
-        if blocked[b]:
-            return []
-        leave: list[tuple[float, float]] = []
-        if not cells[a]:
+        field = Field(blocked.ravel().tolist(), nx, ny, (x0, y0), res, backed)
+        a = field.cell(start)
+        if not cells[a // nx, a % nx]:
             # within the walls' clearance (pushed there, or beside a jamb): every cell around may be
             # in it too, so the way first leaves it through the nearest cell that is not
             rows, cols = np.nonzero(~blocked)
             if rows.size == 0:
-                return []
-            nearest = int(np.argmin((rows - a[0]) ** 2 + (cols - a[1]) ** 2))
-            a = (int(rows[nearest]), int(cols[nearest]))
-            leave = [centre(a)]
-        came: dict[tuple[int, int], tuple[int, int]] = {}
-        cost = {a: 0.0}
-        heap = [(0.0, a)]
-        while heap:
-            _, c = heapq.heappop(heap)
-            if c == b:
-                break
-            for dr, dc in NEIGHBOURS:
-                n = (c[0] + dr, c[1] + dc)
-                if not (0 <= n[0] < ny and 0 <= n[1] < nx) or blocked[n]:
-                    continue
-                g = cost[c] + math.hypot(dr, dc)
-                if g < cost.get(n, math.inf):
-                    cost[n], came[n] = g, c
-                    heapq.heappush(heap, (g + math.hypot(n[0] - b[0], n[1] - b[1]), n))
-        if b not in came:
-            return []
-        route = [b]
-        while route[-1] != a:
-            route.append(came[route[-1]])
-        route.reverse()
+                return field
+            nearest = int(np.argmin((rows - a // nx) ** 2 + (cols - a % nx) ** 2))
+            a = int(rows[nearest]) * nx + int(cols[nearest])
+            field.leave = [field.centre(a)]
+        field.start = a
+        return field
 
-        def straight(a: tuple[int, int], b: tuple[int, int]) -> bool:
+    def _route(self, field: Field, goal: tuple[float, float]) -> list[tuple[float, float]]:
+        """The way from the field's start to ``goal``: A* over its cells, then only the cells where
+        the way must turn, each leg a straight line over free cells."""
+        a, b = field.start, field.cell(goal)
+        if a is None or field.blocked[b]:
+            return []
+        route = field.shortest(a, b)
+        if not route:
+            return []
+
+        def straight(a: int, b: int) -> bool:
             # over free cells of this grid, and of the fine grid the robot's steps keep to: a leg
             # cutting a corner of the fine grid's free space would come nearer a wall than its clearance
-            return _straight(a, b, blocked) and self._leg_free(centre(a), centre(b))
+            return field.straight(a, b) and self._leg_free(field.centre(a), field.centre(b))
 
-        points = [centre(c) for c in _corners(route, straight)]
-        return [*([backed] if backed else []), *leave, *points, goal]
+        points = [field.centre(c) for c in _corners(route, straight)]
+        return [*([field.backed] if field.backed else []), *field.leave, *points, goal]
 
     def _leg_free(self, a: tuple[float, float], b: tuple[float, float]) -> bool:
         """Whether every point of the straight leg a-b lies on a free cell of ``free`` (sampled at a
@@ -474,9 +466,7 @@ class Avoidance:
         return point
 
 
-def _corners(
-    route: list[tuple[int, int]], straight: Callable[[tuple[int, int], tuple[int, int]], bool]
-) -> list[tuple[int, int]]:
+def _corners(route: list[int], straight: Callable[[int, int], bool]) -> list[int]:
     """The cells of ``route`` (after its first, before its last) where it must turn: from each kept
     cell the next is the farthest one reached in a ``straight`` line (over free cells only), so the
     straight legs between them never cut across a blocked cell."""
@@ -491,11 +481,84 @@ def _corners(
     return kept
 
 
-def _straight(a: tuple[int, int], b: tuple[int, int], blocked: np.ndarray) -> bool:
-    """Whether the straight line between the centres of cells ``a`` and ``b`` crosses free cells only."""
-    steps = 2 * max(abs(b[0] - a[0]), abs(b[1] - a[1]))
-    for i in range(1, steps):
-        t = i / steps
-        if blocked[round(a[0] + t * (b[0] - a[0])), round(a[1] + t * (b[1] - a[1]))]:
+@dataclass
+class Field:
+    """A room's grid for one way: which cells are blocked (row-major, a cell is ``row * nx + col``:
+    plain lists and ints, as a search looks at each cell many times), where the way starts."""
+
+    blocked: list[bool]
+    nx: int
+    ny: int
+    origin: tuple[float, float]
+    res: float
+    backed: tuple[float, float] | None  # where the robot first backs off to (Avoidance._backed_off)
+    start: int | None = None  # the start cell (None: no free cell at all)
+    leave: list[tuple[float, float]] = field(default_factory=list)  # out of the walls' clearance first
+    _reached: list[bool] | None = None
+
+    def cell(self, p: tuple[float, float]) -> int:
+        x0, y0 = self.origin
+        row = min(max(int((p[1] - y0) / self.res), 0), self.ny - 1)
+        return row * self.nx + min(max(int((p[0] - x0) / self.res), 0), self.nx - 1)
+
+    def centre(self, c: int) -> tuple[float, float]:
+        row, col = divmod(c, self.nx)
+        return (self.origin[0] + (col + 0.5) * self.res, self.origin[1] + (row + 0.5) * self.res)
+
+    def _neighbours(self, c: int) -> list[tuple[int, float, int, int]]:
+        """(cell, step length, row, col) of the free cells around ``c``, in ``NEIGHBOURS``' order."""
+        row, col = divmod(c, self.nx)
+        found = []
+        for dr, dc in NEIGHBOURS:
+            r, k = row + dr, col + dc
+            if 0 <= r < self.ny and 0 <= k < self.nx and not self.blocked[r * self.nx + k]:
+                found.append((r * self.nx + k, STEP[dr, dc], r, k))
+        return found
+
+    def reaches(self, p: tuple[float, float]) -> bool:
+        """Whether a way from the start can end at ``p``'s cell (the start's free cells, labelled once)."""
+        if self.start is None:
             return False
-    return True
+        if self._reached is None:
+            from scipy import ndimage  # here, not at the top: importing scipy adds 0.3 s to a service's start
+
+            free = ~np.array(self.blocked, dtype=bool).reshape(self.ny, self.nx)
+            free.flat[self.start] = True  # (a start on a robot's disc grown by clearance leaves it)
+            labels, _ = ndimage.label(free, structure=EIGHT_WAY)
+            self._reached = (labels.ravel() == labels.flat[self.start]).tolist()
+        return self._reached[self.cell(p)]
+
+    def shortest(self, a: int, b: int) -> list[int]:
+        """A* from ``a`` to ``b`` over free cells (8 neighbours; ties broken by cell, row first),
+        the cells from ``a`` to ``b``; [] when ``b`` is not reached."""
+        brow, bcol = divmod(b, self.nx)
+        came: dict[int, int] = {}
+        cost = {a: 0.0}
+        heap = [(0.0, a)]
+        while heap:
+            _, c = heapq.heappop(heap)
+            if c == b:
+                break
+            here = cost[c]
+            for n, step, r, k in self._neighbours(c):
+                g = here + step
+                if g < cost.get(n, math.inf):
+                    cost[n], came[n] = g, c
+                    heapq.heappush(heap, (g + math.hypot(r - brow, k - bcol), n))
+        if b not in came:
+            return []
+        route = [b]
+        while route[-1] != a:
+            route.append(came[route[-1]])
+        route.reverse()
+        return route
+
+    def straight(self, a: int, b: int) -> bool:
+        """Whether the straight line between the centres of cells ``a`` and ``b`` crosses free cells only."""
+        (ar, ac), (br, bc) = divmod(a, self.nx), divmod(b, self.nx)
+        steps = 2 * max(abs(br - ar), abs(bc - ac))
+        for i in range(1, steps):
+            t = i / steps
+            if self.blocked[round(ar + t * (br - ar)) * self.nx + round(ac + t * (bc - ac))]:
+                return False
+        return True

@@ -13,9 +13,6 @@ PY     := $(VENV)/bin/python
 # Each stamp says that level is installed for this pyproject.toml and these constraints.
 STAMP_DEMO := $(VENV)/.installed-demo
 STAMP_TEST := $(VENV)/.installed-test
-STAMP_BENCH := $(VENV)/.installed-bench
-# A variable: a comma inside $(call ...) would split the argument.
-BENCH_LEVEL := .[test,peers]
 # The versions CI installed (see `make constraints`): every install from this Makefile uses them.
 CONSTRAINTS := constraints.txt
 
@@ -39,11 +36,6 @@ $(STAMP_TEST): pyproject.toml $(CONSTRAINTS)
 	$(call install,.[test])
 	@touch $(STAMP_TEST) $(STAMP_DEMO)
 
-# '.[test,peers]': benchmarks/peers.py exits 2 without unified-planning's engines.
-$(STAMP_BENCH): pyproject.toml $(CONSTRAINTS)
-	$(call install,$(BENCH_LEVEL))
-	@touch $(STAMP_BENCH) $(STAMP_TEST) $(STAMP_DEMO)
-
 setup: $(STAMP_TEST)
 
 demo: $(STAMP_DEMO)
@@ -62,7 +54,8 @@ test: lint
 	@.ci/system-packages
 	$(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile
 
-bench: $(STAMP_BENCH)
+# '.[test]' holds '.[peers]': benchmarks/peers.py exits 2 without unified-planning's engines.
+bench: $(STAMP_TEST)
 	@mkdir -p benchmarks/results
 	@for b in benchmarks/*.py; do \
 		echo "== $$b" >&2; \
@@ -81,8 +74,8 @@ constraints:
 	rm -rf $(VENV)-constraints
 	$(PYTHON) -m venv $(VENV)-constraints
 	$(VENV)-constraints/bin/python -m pip install -qq --upgrade 'pip>=24,<27'
-	$(VENV)-constraints/bin/python -m pip install -qq -e '.[test,peers]'
-	{ echo "# Versions CI installed for '.[test]' (and '.[peers]' for make bench) (Python $$($(VENV)-constraints/bin/python -c 'import platform; print(platform.python_version())'), Linux x86_64)."; \
+	$(VENV)-constraints/bin/python -m pip install -qq -e '.[test]'
+	{ echo "# Versions CI installed for '.[test]' (Python $$($(VENV)-constraints/bin/python -c 'import platform; print(platform.python_version())'), Linux x86_64)."; \
 	  echo "# Used by every install from the Makefile (pip -c). Regenerate with: make constraints"; \
 	  $(VENV)-constraints/bin/python -m pip freeze --exclude-editable; } > $(CONSTRAINTS)
 	rm -rf $(VENV)-constraints

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import shutil
 import subprocess
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -43,9 +44,11 @@ def test_make_test_installs_the_test_extras_into_the_same_venv_and_stamps_both_l
     assert installs(dry_run("demo", venv)) == []
 
 
-def test_make_bench_installs_the_peers_extra_the_peer_benchmark_needs(tmp_path: Path):
+def test_make_bench_uses_the_test_level_which_holds_the_peers_extra(tmp_path: Path):
     venv = tmp_path / "venv"
     lines = dry_run("bench", venv)
-    assert installs(lines) == ["'.[test,peers]'"], lines
-    assert f"touch {venv}/.installed-bench {venv}/.installed-test {venv}/.installed-demo" in lines
+    assert installs(lines) == ["'.[test]'"], lines
+    assert f"touch {venv}/.installed-test {venv}/.installed-demo" in lines
     assert any("benchmarks/*.py" in line for line in lines)
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    assert any(dep.startswith("arroch[") and "peers" in dep for dep in extras["test"]), extras["test"]

@@ -21,7 +21,7 @@ from protocol.messages import Message
 
 from .profile import METADATA
 from .timebase import CLOCK_METADATA, ORIGIN_KEY, ns
-from .topics import message_topic
+from .topics import MESSAGE_PREFIX, message_topic
 from .wire import WireRecord, read_batches, with_jpeg
 
 
@@ -125,6 +125,18 @@ def _images(reader: McapReader, start: int | None, end: int | None) -> Iterator[
         if decoder is None:
             decoder = decoders[channel.id] = factory.decoder_for(channel.message_encoding, schema)
         yield _camera_of(channel.topic), message.log_time, bytes(decoder(message.data).data)
+
+
+def message_topics(path: Path) -> list[str]:
+    """The topics of the recorded ARROCH messages (``/arroch/<key below the namespace>``), from the
+    file's summary (nothing else is read)."""
+    with _open(path) as f:
+        try:
+            summary = make_reader(f).get_summary()
+        except Exception as exc:
+            raise RecordingError(f"{path}: not a readable MCAP file ({exc})") from None
+    channels = summary.channels.values() if summary else []
+    return sorted({c.topic for c in channels if c.topic.startswith(MESSAGE_PREFIX)})
 
 
 def _camera_of(topic: str) -> str:

@@ -37,11 +37,12 @@ from runtime.runner import add_common_arguments, leave_if_close_overran, zenoh_o
 from runtime.service import Service
 from runtime.transport import NoRouter, ZenohOptions, through_local_router
 
-from .reading import Recorded, RecordingError, messages, metadata
+from .reading import Recorded, RecordingError, message_topics, messages, metadata
 from .topics import MESSAGE_PREFIX, key_of
 
 log = logging.getLogger("arroch.replay")
 PROGRESS_EVERY = 5.0  # wall seconds between two progress lines
+LISTENER_POLL = 0.02  # wall s between looks for a subscriber before the first message
 LINGER = 0.5  # wall seconds between the last message and closing the session (a batch may still be on its way)
 LOOP_GAP = 2.0  # site seconds between the end of one --loop pass and the start of the next
 
@@ -140,6 +141,23 @@ class Replayer(Service):
                         break
                     self._overlay.wait(min(left, 0.1))
 
+    def await_listener(self, topics: Iterable[str], timeout: float) -> bool:
+        """Wait up to ``timeout`` wall s until some subscriber anywhere takes one of the recorded
+        ``topics`` (Zenoh's matching status of a publisher on each key): on a loaded machine a
+        viewer's subscription can take seconds to reach a session that has just joined, and what is
+        published before then reaches no one. True when one does."""
+        probes = [self.session.declare_publisher(key_of(self.keys, topic)) for topic in topics]
+        try:
+            deadline = time.monotonic() + timeout
+            while not any(probe.matching_status.matching for probe in probes):
+                if self.stopping or time.monotonic() >= deadline:
+                    return False
+                time.sleep(LISTENER_POLL)
+            return True
+        finally:
+            for probe in probes:
+                probe.undeclare()
+
     def replay(self, records: Iterable[Recorded], pacer: Pacer, out: TextIO = sys.stderr) -> int:
         last_note = time.monotonic()
         for record in records:
@@ -185,6 +203,9 @@ def replay_main(args: argparse.Namespace) -> int:
         log.error("could not join Zenoh: %s", exc)
         return 1
     try:
+        topics = [t for t in message_topics(path) if selected(t, args.only or [], args.skip or [])]
+        if args.wait_for_listener > 0 and not replayer.await_listener(topics, args.wait_for_listener):
+            log.warning("nothing subscribed to a replayed key in %g s: replaying anyway", args.wait_for_listener)
         time.sleep(args.delay)  # subscribers discover the new publisher first
         code = replayer.replay(_passes(path, args), pacer)
         time.sleep(LINGER)  # the last messages leave before the session closes
@@ -251,6 +272,13 @@ def add_replay_arguments(parser: argparse.ArgumentParser) -> None:
         default=0.05,
         metavar="S",
         help="with --hold-camera: wall seconds before each frame (default 0.05)",
+    )
+    parser.add_argument(
+        "--wait-for-listener",
+        type=float,
+        default=10.0,
+        metavar="S",
+        help="wait up to S wall s for a subscriber of a replayed key before the first message (default 10; 0: none)",
     )
     parser.add_argument(
         "--delay",

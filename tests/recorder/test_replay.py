@@ -1,5 +1,6 @@
 """``arroch replay``: the recorded mission fed to a fresh AR client draws the same robots at the same
-pixels (within 1 px) as the AR client of the recorded run did."""
+pixels (within 1 px) as the AR client of the recorded run did; a replay waits for a subscriber that
+comes late, and one recorded again is the same file's messages byte for byte."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ import time
 import numpy as np
 import pytest
 
-from protocol.messages import Event, Overlay
+from protocol.messages import Event, Overlay, RobotPose
 from services.recorder.reading import messages
 from services.recorder.replay import Pacer, selected
 from tests.procs import ROOT, arroch
@@ -140,3 +141,24 @@ def test_a_fast_replay_recorded_again_gives_back_every_message_byte_for_byte(
     copied = sorted((r.topic, r.time, r.payload) for r in messages(again))
     assert len(copied) == len(original) > 1000
     assert copied == original
+
+
+def test_a_replay_waits_for_a_subscriber_that_comes_late_and_it_gets_every_message(
+    mission, spawn, router, namespace, client
+):  # noqa: E501
+    # Beside a loaded suite a viewer's subscription once reached a replay's new session after the
+    # replay (at 100x) was over, and the viewer got nothing: here the subscriber comes 3 s late.
+    poses = sum(1 for r in messages(mission.recording) if isinstance(r.message, RobotPose))
+    argv = ["replay", str(mission.recording), "--fast", "--only", "robot/*/pose", "--delay", "0"]
+    replay = spawn(arroch(*argv, "--namespace", namespace, "--connect", router), name="replay")
+    time.sleep(3.0)  # a fast replay of the poses alone is over in well under a second
+    got = client.collect(client.keys.robot_pose(), RobotPose)
+    assert replay.wait(60) == 0, "\n".join(replay.lines)
+    deadline, received = time.monotonic() + 30, 0
+    while received < poses and time.monotonic() < deadline:
+        try:
+            got.get(timeout=1.0)
+            received += 1
+        except queue.Empty:
+            pass
+    assert received == poses > 100

@@ -21,6 +21,7 @@ import os
 import queue
 import sys
 import threading
+import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -33,7 +34,6 @@ KEPT_KEYS = 4  # kinds of Control kept ready (a planner uses one or two at a tim
 ONLY_HERE = 3  # sys.getrefcount of a list item that nothing else refers to, inside a comprehension
 FREE_POLL = 0.005  # s between looks at Controls given back while their callers still hold them
 CLOSE_WAIT = 10.0  # s the process waits at exit for the helper to finish the Control it is making
-_STOP = object()  # the order that ends the helper thread
 
 
 def make(key: Key, statements: Statements) -> clingo.Control:
@@ -58,6 +58,8 @@ class ControlShop:
         self._thread: threading.Thread | None = None
         self.made_ahead = 0  # Controls handed out ready (for tests and figures)
         self.made_in_place = 0
+        self._closed = False  # at exit: no more Controls made
+        self._making = False  # the helper is making a Control (its parsing calls back into Python)
 
     def take(self, args: Sequence[str], parts: Sequence[str]) -> clingo.Control:
         key: Key = (tuple(args), tuple(parts))
@@ -82,16 +84,17 @@ class ControlShop:
         self._orders.put(item)
 
     def close(self) -> None:
-        """End the helper thread and wait for it (run at exit).
+        """Take no more orders, and wait while the helper is making a Control (run at exit).
 
-        A daemon thread still inside clingo when the interpreter finalizes is ended by a forced unwind
-        that clingo's C++ catches: the process aborts ("FATAL: exception not rethrown", exit -6) after
-        its work is done. Stopping the helper first lets the process exit with its own status."""
-        thread = self._thread
-        if thread is None or not thread.is_alive():
-            return
-        self._orders.put(_STOP)
-        thread.join(CLOSE_WAIT)
+        A daemon thread inside one of clingo's callbacks into Python (parsing an encoding part) when
+        the interpreter finalizes is ended by a forced unwind that clingo's C++ catches: the process
+        aborts ("FATAL: exception not rethrown", exit -6) after its work is done. Elsewhere (waiting
+        for orders, freeing a Control) it is ended harmlessly, so only that window is waited for."""
+        with self._lock:
+            self._closed = True
+        deadline = time.monotonic() + CLOSE_WAIT
+        while self._making and time.monotonic() < deadline:
+            time.sleep(FREE_POLL)
 
     def _run(self) -> None:
         used: list[clingo.Control] = []  # given back, freed once nobody else holds them
@@ -100,10 +103,6 @@ class ControlShop:
                 item = self._orders.get(timeout=FREE_POLL if used else None)
             except queue.Empty:
                 item = None
-            if item is _STOP:
-                with self._lock:
-                    self._ready.clear()
-                return
             # Free only a Control the caller no longer holds (only the list, the loop variable and the
             # argument refer to it): the last reference dropped is where clingo frees it, here.
             used = [c for c in used if sys.getrefcount(c) > ONLY_HERE]
@@ -114,9 +113,15 @@ class ControlShop:
                 del item
                 continue
             with self._lock:
+                if self._closed:
+                    return
                 if item in self._ready:
                     continue
-            ctl = make(item, self._statements)
+                self._making = True
+            try:
+                ctl = make(item, self._statements)
+            finally:
+                self._making = False
             with self._lock:
                 self._ready[item] = ctl
                 stale = list(self._ready)[:-KEPT_KEYS]
@@ -129,6 +134,7 @@ class ControlShop:
         self._ready = {}
         self._orders = queue.SimpleQueue()
         self._thread = None
+        self._closed = self._making = False
 
 
 def shop(statements: Statements) -> ControlShop:

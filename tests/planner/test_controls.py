@@ -10,7 +10,6 @@ import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 
 import clingo
 import pytest
@@ -21,6 +20,7 @@ from services.planner.single import SingleRobotSolver
 from services.planner.solver import _options, encoding_statements, solve
 from services.planner.world import initial_world
 from tests.planner.conftest import planner_for, site_named
+from tests.procs import ROOT
 
 PARTS = ("domain", "doors", "objective", "makespan")
 
@@ -129,8 +129,13 @@ def test_a_process_exiting_while_the_helper_makes_a_control_exits_cleanly(tmp_pa
     # C++ catches: the process aborted ("FATAL: exception not rethrown", -6) after its work was done.
     script = tmp_path / "exits.py"
     script.write_text(EXITS_WHILE_MAKING)
-    root = Path(__file__).resolve().parents[2]
-    out = subprocess.run([sys.executable, str(script)], cwd=root, env={"PYTHONPATH": str(root)},
-                         capture_output=True, text=True, timeout=120)
+    out = subprocess.run(
+        [sys.executable, str(script)],
+        cwd=ROOT,
+        env={"PYTHONPATH": str(ROOT)},
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert (out.returncode, out.stdout.strip()) == (0, "done"), out.stderr
     assert "FATAL" not in out.stderr

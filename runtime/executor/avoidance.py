@@ -17,9 +17,9 @@ Two rules for driving robots, simulated or real (:mod:`.executor`), on top of th
   and tries again ``retry`` seconds later.
 
 Where there is no way around, the robot kept back asks the robot in its way to make way
-(:mod:`.make_way`). When nothing helps for ``give_up`` seconds (robots wedged in a
-cluster, each waiting on the next, or behind one that waits for a door) the robot's action fails
-and the planner plans again from where the robots stand (:mod:`.executor`). A robot
+(:mod:`.make_way`). When nothing helps for ``give_up`` seconds of a wait that cannot end by
+itself (robots wedged in a cluster, each waiting on the next: :mod:`.waiting`) the robot's action
+fails and the planner plans again from where the robots stand (:mod:`.executor`). A robot
 never pushes through another: solid bodies hold for every step.
 
 Both rules read other robots where they are now. In the simulator robots are stepped one after

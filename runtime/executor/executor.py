@@ -375,15 +375,19 @@ class RobotExecutor:
                 robot.v = robot.omega = 0.0
                 return self._arrived(robot, now + dt)
             kept = self.avoidance.mark_kept_back(robot, now)
-            stuck = kept >= self.avoidance.give_up and self.waits.stuck(robot.id, self.fleet)
-            if stuck or kept >= self.waits.patience:
+            stuck_for = self.waits.stuck_for(robot.id, self.fleet, now)  # every step kept back: its clock runs
+            stuck = kept >= self.avoidance.give_up and stuck_for >= self.avoidance.give_up
+            waited = self.waits.waited(robot.id, now, counts=not self._queued_at_door(robot))
+            out_of_patience = kept >= self.waits.patience and waited >= self.waits.patience
+            if stuck or out_of_patience:
                 # wedged among robots (a cycle, or behind a parked one) with no way around and
                 # nobody making way: it never pushes through; the planner plans again from here
                 robot.v = robot.omega = 0.0
                 self.avoidance.moving_on(robot.id)
-                waited = self.avoidance.give_up if stuck else self.waits.patience
+                limit = self.avoidance.give_up if stuck else self.waits.patience
                 chain = " -> ".join(self.waits.chain(robot.id))
-                return self._fail(robot, f"kept back by robots for {waited:g} s (waiting: {chain})")
+                self.waits.gave_up(robot.id)
+                return self._fail(robot, f"kept back by robots for {limit:g} s (waiting: {chain})")
             step = self._kept_back(robot, follower, now, dt)
             robot.yield_time += dt
         elif step.v > 0.0:
@@ -462,6 +466,16 @@ class RobotExecutor:
                 return False
         taken = 2.0 * self.config.radius + self.avoidance.clearance
         return any(other is not robot and math.dist((other.x, other.y), end) < taken for other in self.fleet.values())
+
+    def _queued_at_door(self, robot: Robot) -> bool:
+        """Whether the robot queues behind robots the first of which waits for a door to open (the
+        chain of waits ends there): the queue moves when the door opens, however long that takes (a
+        human at her task, one who declared herself unavailable for minutes), and giving up would
+        only send the robot back to its place in the queue - so that time does not count toward
+        ``patience`` (:meth:`.waiting.Waits.waited`)."""
+        head = self.waits.head(robot.id)
+        other = self.fleet.get(head) if head else None
+        return other is not None and (other.phase == "wait_open" or other.state == "waiting_at_door")
 
     def _kept_back(self, robot: Robot, follower: PurePursuit, now: float, dt: float) -> Step:
         """Another robot is in the way: drive around it after a while (:mod:`.avoidance`), ask it

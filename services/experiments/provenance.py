@@ -2,8 +2,9 @@
 
 Every trial starts fresh processes, so a service's source edited while a sweep runs changes the
 trials that start afterwards. The fingerprint (SHA-256 over the relative path and content of every
-``.py``, ``.lp`` and ``.toml`` file of ``protocol/`` and ``services/``, this package excepted: it runs
-trials but decides none of their numbers) is taken at the start of each trial and written to
+``.py``, ``.lp`` and ``.toml`` file of ``protocol/``, ``runtime/`` and ``services/``, this package
+excepted: it runs trials but decides none of their numbers; ``runtime/`` holds the robots' executor,
+the controller and the site generator the services run) is taken at the start of each trial and written to
 ``timing.csv``; the report says when a sweep's trials come from more than one version of the code.
 
 The versions of Python and of every installed dependency arroch declares (:func:`dependency_versions`)
@@ -20,7 +21,7 @@ from importlib import metadata
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-SOURCES = ("protocol", "services")
+SOURCES = ("protocol", "runtime", "services")
 SUFFIXES = (".py", ".lp", ".toml")
 EXCLUDED = Path(__file__).resolve().parent  # services/experiments
 

@@ -86,6 +86,9 @@ def test_code_fingerprint_follows_the_sources(tmp_path) -> None:  # noqa: ANN001
     assert second != first
     (tmp_path / "services" / "planner" / "notes.txt").write_text("not a source")
     assert code_fingerprint(tmp_path) == second
+    (tmp_path / "runtime" / "executor").mkdir(parents=True)  # the robots' executor decides outcomes too
+    (tmp_path / "runtime" / "executor" / "waiting.py").write_text("PATIENCE = 120.0\n")
+    assert code_fingerprint(tmp_path) != second
 
 
 def test_dependency_versions_name_python_and_what_is_installed() -> None:

@@ -11,6 +11,7 @@ import contextlib
 import csv
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -270,6 +271,8 @@ def test_an_unreachable_cluster_is_refused_by_name(tmp_path: Path, human: Path) 
 def test_killed_sweep_resumes_to_the_same_csv(reference: Path, tmp_path: Path, human: Path) -> None:
     out = tmp_path / "killed"
     args = ["robots", *TINY, "--methods", "arroch,no-comm", "--out", str(out), "--trial-timeout", "60", "--jobs", "1"]
+    folders = "arroch-exp-*-n2-o1-p0.5-w90-c0-t0*-*"  # the trial folders of this sweep
+    before = set(Path("/tmp").glob(folders))
     proc = start(args, human)
     deadline = time.monotonic() + 200
     while time.monotonic() < deadline and proc.poll() is None:
@@ -281,6 +284,8 @@ def test_killed_sweep_resumes_to_the_same_csv(reference: Path, tmp_path: Path, h
     proc.communicate()
     left = wait_gone(proc.pid)
     assert left == [], f"the services of a killed sweep must die with it: {describe(left)}"
+    for folder in set(Path("/tmp").glob(folders)) - before:
+        shutil.rmtree(folder, ignore_errors=True)  # the running trial's folder: a crash leaves it behind
     done = len(rows(out))
     assert 1 <= done < 4
     proc = start([*args, "--resume"], human)

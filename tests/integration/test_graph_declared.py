@@ -282,7 +282,10 @@ def test_running_services_declare_what_the_graph_says(
         )
     )
     request.addfinalizer(listener_session.close)
-    heard, _listener = _listen(listener_session, prefix)
+    heard, listener = _listen(listener_session, prefix)
+    # undeclared before its session closes (finalizers run last first): closing a session with a
+    # Python callback still declared hung this test's teardown for 25 minutes beside a loaded suite
+    request.addfinalizer(listener.undeclare)
     for run in RUNS:
         folder = tmp_path / run.node.name
         folder.mkdir()

@@ -483,14 +483,10 @@ class RobotExecutor:
         stop = Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
         if self.avoidance.kept_back(robot.id, now) >= self.make_way.ask_after:
             way = self.make_way.way_ahead(follower.path, follower.s)
-            # the robot it waits for first: standing just off the way's points (beside the line of a
-            # head-on meeting) it is not "in the way", and asking only a robot further along left
-            # the two waiting on each other until one gave up (12 robots, no-feedback, trial 0)
-            waited_for = self.fleet.get(self.waits.waits_for.get(robot.id, ""))
-            for other in (waited_for, self.make_way.in_the_way(robot, way, self.fleet)):
-                if other is not None and self.make_way.ask(robot, other, way, now):
-                    self.avoidance.stop_driving_around(robot.id)  # it waits for the other to make way
-                    return stop
+            other = self.make_way.in_the_way(robot, way, self.fleet)
+            if other is not None and self.make_way.ask(robot, other, way, now):
+                self.avoidance.stop_driving_around(robot.id)  # it waits for the other to make way
+                return stop
         around = self.avoidance.around(
             robot, robot.theta, follower.path, follower.s, now, dt, self.fleet, self._allows(robot)
         )
@@ -533,12 +529,10 @@ class RobotExecutor:
 
     def _in_the_way(self, robot: Robot, request: Request) -> bool:
         """Whether the robot asked still stands in the asker's way: on the way's points, or off
-        them but still what the asker stops for (its drive cuts a corner nearer than the points) or
-        waits for (it would touch it)."""
+        them but still what the asker stops for (its drive cuts a corner nearer than the points)."""
         return (
             not self.make_way.off_the_way(request, robot.x, robot.y)
             or self.right_of_way.blocked_by.get(request.asker) == robot.id
-            or self.waits.waits_for.get(request.asker) == robot.id
         )
 
     def _pass_on(self, robot: Robot, request: Request, now: float) -> None:

@@ -15,11 +15,9 @@ A robot loading or unloading is never asked (it is done within seconds, then it 
 Because the ranks are a total order, two robots never ask each other, and the highest-ranked robot
 kept back always gets its way cleared when there is room anywhere nearby.
 
-The robot kept back asks the robot it waits for (:mod:`.waiting`: the one it stops for or would
-touch), else the first robot standing on its way ahead. A robot asked steps off the asker's way
-ahead (``horizon`` metres of its trajectory) to the nearest free point at least a robot's width
-from it (a robot off the way's points that the asker still stops for or waits for - its drive cuts
-a corner nearer than them, or the two meet head on - steps further: :mod:`.executor`), and waits
+A robot asked steps off the asker's way ahead (``horizon`` metres of its trajectory) to the nearest
+free point at least a robot's width from it (a robot off the way's points that the asker still
+stops for - its drive cuts a corner nearer than them - steps further: :mod:`.executor`), and waits
 there until the asker has gone past (it is no longer kept back and is ``passed`` metres away) or
 stopped driving; then it goes on with what it was doing (a driving robot plans its way back onto
 its trajectory).

@@ -223,22 +223,6 @@ def test_a_robot_off_the_ways_points_that_the_asker_still_stops_for_is_still_in_
     assert ex._in_the_way(r2, request)
     ex.right_of_way.blocked_by["r0"] = "r1"
     assert not ex._in_the_way(r2, request)
-    ex.waits.on("r0", "r2")  # r0 waits for r2 (it would touch it): still in its way
-    assert ex._in_the_way(r2, request)
-
-
-def test_a_robot_kept_back_asks_the_robot_it_waits_for_before_one_further_along_its_way():
-    # Head on: r0 waits for r2, which stands just off r0's way (solid bodies stop r0, not the right
-    # of way: it won their cycle); r3 stands on the way further on. Asking only r3 left r0 and r2
-    # waiting on each other until one gave up (twelve robots, no-feedback, trial 0).
-    e = crowd_engine({"r2": (2.0, 5.56), "r3": (3.5, 5.0)})
-    ex, r0 = e.executor, e.robots["r0"]
-    e.apply_command(command("r0", 1, "approach", ["d_storage"], [(r0.x, r0.y), (8.0, r0.y)]))
-    start = e.time
-    ex.avoidance.mark_kept_back(r0, start)
-    ex.waits.on("r0", "r2")
-    ex._kept_back(r0, r0.follower, start + ex.make_way.ask_after, 0.05)
-    assert {asked: r.asker for asked, r in ex.make_way.requests.items()} == {"r2": "r0"}
 
 
 def test_a_boxed_in_robot_the_asker_still_stops_for_passes_the_request_on(monkeypatch):

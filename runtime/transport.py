@@ -24,6 +24,12 @@ commands with trajectories, camera frames, overlays) were lost. A ``--fast`` rep
 mission lost 4-34 of them in each of 3 runs with it on, none in 7 runs with it off; and a sweep trial
 hung in lockstep when a planner's plan, its repeats and its reply to a query for it never arrived,
 while its small messages did (one trial in 216).
+
+A blocked send waits up to 60 s before Zenoh closes the link (``BLOCK_WAIT_BEFORE_CLOSE_US``; Zenoh's
+own default is 5 s, rmw_zenoh's session default 60 s). ARROCH's publishers block rather than drop, so
+a router whose queue to a slow subscriber stays full for 5 s closed that subscriber's session, and
+everything sent until the client reconnected was lost: beside the whole test suite and a sweep, a
+``--fast`` replay into ``arroch record`` stopped being recorded at 44,569 of 58,793 messages.
 """
 
 from __future__ import annotations
@@ -160,6 +166,9 @@ def load_config_file(path: str | Path) -> zenoh.Config:
         raise ValueError(f"zenoh config file {path}: {exc}") from None
 
 
+BLOCK_WAIT_BEFORE_CLOSE_US = 60_000_000  # see the module's docstring
+
+
 def build_config(opts: ZenohOptions) -> zenoh.Config:
     """A zenoh.Config from the options; a config file is loaded as it is, then options applied."""
     if opts.config_file:
@@ -177,6 +186,9 @@ def build_config(opts: ZenohOptions) -> zenoh.Config:
         config.insert_json5("mode", json.dumps(opts.mode))
         config.insert_json5("scouting/multicast/enabled", json.dumps(opts.multicast))
         config.insert_json5("transport/shared_memory/enabled", json.dumps(opts.shared_memory))
+        config.insert_json5(
+            "transport/link/tx/queue/congestion_control/block/wait_before_close", str(BLOCK_WAIT_BEFORE_CLOSE_US)
+        )
     connect = opts.effective_connect()
     if connect:
         config.insert_json5("connect/endpoints", json.dumps(connect))

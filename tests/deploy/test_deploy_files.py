@@ -24,6 +24,9 @@ from services.supervisor.deployment import acl
 from services.supervisor.deployment.render import RenderError, Request, render
 from tests.procs import ROOT, arroch
 
+# Zenoh closes a link after a blocked send waits this long (µs); its 5 s default lost a busy recorder
+WAIT_BEFORE_CLOSE = "transport/link/tx/queue/congestion_control/block/wait_before_close"
+
 DEPLOY = ROOT / "deploy"
 UNITS = ["router", *DEFAULT_SERVICES, "tablet"]
 ZENOH_IDENTITY = {"tablet": "ar"}  # the page joins Zenoh with the AR client's certificate and rights
@@ -100,6 +103,7 @@ def test_deploy_cli_makes_certs_and_renders_every_role_into_configs_zenoh_accept
         config = zenoh.Config.from_file(str(out / f"{role}.json5"))
         mode = "router" if role == "router" else "client"
         assert config.get_json("mode") == f'"{mode}"'
+        assert config.get_json(WAIT_BEFORE_CLOSE) == "60000000"  # Zenoh's 5 s closed busy subscribers' sessions
         if role != "router":
             assert config.get_json("connect/endpoints") == '["tls/10.0.0.1:7447"]'  # tls/ added to a bare address
             assert config.get_json("transport/link/tls/connect_certificate") == f'"{certs.resolve() / role}.pem"'
@@ -114,6 +118,7 @@ def test_plain_profile_renders_router_peer_and_client():
     assert peer.get_json("mode") == '"peer"' and peer.get_json("listen/endpoints") == '["tcp/0.0.0.0:7448"]'
     client = zenoh.Config.from_json5(render(Request("plain", "ar", connect=["tcp/10.0.0.1:7447"])))
     assert client.get_json("scouting/multicast/enabled") == "false"
+    assert {c.get_json(WAIT_BEFORE_CLOSE) for c in (router, peer, client)} == {"60000000"}
 
 
 @pytest.mark.parametrize(

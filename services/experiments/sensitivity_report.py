@@ -26,6 +26,23 @@ from .sensitivity import (  # noqa: E402
 from .store import JsonlStore  # noqa: E402
 
 
+def strict_json(data: object) -> str:
+    """``data`` as standard JSON: a NaN or infinite number (an index SALib could not compute, a
+    Morris-only output's Sobol columns) is ``null``, since JSON has no NaN and strict readers
+    (JavaScript's, jq) refuse Python's ``NaN``."""
+
+    def finite(value: object) -> object:
+        if isinstance(value, float):
+            return value if math.isfinite(value) else None
+        if isinstance(value, dict):
+            return {key: finite(item) for key, item in value.items()}
+        if isinstance(value, list | tuple):
+            return [finite(item) for item in value]
+        return value
+
+    return json.dumps(finite(data), indent=1, default=str, allow_nan=False)
+
+
 def _f(value: float, digits: int = 1) -> str:
     return "n/a" if value is None or math.isnan(value) else f"{value:+.{digits}f}"
 
@@ -213,7 +230,7 @@ def build_sensitivity_report(folder: Path, seed: int = 0) -> list[Path]:
             for a in analyses:
                 lines += [f"### {_title(a)}", "", *_sobol_table(a), ""]
         written.append(figure)
-    (folder / SUMMARY_FILE).write_text(json.dumps(summary, indent=1, default=str) + "\n", encoding="utf-8")
+    (folder / SUMMARY_FILE).write_text(strict_json(summary) + "\n", encoding="utf-8")
     discussion = folder / "discussion.md"
     lines += [
         "## Discussion",

@@ -23,6 +23,7 @@ from services.experiments.sensitivity import (
     stage_spec,
     what_matters,
 )
+from services.experiments.sensitivity_report import strict_json
 from services.experiments.store import CsvStore
 from services.experiments.trial import TrialOutcome
 
@@ -130,3 +131,13 @@ def test_a_point_without_a_complete_pair_takes_the_mean_and_is_counted(tmp_path:
     assert analyses[("team_completion_time", "no-comm")].missing == 1
     assert analyses[("team_completion_time", "no-feedback")].missing == 0
     assert not math.isnan(analyses[("team_completion_time", "no-comm")].mean)
+
+
+def test_the_analysis_is_written_as_standard_json_with_null_for_what_could_not_be_computed() -> None:
+    text = strict_json({"mu": 1.5, "s1": math.nan, "effects": [{"st": math.inf}, (2.0, -math.inf)], "n": 3})
+
+    def refuse(constant: str) -> None:
+        raise ValueError(f"not standard JSON: {constant}")
+
+    expected = {"mu": 1.5, "s1": None, "effects": [{"st": None}, [2.0, None]], "n": 3}
+    assert json.loads(text, parse_constant=refuse) == expected

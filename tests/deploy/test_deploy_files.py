@@ -24,7 +24,7 @@ from services.supervisor.deployment import acl
 from services.supervisor.deployment.render import RenderError, Request, render
 from tests.procs import ROOT, arroch
 
-# Zenoh closes a link after a blocked send waits this long (µs); its 5 s default lost a busy recorder
+# Zenoh closes a link after a blocked send waits this long (µs); its 5 s default lost a stalled subscriber's messages
 WAIT_BEFORE_CLOSE = "transport/link/tx/queue/congestion_control/block/wait_before_close"
 
 DEPLOY = ROOT / "deploy"

@@ -72,7 +72,7 @@ def test_defaults():
     assert get(config, "connect/endpoints") == [DEFAULT_ROUTER]  # client mode needs somewhere to go
     assert get(config, "scouting/multicast/enabled") is False
     assert get(config, "transport/shared_memory/enabled") is False  # unlike Zenoh's default: it lost payloads
-    # unlike Zenoh's 5 s: a router closed a slow recorder's session, losing what it sent meanwhile
+    # unlike Zenoh's 5 s: a router closed a stalled subscriber's session, losing what it sent meanwhile
     assert get(config, "transport/link/tx/queue/congestion_control/block/wait_before_close") == 60_000_000
     assert get(build_config(options_from(parse(), env={"ARROCH_ZENOH_SHM": "1"})), "transport/shared_memory/enabled")
 

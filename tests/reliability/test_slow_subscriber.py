@@ -1,4 +1,4 @@
-"""A subscriber that stops reading for 8 s (a recorder starved of CPU) loses nothing: the router's
+"""A subscriber that stops reading for 8 s (a recorder starved of CPU, say) loses nothing: the router's
 blocked send to it waits, and does not close its session after Zenoh's default 5 s.
 
 With Zenoh's default the router closed the stalled session and 2,605 of 3,000 messages sent meanwhile

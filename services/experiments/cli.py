@@ -10,9 +10,9 @@ and are recorded in DIR/trials.csv as they end (a crash loses nothing finished);
 continues an interrupted sweep. The same options give the same trials.csv byte for byte, on a quiet
 machine or a loaded one, locally or on a Dask cluster (``--cluster``), as long as the planner's
 wall-clock limits do not bind (they did not up to 6 robots; at 12 a loaded machine reached them).
-Trials are paired: for one
-trial index every method meets the same site and the same human draws. When the sweep is complete
-the report is built (``arroch experiment report DIR`` rebuilds it from the CSV).
+Trials are paired: for one trial index every method meets the same site and the same human draws.
+When the sweep is complete the report is built (``arroch experiment report DIR`` rebuilds it from
+the CSV).
 
 Examples:
   arroch experiment robots --robots 2,3,4,5,6 --objects 3 --trials 30 --seed 0 --out experiments/results/robots

@@ -33,8 +33,10 @@ sweep detour detour --capacities 1,2,3 --door-shares 0.5 --robots 2 --objects 3 
 sweep sensitivity sensitivity
 sweep population population --population experiments/population.toml --persons 12 --trials 2
 # the paper's simulation study (§V-A), and the map with her focus share held fixed. 15 trials per
-# cell (was 30, 30 and 20): the whole of this file is ~1,450 trials, ~4.4 h at the 5.5 trials a
-# minute measured on this 2-core machine; 15 pairs still let the exact signed-rank test reach
+# cell (was 30, 30 and 20): the whole of this file is ~1,450 trials (estimated at ~4.4 h from 5.5
+# trials a minute on a loaded machine; measured on a quiet one: 14-15 min for each of robots12,
+# detour and sensitivity, 5 for population, 28 for laziness, about 35 for robots and 45 for the
+# map: ~2.6 h); 15 pairs still let the exact signed-rank test reach
 # p = 6e-5, below Holm's first level in the largest family (0.05 / 24 comparisons = 0.0021)
 sweep robots robots --robots 2,3,4,5,6 --objects 3 --trials 15
 sweep laziness laziness --p 0.05,0.1,0.2,0.4,0.6,0.8,1.0 --robots 3 --objects 3 --trials 15

@@ -303,6 +303,8 @@ REPLAY = ServiceNode(
         pub(_keys.all(), RECORDED_PAYLOAD, "every recorded message, on its own key, as the bytes that travelled"),
         sub(_keys.overlay(), Overlay, "each replayed frame's overlay, before the next frame", "--hold-camera"),
         sub(_keys.clock(), Clock, "the site clock (a SimClock, fed by the replayed Clock messages)"),
+        query(_keys.drain(), "empty", "behind the last message: its reply says all of them left the process"),
+        serve(_keys.drain(), "empty", "on a second session: answers its own barrier query, through the router"),
     ),
 )
 

@@ -112,6 +112,11 @@ class Keys:
         parts.append(instance if instance == "*" else _chunk(instance, "instance id"))
         return self._k("stats", *parts)
 
+    def drain(self, token: str = "*") -> str:
+        """Where :meth:`runtime.service.Service.drain` sends its barrier query (a second session of
+        the same process answers it), so that what a process published has left it before it exits."""
+        return self._k("drain", token if token == "*" else _chunk(token, "drain token"))
+
     # diagnostics
     def ping_reply(self) -> str:
         """Where ``arroch ping serve`` echoes every pose it hears on ``robot/*/pose``."""

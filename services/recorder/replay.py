@@ -35,7 +35,7 @@ from protocol.codec import encode
 from protocol.messages import CameraFrame, Clock, DoorState, Intent, Message, Overlay, RobotCommand
 from runtime.runner import add_common_arguments, leave_if_close_overran, zenoh_options
 from runtime.service import Service
-from runtime.transport import NoRouter, ZenohOptions, through_local_router
+from runtime.transport import BLOCK_WAIT_BEFORE_CLOSE_US, NoRouter, ZenohOptions, through_local_router
 
 from .reading import Recorded, RecordingError, message_topics, messages, metadata
 from .topics import MESSAGE_PREFIX, key_of
@@ -43,7 +43,9 @@ from .topics import MESSAGE_PREFIX, key_of
 log = logging.getLogger("arroch.replay")
 PROGRESS_EVERY = 5.0  # wall seconds between two progress lines
 LISTENER_POLL = 0.02  # wall s between looks for a subscriber before the first message
-LINGER = 0.5  # wall seconds between the last message and closing the session (a batch may still be on its way)
+# Wall seconds the replay waits at most for its last messages to leave before it closes: as long as
+# Zenoh lets a blocked link wait before closing it (a slow subscriber holds the router's queue that long).
+DRAIN_TIMEOUT = BLOCK_WAIT_BEFORE_CLOSE_US / 1e6
 LOOP_GAP = 2.0  # site seconds between the end of one --loop pass and the start of the next
 
 
@@ -208,7 +210,7 @@ def replay_main(args: argparse.Namespace) -> int:
             log.warning("nothing subscribed to a replayed key in %g s: replaying anyway", args.wait_for_listener)
         time.sleep(args.delay)  # subscribers discover the new publisher first
         code = replayer.replay(_passes(path, args), pacer)
-        time.sleep(LINGER)  # the last messages leave before the session closes
+        replayer.drain(DRAIN_TIMEOUT)  # the last messages leave before the session closes
     except RecordingError as exc:
         log.error("%s", exc)
         code = 2

@@ -38,6 +38,7 @@ EXPECTED = {
     "event": ((), "event"),
     "liveliness": (("planner", "planner-12"), "@liveliness/planner/planner-12"),
     "stats": (("planner", "planner-12"), "stats/planner/planner-12"),
+    "drain": (("replay-12-ab3f",), "drain/replay-12-ab3f"),
     "ping_reply": ((), "ping/reply"),
     "all": ((), "**"),
 }

@@ -49,6 +49,7 @@ HOLD = 12.0  # site s she keeps the door open at least
 TASK_DONE_AT = 5.0  # site s
 BLOCK = zenoh.CongestionControl.BLOCK
 TIMEOUT = 45.0  # wall s for the mission once the sim is up (about 10-15 s here)
+DELIVERY_WALL_S = 2.0  # wall s a participant's message may take to reach the sim on a loaded machine
 
 
 class Person:
@@ -64,7 +65,7 @@ class Person:
         self.door_open = False  # the world's view (door/d_storage/state)
         self.said_open_at: float | None = None  # site time she last opened it (the sensor said true)
         self.reports: list[tuple[float, bool]] = []  # (site time, open) the sensor published
-        self.task_done_sent = False
+        self.task_done_at: float | None = None  # site time (as she last heard it) she said her task was done
         self._stop = threading.Event()
         keys = client.keys
         client.subscribe(keys.clock(), Clock, self._on_clock, inline=True)
@@ -102,8 +103,8 @@ class Person:
         while not self._stop.wait(0.02):
             with self.lock:
                 now, waiting, poses = self.now, dict(self.waiting), dict(self.poses)
-            if not self.task_done_sent and now >= TASK_DONE_AT:
-                self.task_done_sent = True
+            if self.task_done_at is None and now >= TASK_DONE_AT:
+                self.task_done_at = now
                 self.client.publish(
                     self.client.keys.participant_action(),
                     ParticipantAction(participant="P01", trial="rehearsal", act="task_done"),
@@ -200,7 +201,12 @@ def test_a_participant_trial_with_ros2_robots_and_a_real_door(spawn, router, nam
     assert sorted(o for r in m["robots"].values() for o in r["delivered"]) == ["o0", "o1"]
     assert m["closed_door_crossings"] == 0
     assert m["human"]["participant"] is True and m["human"]["doors"] == "sensor"
-    assert m["agent_completion_times"]["human"] == pytest.approx(TASK_DONE_AT, abs=1.0)
+    # Her task ends when she says so (no simulated task draw): at the site time her word arrived. The
+    # site runs at RATE x real time, so its trip through Zenoh costs RATE site s per wall s; beside a
+    # loaded suite it arrived 1.8 site s after she sent it.
+    said_at = person.task_done_at
+    assert said_at is not None and said_at >= TASK_DONE_AT
+    assert said_at <= m["agent_completion_times"]["human"] <= said_at + RATE * DELIVERY_WALL_S
     # Every opening of her door came from its sensor, and counts as hers.
     log = [json.loads(line) for line in events_out.read_text().splitlines()]
     opened = [e for e in log if e["kind"] == "door_opened"]

@@ -47,12 +47,14 @@ lint: setup
 
 # Two pytest-xdist workers, one per core (three made wall-clock bounds of mission tests miss). A
 # test file stays on one worker, so the processes its module fixtures start are started once; files
-# with slow tests go first (tests/conftest.py), so both workers end together.
+# with slow tests go first (tests/conftest.py), so both workers end together. --no-loadscope-reorder
+# (pytest-xdist 3.8) keeps that order: since 3.5 xdist hands out the files with the most tests first,
+# which left the long single-test files (the study, the demo, the ROS 2 missions) to the last minutes.
 TEST_WORKERS ?= 2
 
 test: lint
 	@.ci/system-packages
-	$(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile
+	$(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder
 
 # '.[test]' holds '.[peers]': benchmarks/peers.py exits 2 without unified-planning's engines.
 bench: $(STAMP_TEST)

@@ -8,8 +8,8 @@ Each trial runs the real planner, restrictor and sim (its human model) as separa
 Zenoh, in lockstep mode, on a site generated from the trial's seed. Trials run ``--jobs`` at a time
 and are recorded in DIR/trials.csv as they end (a crash loses nothing finished); ``--resume``
 continues an interrupted sweep. The same options give the same trials.csv byte for byte, on a quiet
-machine or a loaded one, locally or on a Dask cluster (``--cluster``), as long as the planner's
-wall-clock limits do not bind (they did not up to 6 robots; at 12 a loaded machine reached them).
+machine or a loaded one, locally or on a Dask cluster (``--cluster``); at 12 robots a mission once
+came out differently beside another sweep (cause open: experiments/README.md, Reproducing).
 Trials are paired: for one trial index every method meets the same site and the same human draws.
 When the sweep is complete the report is built (``arroch experiment report DIR`` rebuilds it from
 the CSV).

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 
 import pytest
 import zenoh
@@ -20,6 +21,23 @@ pytestmark = [pytest.mark.integration]
 
 MESSAGES, PAYLOAD = 3000, b"x" * 4000  # 12 MB: far more than the router's queue to the subscriber holds
 STALL = 8.0  # wall s the subscriber's first callback keeps Zenoh's thread: longer than Zenoh's 5 s default
+
+
+def send_burst(put: Callable[[bytes], None]) -> float:
+    """Once the subscription has reached the router, put MESSAGES payloads as fast as ``put`` lets
+    them go; returns the seconds that took (how long the sends were held back)."""
+    time.sleep(1.0)
+    started = time.monotonic()
+    for _ in range(MESSAGES):
+        put(PAYLOAD)
+    return time.monotonic() - started
+
+
+def wait_for_all(received: Callable[[], int], seconds: float) -> None:
+    """Until ``received()`` counts MESSAGES, or ``seconds`` have passed."""
+    deadline = time.monotonic() + seconds
+    while received() < MESSAGES and time.monotonic() < deadline:
+        time.sleep(0.2)
 
 
 def test_a_subscriber_that_stalls_8_s_gets_every_message_a_blocking_publisher_sent(router: str):
@@ -37,14 +55,8 @@ def test_a_subscriber_that_stalls_8_s_gets_every_message_a_blocking_publisher_se
     try:
         subscriber.declare_subscriber("slow/sub", on_sample)
         put = publisher.declare_publisher("slow/sub", **publisher_options()).put
-        time.sleep(1.0)  # the subscription reaches the router
-        started = time.monotonic()
-        for _ in range(MESSAGES):
-            put(PAYLOAD)
-        blocked = time.monotonic() - started
-        deadline = time.monotonic() + 60
-        while received < MESSAGES and time.monotonic() < deadline:
-            time.sleep(0.2)
+        blocked = send_burst(put)
+        wait_for_all(lambda: received, 60)
     finally:
         subscriber.close()
         publisher.close()
@@ -68,16 +80,11 @@ def test_a_service_that_drains_before_it_closes_loses_nothing_to_a_slow_reader(r
     try:
         subscriber.declare_subscriber("slow/drain", on_sample)
         sender.open()
-        put = sender.advertise("slow/drain").put
-        time.sleep(1.0)  # the subscription reaches the router
-        for _ in range(MESSAGES):
-            put(PAYLOAD)
+        send_burst(sender.advertise("slow/drain").put)
         behind = MESSAGES - received  # what was still on its way when the last put returned
         drained = sender.drain(30.0)
         sender.close()
-        deadline = time.monotonic() + 30
-        while received < MESSAGES and time.monotonic() < deadline:
-            time.sleep(0.2)
+        wait_for_all(lambda: received, 30)
     finally:
         subscriber.close()
         sender.close()

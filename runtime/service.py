@@ -231,11 +231,7 @@ class Service:
                 pass
         self._declared.clear()
         self._publishers.clear()
-        # session.close() can block on a dead link; never let it hold the process hostage.
-        closer = threading.Thread(target=session.close, name="zenoh-close", daemon=True)
-        closer.start()
-        closer.join(CLOSE_TIMEOUT)
-        if closer.is_alive():
+        if not close_within(session, CLOSE_TIMEOUT):
             self.close_timed_out = True
             self.log.warning("zenoh session did not close within %.1f s; exiting anyway", CLOSE_TIMEOUT)
         self.log.info("%s %s stopped", self.name, self.instance)
@@ -272,7 +268,7 @@ class Service:
                     time.sleep(0.05)
             queryable.undeclare()
         finally:
-            helper.close()
+            close_within(helper, CLOSE_TIMEOUT)
         if not answered:
             self.log.warning("what was published may not all have left within %.1f s", timeout)
         return answered
@@ -718,6 +714,15 @@ class Service:
         except Exception:
             self.count("handler_errors")
             self.log.exception("answering a stats query failed")
+
+
+def close_within(session: zenoh.Session, timeout: float) -> bool:
+    """Close ``session``, waiting at most ``timeout`` s; False when it had not closed by then.
+    session.close() can block on a dead link: it never holds the process hostage."""
+    closer = threading.Thread(target=session.close, name="zenoh-close", daemon=True)
+    closer.start()
+    closer.join(timeout)
+    return not closer.is_alive()
 
 
 def publisher_options(*, express: bool = EXPRESS) -> dict[str, Any]:

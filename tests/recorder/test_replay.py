@@ -4,6 +4,7 @@ comes late, and one recorded again, by a recorder starved of CPU, is the same fi
 
 from __future__ import annotations
 
+import os
 import queue
 import re
 import signal
@@ -106,12 +107,12 @@ def starve(proc: Proc, done: threading.Event) -> None:
     """Let ``proc`` run 50 ms in every 200 ms until ``done`` is set, then let it run."""
     try:
         while not done.is_set():
-            proc.signal(signal.SIGSTOP)
+            os.killpg(proc.popen.pid, signal.SIGSTOP)
             time.sleep(0.15)
-            proc.signal(signal.SIGCONT)
+            os.killpg(proc.popen.pid, signal.SIGCONT)
             time.sleep(0.05)
     finally:
-        proc.signal(signal.SIGCONT)
+        os.killpg(proc.popen.pid, signal.SIGCONT)
 
 
 def test_a_fast_replay_recorded_again_gives_back_every_message_byte_for_byte(

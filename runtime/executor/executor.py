@@ -17,8 +17,8 @@ the next crossing's door is not passable, the robot may go no further than ``rad
 stop_margin`` short of the closed leaf's line; held there it is ``waiting_at_door``. A hard guard
 backs this up: a step that would bring the robot's disc within ``guard_margin`` of a shut door's
 gap, closer than it was, is refused (the robot still turns where it stands). Walls likewise: a
-step that takes a disc more than ``wall_tolerance`` into a wall, deeper than it was, is refused
-(the pursuit's corner cut beside a doorway, heading back onto a trajectory from off it), and the
+step that takes a disc more than ``wall_tolerance`` (a touch) into a wall, deeper than it was, is
+refused (the pursuit's corner cut beside a doorway, heading back onto a trajectory from off it), and the
 robot plans its way back on the grid (:meth:`Avoidance.rejoin`). A drive refused so for
 ``guard_patience`` in a row (a door it does not go through, a wall it has no way round) fails.
 Robots never touch (:mod:`.avoidance`): a robot kept back by others that drives around nothing and
@@ -52,7 +52,8 @@ from .interfaces import Doors, Objects
 from .make_way import MakeWay, Request, along
 from .right_of_way import RightOfWay
 from .waiting import Waits
-from .walls import WallDepth
+from .wall_slide import WallSlide
+from .walls import TOUCH, WallDepth
 
 QUEUE_DISTANCE = 1.5  # m from the end of its approach within which a robot kept back queues there
 BOX_SLACK = 1e-9  # m: the door guard's quick box test errs on the side of the exact one
@@ -82,7 +83,9 @@ class RobotConfig:
     reach: float = REACH  # m from the robot's centre within which it can pick up an object
     robot_margin: float = 0.05  # m a driving robot keeps between its disc and another robot's
     guard_patience: float = 30.0  # s a drive may be refused by the shut-doorway or wall guard before it fails
-    wall_tolerance: float = 0.05  # m a disc may reach into a wall (the pursuit's corner cut at a jamb)
+    # m a disc may reach into a wall: touching it, no more. (0.05 until the robots sweep found two
+    # discs 10-11 mm into a door's jamb, cutting the corner back onto the way in after making way.)
+    wall_tolerance: float = TOUCH
     # m added to ``robot_margin`` and to the closest two discs may come (``Avoidance.contact_gap``) for
     # robots that see one another late (a real robot's driver sets it from its control period,
     # services/robot/driver.py: the others' poses are predicted, and this is what the prediction may
@@ -207,6 +210,7 @@ class RobotExecutor:
             inflate=config.radius + wall_clearance(FREE_RESOLUTION),
         )
         self._walls = WallDepth(site, config.radius)
+        self.wall_slide = WallSlide(self._walls, config.wall_tolerance, config.controller)
         self.avoidance = Avoidance(site, self._free, config.radius, config.controller)
         self.avoidance.contact_gap += config.allowance
         self.doorways = Doorways(site)
@@ -390,13 +394,20 @@ class RobotExecutor:
                 return self._fail(robot, f"kept back by robots for {limit:g} s (waiting: {chain})")
             step = self._kept_back(robot, follower, now, dt)
             robot.yield_time += dt
+            self.wall_slide.forget(robot.id)  # driven around robots now, on the grid's free cells
         elif step.v > 0.0:
             self.avoidance.moving_on(robot.id)
+        if step.held:
+            self.wall_slide.forget(robot.id)
+        elif not self.avoidance.driving_around(robot.id):
+            # the pursuit cutting a jamb's corner: the robot goes along the wall instead, while it may
+            step = self.wall_slide.step(robot, step, dt)
         moved = (step.x, step.y) != (robot.x, robot.y)
         refused_by = "a shut door's gap" if moved and self._into_shut_doorway(robot, step) else ""
         if moved and not refused_by and self._into_wall(robot, step):
             refused_by = "a wall"
-            # the way on lies past a wall's end (the pursuit cuts the corner): plan it on the grid
+            # the way on lies past a wall's end, with no way along the wall: plan it on the grid
+            self.wall_slide.forget(robot.id)
             self.avoidance.rejoin(robot, follower.path, follower.s, now, self.fleet, off_track=True)
         if refused_by or (moved and not self.avoidance.clear(robot, step.x, step.y, self.fleet)):
             # whatever moved it (driving around, a hold, a corner): its disc never enters a shut doorway
@@ -579,8 +590,7 @@ class RobotExecutor:
     def _into_wall(self, robot: Robot, step: Step) -> bool:
         """Whether ``step`` takes the robot's disc more than ``wall_tolerance`` into a wall, deeper
         than it was (sliding along a wall, or getting out of one, is allowed)."""
-        after = self._walls.depth(step.x, step.y)
-        return after > self.config.wall_tolerance and after > self._walls.depth(robot.x, robot.y) + 1e-9
+        return self.wall_slide.into_wall(robot.x, robot.y, step.x, step.y)
 
     def _breaks_guard(self, robot: Robot, step: Step, door_id: str, margin: float | None = None) -> bool:
         a, b = self.doors[door_id].gap

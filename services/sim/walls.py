@@ -10,12 +10,9 @@ from dataclasses import dataclass
 
 from protocol.site.model import Site
 from runtime.executor import Robot
-from runtime.executor.walls import WallDepth
+from runtime.executor.walls import TOUCH, WallDepth
 
 from .overlaps import place
-
-# A disc reaching less than this (m) into a wall touches it, no more (float rounding at the limit).
-TOLERANCE = 1e-3
 
 
 @dataclass(frozen=True)
@@ -29,9 +26,9 @@ class WallContact:
 class WallWatch:
     """A safety figure checked every tick, like :mod:`.overlaps`: robots whose disc starts to reach
     into a wall (edge-triggered: one contact however many ticks it lasts), and the deepest any disc
-    reached. The executor's wall guard (:mod:`runtime.executor.executor`) bounds the depth at
-    ``RobotConfig.wall_tolerance``; this counts how often it is used, independently of how the
-    executor keeps to it."""
+    reached. The executor's wall guard (:mod:`runtime.executor.executor`) refuses any step deeper
+    than ``RobotConfig.wall_tolerance`` (by default :data:`TOUCH`, what counts here as a contact);
+    this counts contacts independently of how the executor keeps to it."""
 
     def __init__(self, site: Site, radius: float) -> None:
         self.site = site
@@ -46,7 +43,7 @@ class WallWatch:
         started: list[WallContact] = []
         for robot in sorted(robots, key=lambda r: r.id):
             depth = self.walls.depth(robot.x, robot.y)
-            if depth <= TOLERANCE:
+            if depth <= TOUCH:
                 continue
             self.deepest = max(self.deepest, depth)
             touching.add(robot.id)

@@ -7,9 +7,9 @@ unavailability (``detour``), a sensitivity analysis of the human model and the d
 Each trial runs the real planner, restrictor and sim (its human model) as separate processes over
 Zenoh, in lockstep mode, on a site generated from the trial's seed. Trials run ``--jobs`` at a time
 and are recorded in DIR/trials.csv as they end (a crash loses nothing finished); ``--resume``
-continues an interrupted sweep. The same options give the same trials.csv byte for byte, on a quiet
-machine or a loaded one, locally or on a Dask cluster (``--cluster``); at 12 robots a mission once
-came out differently beside another sweep (cause open: experiments/README.md, Reproducing).
+continues an interrupted sweep. The same options give the same trials.csv byte for byte on a quiet
+machine, locally or on a Dask cluster (``--cluster``); under load about 1 row in 100 has come out
+differently (cause open: experiments/README.md, Reproducing).
 Trials are paired: for one trial index every method meets the same site and the same human draws.
 When the sweep is complete the report is built (``arroch experiment report DIR`` rebuilds it from
 the CSV).

@@ -24,8 +24,11 @@ from foxglove.websocket import ServerListener
 
 log = logging.getLogger("arroch.record")
 # Messages queued per viewer before the oldest are dropped (the SDK's default is 1024): a lockstep
-# mission publishes in bursts of hundreds, which a viewer on a slow link should still get whole.
-VIEWER_BACKLOG = 16384
+# mission publishes in bursts of hundreds, which a viewer on a slow link should still get whole, and
+# a replay at 100x sends a mission's ~58,000 messages in about 7 s. 16,384 lost 6 of 114 plans to a
+# viewer beside the loaded test suite; most messages are poses and transforms of ~200 bytes, so the
+# bound is tens of MB at most.
+VIEWER_BACKLOG = 65536
 
 
 class FoxgloveSink:

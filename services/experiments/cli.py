@@ -327,6 +327,13 @@ def add_run_arguments(parser: argparse.ArgumentParser, kind: str) -> None:
         "instead of --jobs local workers; needs pip install 'arroch[cluster]'",
     )
     run.add_argument(
+        "--cluster-timeout",
+        type=float,
+        default=20.0,
+        metavar="S",
+        help="wall s to reach the --cluster scheduler before the sweep is refused (default 20)",
+    )
+    run.add_argument(
         "--router",
         choices=("worker", "shared", "trial"),
         default="worker",
@@ -486,6 +493,7 @@ def run_options(args: argparse.Namespace, out: Path) -> Any:
         ),
         keep_events=args.keep_events,
         cluster=args.cluster,
+        cluster_timeout=args.cluster_timeout,
     )
 
 

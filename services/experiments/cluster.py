@@ -51,13 +51,13 @@ def run_on_worker(spec_json: dict[str, Any], key: tuple[Any, ...], config: Trial
 class ClusterPool:
     """Submits trials to the scheduler at ``address`` and yields their outcomes as they finish."""
 
-    def __init__(self, address: str) -> None:
+    def __init__(self, address: str, *, timeout: float = 20.0) -> None:
         try:
             from distributed import Client
         except ImportError:
             raise ClusterError("--cluster needs the 'distributed' package: pip install 'arroch[cluster]'") from None
         try:
-            self.client = Client(address, timeout="20s", set_as_default=False)
+            self.client = Client(address, timeout=f"{timeout:g}s", set_as_default=False)
         except (OSError, TimeoutError) as exc:
             raise ClusterError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
         self.address = address

@@ -72,6 +72,7 @@ class RunOptions:
     report: bool = True
     keep_events: bool = False  # DIR/events/<trial>.jsonl
     cluster: str | None = None  # a Dask scheduler's address: run the trials there instead of locally
+    cluster_timeout: float = 20.0  # wall s to reach it
 
     def check(self) -> None:
         if self.jobs < 1:
@@ -80,6 +81,8 @@ class RunOptions:
             raise SweepError(f"--router must be one of {', '.join(ROUTER_MODES)} (got {self.router!r})")
         if not self.trial.timeout > 0:
             raise SweepError(f"--trial-timeout must be > 0 (got {self.trial.timeout})")
+        if not self.cluster_timeout > 0:
+            raise SweepError(f"--cluster-timeout must be > 0 (got {self.cluster_timeout})")
 
 
 class Sweep:
@@ -298,7 +301,7 @@ class Sweep:
 
         assert self.options.cluster is not None
         try:
-            pool = ClusterPool(self.options.cluster)
+            pool = ClusterPool(self.options.cluster, timeout=self.options.cluster_timeout)
         except ClusterError as exc:
             raise SweepError(str(exc)) from None
         try:

@@ -263,7 +263,8 @@ def test_a_dask_cluster_gives_the_same_csv(reference: Path, tmp_path: Path, huma
 
 
 def test_an_unreachable_cluster_is_refused_by_name(tmp_path: Path, human: Path) -> None:
-    proc = start(["robots", *TINY, "--out", str(tmp_path / "nowhere"), "--cluster", "tcp://127.0.0.1:9"], human)
+    nowhere = ["--cluster", "tcp://127.0.0.1:9", "--cluster-timeout", "2"]  # (2 s, not the default 20: a test)
+    proc = start(["robots", *TINY, "--out", str(tmp_path / "nowhere"), *nowhere], human)
     code, output = finish(proc, 120)
     assert code == 2 and "cannot reach the Dask scheduler at tcp://127.0.0.1:9" in output
 

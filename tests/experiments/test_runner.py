@@ -11,6 +11,7 @@ import contextlib
 import csv
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -18,10 +19,13 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from services.experiments.routers import RUN_ENV
+from services.experiments.runner import RunOptions, SweepError
+from services.experiments.trial import TrialConfig
 from tests.procs import ROOT
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
@@ -303,3 +307,19 @@ def test_resume_refuses_another_sweep(reference: Path, tmp_path: Path, human: Pa
     proc = start(["robots", *TINY, "--methods", "arroch,no-comm", "--out", str(reference)], human)
     code, output = finish(proc, 30)
     assert code == 2 and "already holds a sweep: add --resume" in output
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"jobs": 0}, "--jobs must be >= 1"),
+        ({"router": "everywhere"}, "--router must be one of"),
+        ({"trial": TrialConfig(timeout=0.0)}, "--trial-timeout must be > 0"),
+        ({"cluster_timeout": float("nan")}, "--cluster-timeout must be > 0"),
+        ({"cluster_timeout": -1.0}, "--cluster-timeout must be > 0"),
+    ],
+)
+def test_bad_run_options_are_refused_by_name(tmp_path: Path, changes: dict[str, Any], message: str) -> None:
+    with pytest.raises(SweepError, match=re.escape(message)):
+        RunOptions(out=tmp_path, **changes).check()
+    RunOptions(out=tmp_path).check()  # the defaults are fine

@@ -1,14 +1,22 @@
 """One recorded mission shared by all the recorder tests: the demo's lockstep mission (planner,
 restrictor, sim with the tablet camera, AR client, the tablet page) under ``arroch up``, which
 records it to ``run.mcap`` and, with ``--record-profile ros2 --ros-distro humble``, to a Humble bag
-beside it. The tablet page prints its URL with the run's access token, which must reach no file."""
+beside it. The tablet page prints its URL with the run's access token, which must reach no file.
+
+Under pytest-xdist the recorder's test files may land on both workers: the first to need the mission
+records it in the session's shared temporary folder and the other reads the same run (a file lock
+between them), so the suite runs it once. The tests only read the run's folder."""
 
 from __future__ import annotations
 
+import fcntl
+import json
 import re
+import tempfile
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import pytest
@@ -39,8 +47,29 @@ class Mission:
 
 
 @pytest.fixture(scope="session")  # one mission for every recorder test (only they use it)
-def mission(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Mission]:
-    base = tmp_path_factory.mktemp("mission")
+def mission(tmp_path_factory: pytest.TempPathFactory, worker_id: str) -> Mission:
+    if worker_id == "master":  # not distributed: this session's own folder
+        return _record(tmp_path_factory.mktemp("mission"))
+    # pytest-xdist: every worker's temporary folder is in the session's one
+    shared = tmp_path_factory.getbasetemp().parent / "recorder-mission"
+    with _locked(shared.parent / "recorder-mission.lock"):
+        done = shared / "mission.json"
+        if not done.exists():
+            shared.mkdir(exist_ok=True)
+            mission = _record(Path(tempfile.mkdtemp(dir=shared)))  # a failed attempt's folder stays apart
+            done.write_text(json.dumps({**asdict(mission), "run": str(mission.run)}))
+        found = json.loads(done.read_text())
+    return Mission(**{**found, "run": Path(found["run"])})
+
+
+@contextmanager
+def _locked(path: Path) -> Iterator[None]:
+    with open(path, "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        yield
+
+
+def _record(base: Path) -> Mission:
     namespace = f"rec{free_tcp_port()}"
     started = time.time()
     proc = Proc(
@@ -80,4 +109,4 @@ def mission(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Mission]:
         proc.stop()
     (run,) = [p for p in (base / "runs").iterdir() if p.is_dir()]
     (token,) = {m.group(1) for line in proc.output.splitlines() if (m := _TOKEN.match(line))}
-    yield Mission(run, proc.output, token, started, time.time())
+    return Mission(run, proc.output, token, started, time.time())

@@ -310,10 +310,10 @@ def _run(spawn: Callable[..., Proc], folder: Path) -> tuple[set[str], list[str]]
             (folder / run.node.name).mkdir()
             services.append(spawn(run.argv(namespace, admin.endpoint, folder / run.node.name), name=run.node.name))
             services[-1].wait_for("up on namespace", timeout=60)
-        instances = _instances(admin.session, namespace)
         heard = Heard()
         deadline = time.monotonic() + OBSERVE_TIMEOUT
-        while not _all_published(heard, instances) and time.monotonic() < deadline:
+        # (instances asked again each time: a service's token may reach the router after its log line)
+        while not _all_published(heard, _instances(admin.session, namespace)) and time.monotonic() < deadline:
             time.sleep(0.5)
             _drain(listener, prefix, heard)
         # Then the admin space; again a second later while something declared is not there yet.

@@ -9,7 +9,7 @@ card (ARROCH), walking to her door when the view shows a robot waiting there and
 control until it opens, the questionnaire. Then ``arroch study report`` builds the report from what
 the trials left in the study folder, and the recordings hold her acts.
 
-The world runs 20x faster than real time on a generated two-robot building, so a trial takes seconds.
+The world runs 10x faster than real time on a generated two-robot building, so a trial takes seconds.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from tests.tablet.study_driver import StudyPageDriver
 pytestmark = [pytest.mark.integration, pytest.mark.slow(seconds=135)]  # wall s on two quiet cores
 
 DOOR = "d_storage"  # her door, into the storage room where every object goes
-RATE = 20.0
+RATE = 10.0
 URL = re.compile(r"^\s+(https://\S+[?&]token=\S+)\s*$")
 #: What each scripted participant answers, by condition: ARROCH's robots are easier to keep track of (Q2).
 ANSWERS = {

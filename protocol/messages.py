@@ -247,9 +247,8 @@ class RobotTraffic(Message):
     """What one robot's executor tells the others about the traffic rules it follows
     (runtime/executor/traffic.py): the robot it stops for (right of way), the robot it waits for
     (queues and cycles), the opening its gothrough crosses and whether it asks for it or holds it,
-    the requests to make way it made, and the asker it cannot make way for. Robot processes
-    (``arroch robot``) publish it on every change and once a second, and merge the others' into
-    their executor's tables; "" means none."""
+    and the requests to make way it made. Robot processes (``arroch robot``) publish it on every
+    change and once a second, and merge the others' into their executor's tables; "" means none."""
 
     robot: Ident
     blocked_by: Ident = ""
@@ -259,7 +258,6 @@ class RobotTraffic(Message):
     asked_at: Float(-TIME, TIME) = 0.0  # site time it asked
     holds: List(DoorwayHold, 8) = []
     asks: List(MakeWayAsk, 32) = []
-    boxed_for: Ident = ""  # the asker whose request to make way the robot cannot answer (boxed in)
 
 
 class TeamPlan(Message):

@@ -493,13 +493,11 @@ class RobotExecutor:
         to make way when that does not get the robot anywhere (:mod:`.make_way`), else stop."""
         stop = Step(robot.x, robot.y, robot.theta, 0.0, 0.0)
         if self.avoidance.kept_back(robot.id, now) >= self.make_way.ask_after:
-            way = self.make_way.way_ahead(follower.path, follower.s, (robot.x, robot.y))
+            way = self.make_way.way_ahead(follower.path, follower.s)
             other = self.make_way.in_the_way(robot, way, self.fleet)
             if other is not None and self.make_way.ask(robot, other, way, now):
-                if not self.make_way.requests[other.id].boxed:
-                    self.avoidance.stop_driving_around(robot.id)  # it waits for the other to make way
-                    return stop
-                # the robot asked is boxed in: standing would not free the way; try around it meanwhile
+                self.avoidance.stop_driving_around(robot.id)  # it waits for the other to make way
+                return stop
         around = self.avoidance.around(
             robot, robot.theta, follower.path, follower.s, now, dt, self.fleet, self._allows(robot)
         )
@@ -533,9 +531,7 @@ class RobotExecutor:
                 self._allows(robot),
             )
         if step is None and not self.avoidance.driving_around(robot.id):
-            request.boxed = not self._pass_on(robot, request, now)
-        elif step is not None:
-            request.boxed = False
+            self._pass_on(robot, request, now)
         if step is None or self._into_shut_doorway(robot, step):
             robot.v = robot.omega = 0.0
             return True
@@ -550,10 +546,9 @@ class RobotExecutor:
             or self.right_of_way.blocked_by.get(request.asker) == robot.id
         )
 
-    def _pass_on(self, robot: Robot, request: Request, now: float) -> bool:
+    def _pass_on(self, robot: Robot, request: Request, now: float) -> None:
         """Boxed in while making way: ask the robot standing where it could go to make way in turn
-        (at most once per ``avoidance.retry``: it is a search of the room). Whether the way may still
-        be freed: the robot is off it, or a robot it asked makes way for it."""
+        (at most once per ``avoidance.retry``: it is a search of the room)."""
         if self._in_the_way(robot, request) and (
             now - self._passed_on.get(robot.id, -math.inf) >= self.avoidance.retry
         ):
@@ -567,9 +562,6 @@ class RobotExecutor:
             if found is not None:
                 other, escape = found
                 self.make_way.pass_on(robot, other, along(escape, self.make_way.step), now)
-        return not self._in_the_way(robot, request) or any(
-            not asked.boxed for asked in self.make_way.made_by(robot.id).values()
-        )
 
     def _allows(self, robot: Robot):
         """What a step off the trajectory must not do: enter a shut doorway, a wall or a lane another robot holds."""

@@ -15,9 +15,7 @@ A robot loading or unloading is never asked (it is done within seconds, then it 
 Because the ranks are a total order, two robots never ask each other, and the highest-ranked robot
 kept back always gets its way cleared when there is room anywhere nearby.
 
-The asker's way is the straight line from where it stands to its trajectory (a robot back from driving
-around, or from making way, stands off it and drives that line first) and then ``horizon`` metres of
-its trajectory. A robot asked steps off the asker's way to the nearest
+A robot asked steps off the asker's way ahead (``horizon`` metres of its trajectory) to the nearest
 free point at least a robot's width from it (a robot off the way's points that the asker still
 stops for - its drive cuts a corner nearer than them - steps further: :mod:`.executor`), and waits
 there until the asker has gone past (it is no longer kept back and is ``passed`` metres away) or
@@ -28,10 +26,7 @@ A robot asked that is boxed in (in a crowd at a door every free point is behind 
 passes the request on: it asks the robot standing where it could go to make way in turn - off the
 first asker's way and off its own way out - whatever that robot's rank, as long as it is not
 loading or unloading, holding a doorway, or already in the chain (``chain`` robots at most). The
-robots of a chain answer for the first asker: when its request ends, theirs do. A robot asked that
-can neither step off nor pass the request on says so (``Request.boxed``), and its asker, instead of
-standing until the request lapses, goes on trying to drive around it (twelve robots, arroch trial 0:
-a robot asked a boxed-in one on its way back to its trajectory and stood 120 s, until it gave up).
+robots of a chain answer for the first asker: when its request ends, theirs do.
 
 Between robot processes (``arroch robot``) each asker's requests travel in its ``RobotTraffic``
 (:mod:`.traffic`): the robot asked answers a request it heard of (:meth:`MakeWay.adopt`), and the
@@ -63,7 +58,6 @@ class Request:
     since: float
     renewed: float
     root: str = ""  # passed on: the robot whose way the chain clears ("": the asker)
-    boxed: bool = False  # the robot asked cannot get off the way, nor find a robot to pass it on to
 
     @property
     def first_asker(self) -> str:
@@ -94,19 +88,11 @@ class MakeWay:
         level = HOLDER_RANK if self.holds_doorway(robot.id) else PHASE_RANK.get(robot.phase, -1)
         return (-level, natural(robot.id))
 
-    def way_ahead(
-        self, path: Path, progress: float, start: tuple[float, float] | None = None
-    ) -> list[tuple[float, float]]:
-        """The points of ``path`` from ``progress`` to ``horizon`` metres on, led by the straight
-        line from ``start`` (where the robot stands) to the path's point at ``progress``: a robot off
-        its trajectory (back from driving around, or from making way) drives that line first, and a
-        robot standing on it is in the way, though off the trajectory's points."""
+    def way_ahead(self, path: Path, progress: float) -> list[tuple[float, float]]:
+        """The points of ``path`` from ``progress`` to ``horizon`` metres on."""
         end = min(progress + self.horizon, path.length)
         count = max(int((end - progress) / self.step), 0)
-        points = [path.point_at(progress + i * self.step) for i in range(count + 1)]
-        if start is None or math.dist(start, points[0]) <= self.step:
-            return points
-        return [*along([start, points[0]], self.step)[:-1], *points]
+        return [path.point_at(progress + i * self.step) for i in range(count + 1)]
 
     def in_the_way(self, robot: Body, way: list[tuple[float, float]], fleet: Mapping[str, Body]) -> Body | None:
         """The first robot along ``way`` that stands on it (nearer than ``keep`` to one of its points)."""
@@ -198,18 +184,6 @@ class MakeWay:
                 if other is None or self._ended(request, other, now, fleet):
                     del self.requests[asked]
 
-    def boxed_for(self, robot: str) -> str:
-        """The asker whose request ``robot`` cannot answer (it is boxed in), "" when none."""
-        request = self.requests.get(robot)
-        return request.asker if request is not None and request.boxed else ""
-
-    def adopt_boxed(self, robot: str, asker: str) -> None:
-        """``robot`` (another process's) says it cannot answer ``asker``'s request ("": it can, or
-        it has none): mark the request as this process holds it."""
-        request = self.requests.get(robot)
-        if request is not None:
-            request.boxed = bool(asker) and request.asker == asker
-
     def made_by(self, asker: str) -> dict[str, Request]:
         """The requests ``asker`` made, by the robot asked."""
         return {asked: r for asked, r in self.requests.items() if r.asker == asker}
@@ -226,8 +200,6 @@ class MakeWay:
             fresh = held is not None and held.asker != asker and now - held.renewed <= self.linger
             if fresh and (held.since, held.asker) <= (request.since, request.asker):
                 continue
-            if held is not None and held.asker == request.asker:
-                request.boxed = held.boxed  # the asked robot's answer, not the asker's to say
             self.requests[asked] = request
 
     def off_the_way(self, request: Request, x: float, y: float) -> bool:

@@ -45,7 +45,6 @@ def traffic_of(executor: RobotExecutor, robot: str) -> RobotTraffic:
             MakeWayAsk(asked=asked, way=[list(p) for p in r.way], since=r.since, renewed=r.renewed, root=r.root)
             for asked, r in sorted(executor.make_way.made_by(robot).items())
         ],
-        boxed_for=executor.make_way.boxed_for(robot),
     )
 
 
@@ -70,7 +69,6 @@ def adopt(executor: RobotExecutor, traffic: RobotTraffic, now: float) -> None:
     )
     made = {a.asked: Request(rid, [(p[0], p[1]) for p in a.way], a.since, a.renewed, a.root) for a in traffic.asks}
     executor.make_way.adopt(rid, made, now)
-    executor.make_way.adopt_boxed(rid, traffic.boxed_for)
 
 
 def forget(executor: RobotExecutor, robot: str) -> None:
@@ -85,7 +83,7 @@ def traffic_problem(traffic: RobotTraffic, site: Site) -> str:
     """Why ``traffic`` cannot be taken (a robot or opening the site does not have), naming the
     field; "" when it can."""
     robots = site.robots
-    for name in ("robot", "blocked_by", "waits_for", "boxed_for"):
+    for name in ("robot", "blocked_by", "waits_for"):
         rid = getattr(traffic, name)
         if rid and rid not in robots:
             return f"{name}: no robot {rid!r} on site {site.name}"

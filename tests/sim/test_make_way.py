@@ -58,22 +58,6 @@ def test_the_way_ahead_and_who_stands_on_it():
     assert way.off_the_way(request, 2.5, 0.6) and not way.off_the_way(request, 2.5, 0.5)
 
 
-def test_the_way_of_a_robot_off_its_trajectory_starts_where_it_stands():
-    # twelve robots, no-feedback, trial 0: r0, back from driving around, stood 0.9 m short of its
-    # trajectory's point at its progress; r6, facing it between the two, was off the trajectory's
-    # points, so it was never asked to make way, and the two waited on each other until r6 gave up
-    way = rules()
-    path = Path([[0.0, 0.0, 0.0, 0.0], [10.0, 5.0, 0.0, 0.0]])
-    asker, facing = Bot("r0", 0.1, 0.0), Bot("r6", 0.5, -0.3)
-    fleet = {"r0": asker, "r6": facing}
-    assert way.in_the_way(asker, way.way_ahead(path, 1.0), fleet) is None  # the trajectory's points alone
-    ahead = way.way_ahead(path, 1.0, (asker.x, asker.y))
-    assert ahead[0] == (0.1, 0.0) and (1.0, 0.0) in ahead
-    assert all(math.dist(a, b) <= way.step + 1e-9 for a, b in pairwise(ahead))
-    assert way.in_the_way(asker, ahead, fleet) is facing
-    assert way.way_ahead(path, 1.0, (1.05, 0.0))[0] == (1.0, 0.0)  # on its trajectory: its points only
-
-
 def test_a_request_ends_when_the_asker_has_gone_past_or_stops_driving():
     way = rules()
     asker, asked = Bot("r0", 0.0, 0.0), Bot("r1", 0.6, 0.0, "done")
@@ -255,55 +239,3 @@ def test_a_boxed_in_robot_the_asker_still_stops_for_passes_the_request_on(monkey
     ex.right_of_way.blocked_by["r0"] = "r2"
     ex._pass_on(e.robots["r2"], request, e.time)
     assert searched == ["r2"]  # r0 stops for it: it looks for who boxes it in
-
-
-def test_a_robot_asked_that_cannot_make_way_says_so_and_the_asker_drives_around_it(monkeypatch):
-    # Twelve robots, arroch trial 0: r3 asked r5, boxed in on its way, to make way, and stood until
-    # it gave up 120 s later, though there was a way around r5 by then. Here r0 drives east; r2 on
-    # its way cannot move (its way-around search is stood in for: none) and there is nobody to pass
-    # the request on to. While r4 stands north of r2 there is no way around either; once r4 has
-    # gone, r0 drives around r2 instead of waiting for a robot that said it cannot make way.
-    e = crowd_engine({"r2": (4.0, 5.0), "r3": (4.0, 4.4), "r4": (4.0, 5.6), "r5": (4.6, 5.0)})
-    ex = e.executor
-    ex.make_way.chain = 0
-    avoidance = ex.avoidance
-    real = avoidance.out_of_the_way
-
-    def stuck_r2(robot, *args):
-        return None if robot.id == "r2" else real(robot, *args)
-
-    monkeypatch.setattr(avoidance, "out_of_the_way", stuck_r2)
-    r0, r2, r4 = e.robots["r0"], e.robots["r2"], e.robots["r4"]
-    e.apply_command(command("r0", 1, "approach", ["d_storage"], [(1.0, 5.0), (8.0, 5.0)]))
-    while not (ex.make_way.requests.get("r2") and ex.make_way.requests["r2"].boxed):
-        assert e.time < 10.0 and r0.phase == "drive"
-        e.step()
-    assert ex.make_way.boxed_for("r2") == "r0"
-    r4.x, r4.y = 10.0, 5.5  # r4 leaves: there is room north of r2 now
-    events: list = []
-    while r0.phase == "drive":
-        assert e.time < 60.0
-        e.step()
-        events += e.take_events()
-    assert r0.phase == "done" and math.dist((r0.x, r0.y), (8.0, 5.0)) < 0.1  # around r2, not through it
-    assert (r2.x, r2.y) == (4.0, 5.0) and e.summary()["robot_overlaps"] == 0
-    assert not [ev for ev in events if ev.kind == "action_failed"]
-
-
-def test_a_robot_that_cannot_make_way_tells_the_askers_process():
-    # Between robot processes the asker's request lives in both; the robot asked says it is boxed
-    # in through its RobotTraffic, and the asker's process marks its own copy.
-    from runtime.executor.traffic import adopt, traffic_of
-
-    asked_side, asker_side = crowd_engine({"r2": (4.0, 5.0)}).executor, crowd_engine({"r2": (4.0, 5.0)}).executor
-    way = [(3.0 + 0.1 * i, 5.0) for i in range(21)]
-    for ex in (asked_side, asker_side):
-        ex.make_way.requests["r2"] = Request("r0", list(way), 1.0, 1.0)
-    asked_side.make_way.requests["r2"].boxed = True
-    adopt(asker_side, traffic_of(asked_side, "r2"), 1.5)
-    assert asker_side.make_way.requests["r2"].boxed
-    adopt(asked_side, traffic_of(asker_side, "r0"), 1.6)  # the asker renews its request: still boxed
-    assert asked_side.make_way.requests["r2"].boxed
-    asked_side.make_way.requests["r2"].boxed = False  # it found a way off
-    adopt(asker_side, traffic_of(asked_side, "r2"), 2.0)
-    assert not asker_side.make_way.requests["r2"].boxed

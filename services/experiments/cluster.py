@@ -51,7 +51,7 @@ def run_on_worker(spec_json: dict[str, Any], key: tuple[Any, ...], config: Trial
 class ClusterPool:
     """Submits trials to the scheduler at ``address`` and yields their outcomes as they finish."""
 
-    def __init__(self, address: str, *, timeout: float = 20.0) -> None:
+    def __init__(self, address: str, *, timeout: float) -> None:
         try:
             from distributed import Client
         except ImportError:

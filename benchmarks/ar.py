@@ -32,10 +32,13 @@ On the same frames in the same run:
   the true corners, pose error with the same localiser) — the measurement behind the default.
 
 ``--close`` (:func:`close_main`): the close views at 1280x720 through the whole pipeline with the
-small-tag reading as built (skipped on frames with enough well-seen tags) and read on every frame, the
-two alternated ``--rounds`` times in one process so both see the same machine load: median fps over
-rounds (CPU time and wall clock), their ratio, small-tag passes and skips per frame, detection rate
-and pose errors of each; the floor (>= 65 fps on one core) on the first.
+detector as built (the quick first pass after a close view; small-tag reading skipped on frames with
+enough well-seen tags), without the first pass, reading small tags on every frame and never reading
+them, each on the live path (gray decode, nothing drawn: the tablet's page) and the annotated one
+(recording), alternated ``--rounds`` times in one process so all see the same machine load: median
+fps over rounds (CPU time and wall clock), their ratios, small-tag passes and skips and first-pass
+frames per frame, detection rate and pose errors of each; the floor (>= 65 fps on one core) on the
+live path as built.
 
 ``--hard`` (:func:`hard_main`): the frames a tablet sees across a large room instead — a 20 x 14 m
 hall with one 0.16 m tag every 2.4 m of wall, cameras 2-7 m from the tags they look at, up to 65 deg
@@ -242,18 +245,22 @@ def small_tag_counts(detector: TagDetector) -> dict:
     return {"passes": detector.small_tag_passes, "skipped": detector.small_tag_skips}
 
 
-def timed_pipeline(site, pipeline: Pipeline, frames: list[Frame]) -> dict:  # noqa: ANN001
-    """``pipeline`` over ``frames`` as independent views: per-stage times, CPU and wall fps, accuracy."""
+def timed_pipeline(site, pipeline: Pipeline, frames: list[Frame], *, annotate: bool = True) -> dict:  # noqa: ANN001
+    """``pipeline`` over ``frames`` as independent views: per-stage times, CPU and wall fps, accuracy.
+    ``annotate``: draw the overlay into the frame too (what a recording needs); without it the frame
+    is decoded straight to gray and nothing is drawn, as the tablet's page and the AR client run it
+    when they record nothing."""
     stages = {k: [] for k in ("decode", "detect", "pose", "project", "draw", "total")}
     cpu: list[float] = []
     accuracy = Accuracy(site)
     # Warm-up (caches, first-call allocations) on the first frame, not measured.
-    pipeline.process(frames[0].jpeg, frames[0].K, -100.0)
+    pipeline.process(frames[0].jpeg, frames[0].K, -100.0, annotate=annotate)
     pipeline.detector.small_tag_passes = pipeline.detector.small_tag_skips = 0
+    pipeline.detector.frames_searched = pipeline.detector.first_pass_frames = 0
     for i, f in enumerate(frames):
         pipeline.reset()  # independent views: no tracking or filtering across them
         c0 = time.process_time()
-        overlay, _ = pipeline.process(f.jpeg, f.K, 10.0 * i)
+        overlay, _ = pipeline.process(f.jpeg, f.K, 10.0 * i, annotate=annotate)
         cpu.append(time.process_time() - c0)
         t = pipeline.timings
         for k in ("decode", "detect", "pose", "project", "draw"):
@@ -268,6 +275,7 @@ def timed_pipeline(site, pipeline: Pipeline, frames: list[Frame]) -> dict:  # no
         "cpu_ms_per_frame": stats(cpu, 1000.0),
         "fps_cpu": float(1.0 / np.mean(cpu)),
         "small_tag_reading": small_tag_counts(pipeline.detector),
+        "first_pass_settled_share": pipeline.detector.first_pass_frames / max(pipeline.detector.frames_searched, 1),
         **accuracy.summary(),
     }
 
@@ -682,10 +690,13 @@ def render_frames(site: Site, views: list[View], size: tuple[int, int]) -> list[
 
 
 def close_main(args: argparse.Namespace) -> int:
-    """The close views (the default set at 1280x720) with small-tag reading as built (skipped on frames with
-    enough well-seen tags), read on every frame (as before the skip) and never read (the pipeline before
-    small-tag reading), alternated round by round in one process so all see the same machine load; fps
-    from CPU time per frame, accuracy on the same frames."""
+    """The close views (the default set at 1280x720) through the whole pipeline, alternated round by round
+    in one process so all see the same machine load: the detector as built (the quick first pass after a
+    close view, small-tag reading skipped on frames with enough well-seen tags), without the first pass,
+    reading small tags on every frame, and never reading them (the pipeline before small-tag reading);
+    each on the live path (decoded to gray, nothing drawn: the tablet's page and the AR client when
+    they record nothing) and the annotated one (the overlay drawn into the frame: recording). fps from
+    CPU time per frame, accuracy on the same frames."""
     load_at_start = list(os.getloadavg())
     site = load_site(args.site)
     views = sample_views(site, args.frames, seed=args.seed)
@@ -694,17 +705,22 @@ def close_main(args: argparse.Namespace) -> int:
     frames = render_frames(site, views, (w, h))
     known = [lm.tag for lm in site.landmarks]
     policies = {
-        "skip_when_well_seen": TagDetector("opencv", known_ids=known),
-        "read_every_frame": TagDetector("opencv", known_ids=known, skip_small_at=None),
-        # The pipeline before small-tag reading came in: what the skip is meant to win back.
-        "never_read": TagDetector("opencv", known_ids=known, small_tags=False),
+        "as_built": {},
+        "no_first_pass": {"first_pass": False},
+        "read_every_frame": {"skip_small_at": None, "first_pass": False},
+        # The pipeline before small-tag reading came in.
+        "never_read": {"small_tags": False, "first_pass": False},
     }
-    runs: dict[str, list[dict]] = {name: [] for name in policies}
+    paths = {"live": False, "annotated": True}
+    runs: dict[tuple[str, str], list[dict]] = {(name, path): [] for name in policies for path in paths}
     for r in range(args.rounds):
-        for name, detector in policies.items():
-            log(f"close views: round {r + 1}/{args.rounds}, small tags {name}")
-            pipeline = Pipeline(site, world_for(site), detector=detector, panel=FeedbackPanel(library_for_site(site)))
-            runs[name].append(timed_pipeline(site, pipeline, frames))
+        for name, options in policies.items():
+            for path, annotate in paths.items():
+                log(f"close views: round {r + 1}/{args.rounds}, {name}, {path}")
+                detector = TagDetector("opencv", known_ids=known, **options)
+                panel = FeedbackPanel(library_for_site(site))
+                pipeline = Pipeline(site, world_for(site), detector=detector, panel=panel)
+                runs[name, path].append(timed_pipeline(site, pipeline, frames, annotate=annotate))
     result: dict = {
         "benchmark": "ar --close",
         "command": " ".join(["benchmarks/ar.py", *sys.argv[1:]]),
@@ -717,30 +733,37 @@ def close_main(args: argparse.Namespace) -> int:
         "threads": 1,
         "load_average_at_start": load_at_start,
         "tags_in_view": stats([len(f.in_view) for f in frames]),
-        "policies": {},
+        "policies": {name: {} for name in policies},
     }
-    for name, rounds in runs.items():
+    for (name, path), rounds in runs.items():
         last = rounds[-1]  # the pipeline is deterministic: accuracy is the same in every round
         last.pop("_per_frame")
-        result["policies"][name] = {
+        result["policies"][name][path] = {
             # Median over rounds of each round's fps: one disturbed round does not decide the figure.
             "fps_cpu": float(np.median([x["fps_cpu"] for x in rounds])),
             "fps_wall": float(np.median([x["fps"] for x in rounds])),
             "fps_cpu_per_round": [x["fps_cpu"] for x in rounds],
             "fps_wall_per_round": [x["fps"] for x in rounds],
             "small_tag_reading_per_frame": {k: v / len(frames) for k, v in last["small_tag_reading"].items()},
+            "first_pass_settled_share": last["first_pass_settled_share"],
             **{k: last[k] for k in ("stage_ms", "detection_rate", "localisation_rate")},
             **{k: last[k] for k in ("position_error_m", "rotation_error_deg", "position_error_fraction_of_distance")},
         }
-    skip, every = result["policies"]["skip_when_well_seen"], result["policies"]["read_every_frame"]
-    result["fps_cpu_ratio_skip_over_every_frame"] = skip["fps_cpu"] / every["fps_cpu"]
-    result["fps_cpu_ratio_skip_over_never_read"] = skip["fps_cpu"] / result["policies"]["never_read"]["fps_cpu"]
+    fps = {name: {path: v["fps_cpu"] for path, v in by_path.items()} for name, by_path in result["policies"].items()}
+    result["fps_cpu_ratios"] = {
+        f"as_built_over_{other}_{path}": fps["as_built"][path] / fps[other][path]
+        for other in ("no_first_pass", "read_every_frame", "never_read")
+        for path in paths
+    }
+    built = result["policies"]["as_built"]
     result["floors"] = {
+        # The live path is what a person holding the tablet waits for; the annotated one beside it.
         "close_views_fps_one_core": {
-            "value": skip["fps_cpu"],
-            "wall_clock_value": skip["fps_wall"],
+            "value": built["live"]["fps_cpu"],
+            "wall_clock_value": built["live"]["fps_wall"],
+            "annotated_value": built["annotated"]["fps_cpu"],
             "limit": CLOSE_VIEWS_MIN_FPS,
-            "ok": skip["fps_cpu"] >= CLOSE_VIEWS_MIN_FPS,
+            "ok": built["live"]["fps_cpu"] >= CLOSE_VIEWS_MIN_FPS,
         },
     }
     result["load_average_at_end"] = list(os.getloadavg())

@@ -204,7 +204,8 @@ class Pipeline:
         return self.last_filtered.pose
 
     def reset(self) -> None:
-        """Forget tracking and filtering state (the next frame is unrelated to the last)."""
+        """Forget tracking and filtering state (the next frame is unrelated to the last). The detector's
+        ``close_view`` stays: it only decides which of its passes runs first, each reading true tags."""
         self.localizer.reset()
         if self.pose_filter is not None:
             self.pose_filter.reset()

@@ -22,6 +22,7 @@ original position: a refinement must never make a detection worse.
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 
 import cv2
@@ -65,7 +66,9 @@ def refine_corners(
 
 def _module_px(quad: np.ndarray) -> float:
     """A tag's module size in pixels: its mean side over the black square's 8 modules."""
-    return float(np.linalg.norm(np.roll(quad, -1, axis=0) - quad, axis=1).mean()) / 8.0
+    (x0, y0), (x1, y1), (x2, y2), (x3, y3) = quad.tolist()  # plain floats: numpy's per-call cost dominates
+    sides = math.hypot(x1 - x0, y1 - y0) + math.hypot(x2 - x1, y2 - y1) + math.hypot(x3 - x2, y3 - y2)
+    return (sides + math.hypot(x0 - x3, y0 - y3)) / 32.0
 
 
 class Lens:

@@ -8,9 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from services.ar_client.detect import SKIP_SMALL_AT_TAGS, WELL_SEEN_PX, TagDetection, TagDetector
+from services.ar_client.detect import SKIP_SMALL_AT_TAGS, WELL_SEEN_PX, TagDetection, TagDetector, tag_side_px
 from services.ar_client.pipeline import Pipeline
-from services.ar_client.refine import _principal_directions
+from services.ar_client.refine import _module_px, _principal_directions
+from services.ar_client.smalltags import quad_signed_area
 from services.ar_client.synth import render
 from tests.ar.helpers import CLUSTER_CENTRE, HD, VGA, site, view_of
 from tests.ar.test_smalltags import far_views
@@ -101,3 +102,68 @@ def test_principal_direction_matches_the_leading_eigenvector() -> None:
     direction = _principal_directions(centred)
     _, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred))
     assert np.allclose(np.abs(np.einsum("ni,ni->n", direction, vectors[..., :, 1])), 1.0, atol=1e-9)
+
+
+def test_after_a_close_view_the_quick_first_pass_settles_the_next_one() -> None:
+    """The first frame gets the full pass; a close view after a close view is settled by the first pass
+    (big tags only), which reads the same tags at the same corners as the full pass."""
+    hall = site("hall")
+    frame = render(hall, view_of(CLUSTER_CENTRE, 0.0, 1.6, 10.0), HD, seed=1)
+    quick, full = hall_detector(), hall_detector(first_pass=False)
+    first = quick.detect(frame.image)
+    assert (quick.frames_searched, quick.first_pass_frames, quick.close_view) == (1, 0, True)
+    second = quick.detect(frame.image)
+    assert (quick.frames_searched, quick.first_pass_frames) == (2, 1)
+    reference = full.detect(frame.image)
+    assert full.first_pass_frames == 0 and full.close_view is True  # it knows, but never tries
+    assert [d.tag_id for d in second] == [d.tag_id for d in first] == [d.tag_id for d in reference]
+    for a, b in zip(second, reference, strict=True):
+        assert np.abs(a.corners - b.corners).max() < 0.25, a.tag_id
+
+
+def test_a_far_view_never_tries_the_first_pass_and_the_next_close_one_gets_the_full_pass(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    hall = site("hall")
+    detector = hall_detector()
+    tried: list[int] = []
+    real = detector._first_pass
+
+    def counting(gray, lens):  # noqa: ANN001, ANN202
+        tried.append(gray.shape[1])
+        return real(gray, lens)
+
+    monkeypatch.setattr(detector, "_first_pass", counting)
+    close = render(hall, view_of(CLUSTER_CENTRE, 0.0, 1.6, 10.0), HD, seed=1)
+    detector.detect(close.image)
+    seed, pose = far_views()[0]
+    far = render(hall, pose, VGA, seed=seed, noise_sigma=2.5, blur_sigma=0.8)
+    detector.detect(far.image)  # tried after the close view: it does not settle a far one
+    assert tried == [VGA.width] and detector.first_pass_frames == 0 and detector.close_view is False
+    detector.detect(far.image)
+    detector.detect(close.image)
+    assert tried == [VGA.width]  # neither after the far view
+    assert detector.close_view is True and detector.first_pass_frames == 0
+    detector.detect(close.image)
+    assert tried == [VGA.width, HD.width] and detector.first_pass_frames == 1
+
+
+def test_no_first_pass_without_the_skip() -> None:
+    """Reading small tags on every frame means the full pass on every frame."""
+    hall = site("hall")
+    frame = render(hall, view_of(CLUSTER_CENTRE, 0.0, 1.6, 10.0), HD, seed=1)
+    detector = hall_detector(skip_small_at=None)
+    for _ in range(2):
+        detector.detect(frame.image)
+    assert detector.first_pass_frames == 0 and detector.small_tag_passes == 2
+
+
+def test_tag_size_in_plain_floats_matches_numpy() -> None:
+    rng = np.random.default_rng(3)
+    for quad in rng.uniform(-50.0, 900.0, (200, 4, 2)):
+        x, y = quad[:, 0], quad[:, 1]
+        area = 0.5 * (np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+        assert quad_signed_area(quad) == pytest.approx(area, rel=1e-12, abs=1e-9)
+        assert tag_side_px(quad) == pytest.approx(np.sqrt(abs(area)), rel=1e-12, abs=1e-9)
+        sides = np.linalg.norm(np.roll(quad, -1, axis=0) - quad, axis=1)
+        assert _module_px(quad) == pytest.approx(sides.mean() / 8.0, rel=1e-12)

@@ -217,6 +217,16 @@ class Avoidance:
             detour = self._detours[robot.id] = Detour(points)
         return self._follow(robot, theta, detour, now, dt, fleet, allowed)
 
+    def way_off(
+        self, robot: Body, fleet: Mapping[str, Body], outside: Callable[[float, float], bool]
+    ) -> list[tuple[float, float]]:
+        """A way to the nearest free point where ``outside`` holds (as :meth:`out_of_the_way` drives),
+        or [] when there is none."""
+        room = self.site.room_at(robot.x, robot.y)
+        if room is None:
+            return []
+        return self._free_point(robot, room, outside, [(o.x, o.y) for o in fleet.values() if o.id != robot.id])
+
     def boxed_in_by(
         self,
         robot: Body,

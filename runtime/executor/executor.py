@@ -220,6 +220,7 @@ class RobotExecutor:
         self.waits = Waits()
         self._made_way: set[str] = set()  # robots answering a request to make way
         self._passed_on: dict[str, float] = {}  # robot -> when it last looked for a robot boxing it in
+        self._offered: dict[str, int] = {}  # robot -> the action in which it made way unasked (once per action)
 
     # ------------------------------------------------------------------ commands
 
@@ -388,6 +389,8 @@ class RobotExecutor:
                 # nobody making way: it never pushes through; the planner plans again from here
                 robot.v = robot.omega = 0.0
                 self.avoidance.moving_on(robot.id)
+                if stuck and self._make_way_unasked(robot, now):
+                    return []
                 limit = self.avoidance.give_up if stuck else self.waits.patience
                 chain = " -> ".join(self.waits.chain(robot.id))
                 self.waits.gave_up(robot.id)
@@ -536,6 +539,25 @@ class RobotExecutor:
             robot.v = robot.omega = 0.0
             return True
         robot.x, robot.y, robot.theta, robot.v, robot.omega = step.x, step.y, step.theta, step.v, step.omega
+        return True
+
+    def _make_way_unasked(self, robot: Robot, now: float) -> bool:
+        """The last resort of a robot in a waiting cycle, before its action fails: make way for the
+        robot of the cycle that waits on it (:meth:`.make_way.MakeWay.offer`), once per action, when
+        there is a free point off that robot's way. A failed action alone breaks no cycle: the replan
+        leaves both robots where they stand, and they wait on each other again."""
+        chain = self.waits.chain(robot.id)
+        if len(chain) < 3 or chain[-1] != robot.id or self._offered.get(robot.id) == robot.last_action_id:
+            return False  # not in a cycle itself (queued behind one), or it made way once in this action
+        waiting = self.fleet.get(chain[-2])
+        if waiting is None:
+            return False
+        request = self.make_way.offer(robot, waiting, now)
+        if not self.avoidance.way_off(robot, self.fleet, lambda x, y: self.make_way.off_the_way(request, x, y)):
+            self.make_way.forget(robot.id)
+            return False
+        self._offered[robot.id] = robot.last_action_id
+        self.waits.gave_up(robot.id)  # its wait is over; the robots it waited on get ``give_up`` afresh
         return True
 
     def _in_the_way(self, robot: Robot, request: Request) -> bool:

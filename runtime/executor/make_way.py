@@ -22,6 +22,12 @@ there until the asker has gone past (it is no longer kept back and is ``passed``
 stopped driving; then it goes on with what it was doing (a driving robot plans its way back onto
 its trajectory).
 
+A robot wedged in a waiting cycle (each robot of it waits on the next: :mod:`.waiting`) that has
+waited ``Avoidance.give_up`` seconds makes way for the robot that waits on it, unasked
+(:meth:`MakeWay.offer`), if it has somewhere to go: its action would otherwise fail and the replan
+would leave both robots where they are, to meet again. It does so once per action; the next time
+its action fails, as before.
+
 A robot asked that is boxed in (in a crowd at a door every free point is behind another robot)
 passes the request on: it asks the robot standing where it could go to make way in turn - off the
 first asker's way and off its own way out - whatever that robot's rank, as long as it is not
@@ -58,6 +64,7 @@ class Request:
     since: float
     renewed: float
     root: str = ""  # passed on: the robot whose way the chain clears ("": the asker)
+    offered: bool = False  # made by the robot asked itself, unasked (:meth:`MakeWay.offer`)
 
     @property
     def first_asker(self) -> str:
@@ -115,6 +122,18 @@ class MakeWay:
             return False  # it is making way for another robot first
         self.requests[asked.id] = Request(asker.id, way, now, now)
         return True
+
+    def offer(self, robot: Body, to: Body, now: float) -> Request:
+        """``robot``, wedged in a waiting cycle with ``to`` (``to`` waits on it), makes way for it
+        unasked: off the straight way from ``to`` through where ``robot`` stands and ``horizon``
+        metres on - where ``to`` was going when ``robot``'s disc stopped it. Ranks do not matter:
+        the request comes from the robot that moves."""
+        dx, dy = robot.x - to.x, robot.y - to.y
+        length = math.hypot(dx, dy) or 1.0
+        end = (robot.x + dx / length * self.horizon, robot.y + dy / length * self.horizon)
+        request = Request(to.id, along([(to.x, to.y), end], self.step), now, now, offered=True)
+        self.requests[robot.id] = request
+        return request
 
     def pass_on(self, robot: Body, other: Body, escape: list[tuple[float, float]], now: float) -> bool:
         """``robot``, making way but boxed in, asks ``other`` to make way in turn: off the way
@@ -193,7 +212,7 @@ class MakeWay:
         robot already asked by someone else keeps that request while it is fresh and older (the
         first robot to ask is answered first, as :meth:`ask` has it)."""
         for asked, request in list(self.requests.items()):
-            if request.asker == asker and asked not in made:
+            if request.asker == asker and asked not in made and not request.offered:
                 del self.requests[asked]
         for asked, request in made.items():
             held = self.requests.get(asked)

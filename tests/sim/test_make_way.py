@@ -239,3 +239,48 @@ def test_a_boxed_in_robot_the_asker_still_stops_for_passes_the_request_on(monkey
     ex.right_of_way.blocked_by["r0"] = "r2"
     ex._pass_on(e.robots["r2"], request, e.time)
     assert searched == ["r2"]  # r0 stops for it: it looks for who boxes it in
+
+
+def head_on(last_resort: bool, monkeypatch) -> tuple[Engine, list]:  # noqa: ANN001
+    """r0 drives east along the corridor's middle and r1 west along the same line; neither asks the
+    other to make way nor drives around it, so they meet and wait on each other: a cycle."""
+    e = crowd_engine({})
+    e.executor.make_way.ask_after = math.inf
+    e.executor.avoidance.detour_after = math.inf
+    if not last_resort:
+        monkeypatch.setattr(e.executor, "_make_way_unasked", lambda robot, now: False)
+    e.apply_command(command("r0", 1, "approach", ["d_storage"], [(1.0, 5.0), (9.0, 5.0)]))
+    e.apply_command(command("r1", 1, "approach", ["d_office"], [(10.0, 5.0), (2.0, 5.0)]))
+    events: list = []
+    while e.time < 120.0 and {r.phase for r in e.robots.values()} & {"drive"}:
+        e.step()
+        events += e.take_events()
+    return e, events
+
+
+def test_a_robot_wedged_in_a_cycle_makes_way_unasked_before_its_action_fails(monkeypatch):
+    e, events = head_on(True, monkeypatch)
+    r0, r1 = e.robots["r0"], e.robots["r1"]
+    assert r0.phase == r1.phase == "done", [(ev.robot, ev.data) for ev in events if ev.kind == "action_failed"]
+    assert math.dist((r0.x, r0.y), (9.0, 5.0)) < 0.1 and math.dist((r1.x, r1.y), (2.0, 5.0)) < 0.1
+    assert [ev for ev in events if ev.kind == "action_failed"] == [] and e.summary()["robot_overlaps"] == 0
+    assert set(e.executor._offered) == {"r0"} or set(e.executor._offered) == {"r1"}  # one of them made way, once
+    # Without it, the first whose give-up clock runs out fails its action where it stands (and here,
+    # with nobody asking, so does the other, behind a parked robot).
+    e, events = head_on(False, monkeypatch)
+    failed = [(ev.robot, ev.data.reason) for ev in events if ev.kind == "action_failed"]
+    assert failed and failed[0][1] == "kept back by robots for 12 s (waiting: r0 -> r1 -> r0)"
+    assert e.summary()["robot_overlaps"] == 0
+
+
+def test_an_offered_request_survives_its_askers_traffic():
+    """Between robot processes the robot that waits on it never sent the request (it was offered):
+    hearing that robot's traffic, which lists no request, must not end it."""
+    rules_ = rules()
+    robots = {"r0": Bot("r0", 4.0, 5.0, "drive"), "r1": Bot("r1", 4.6, 5.0, "drive")}
+    request = rules_.offer(robots["r1"], robots["r0"], 0.0)
+    assert request.asker == "r0" and request.offered
+    assert not rules_.off_the_way(request, 4.6, 5.0) and rules_.off_the_way(request, 4.6, 5.6)
+    assert request.way[0] == (4.0, 5.0) and math.isclose(request.way[-1][0], 4.6 + rules_.horizon)
+    rules_.adopt("r0", {}, 0.5)
+    assert rules_.requests["r1"] is request

@@ -139,6 +139,16 @@ class Doorways:
         del self._asked[robot.id]
         return True
 
+    def hand_back(self, robot: str) -> bool:
+        """``robot`` gives back the openings it holds and has not entered yet, and asks for none;
+        whether it held any. (A robot making way for it may have no way out but through their lanes.)"""
+        mine = [o for o, holder in self.holders.items() if holder == robot and o not in self._entered]
+        for opening_id in mine:
+            del self.holders[opening_id]
+            self._granted_at.pop(opening_id, None)
+        self._asked.pop(robot, None)
+        return bool(mine)
+
     def holds(self, robot: str) -> bool:
         """Whether ``robot`` holds an opening (it is crossing it)."""
         return robot in self.holders.values()

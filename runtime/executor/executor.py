@@ -221,6 +221,8 @@ class RobotExecutor:
         self._made_way: set[str] = set()  # robots answering a request to make way
         self._passed_on: dict[str, float] = {}  # robot -> when it last looked for a robot boxing it in
         self._offered: dict[str, int] = {}  # robot -> the action in which it made way unasked (once per action)
+        # robot -> (action, robot making way for it) for which it handed its doorway back (once per action)
+        self._handed_back: dict[str, tuple[int, str]] = {}
 
     # ------------------------------------------------------------------ commands
 
@@ -324,9 +326,10 @@ class RobotExecutor:
         opening_id = _crossing(robot)
         kept_back_by = self.waits.waits_for.get(robot.id, "")  # last step's (it may still drive around it)
         self.waits.off(robot.id)  # until a robot keeps it back below
-        if opening_id and not self.doorways.may_cross(robot, opening_id, now, self.fleet):
-            robot.v = robot.omega = 0.0  # another robot has the doorway: wait where it is
-            holder = self.doorways.holders.get(opening_id)
+        letting = self._lets_way_be_made(robot)
+        if opening_id and (letting or not self.doorways.may_cross(robot, opening_id, now, self.fleet)):
+            robot.v = robot.omega = 0.0  # another robot has the doorway (or is to get out through it): wait
+            holder = self._handed_back[robot.id][1] if letting else self.doorways.holders.get(opening_id)
             if holder is not None:
                 self.waits.on(robot.id, holder)
             robot.yield_time += dt
@@ -389,7 +392,7 @@ class RobotExecutor:
                 # nobody making way: it never pushes through; the planner plans again from here
                 robot.v = robot.omega = 0.0
                 self.avoidance.moving_on(robot.id)
-                if stuck and self._make_way_unasked(robot, now):
+                if (stuck and self._make_way_unasked(robot, now)) or self._hand_doorway_back(robot, now):
                     return []
                 limit = self.avoidance.give_up if stuck else self.waits.patience
                 chain = " -> ".join(self.waits.chain(robot.id))
@@ -559,6 +562,37 @@ class RobotExecutor:
         self._offered[robot.id] = robot.last_action_id
         self.waits.gave_up(robot.id)  # its wait is over; the robots it waited on get ``give_up`` afresh
         return True
+
+    def _hand_doorway_back(self, robot: Robot, now: float) -> bool:
+        """The last resort of a robot holding a doorway it has not entered, kept back by a robot
+        making way for it, before its action fails: that robot may be boxed in by the doorway's lane
+        (no robot steps into a lane another holds), so it hands the doorway back, asks afresh, and
+        takes the doorway again once the other is off its way (:meth:`_lets_way_be_made`); once
+        per action."""
+        other = self.waits.waits_for.get(robot.id, "")
+        request = self.make_way.requests.get(other)
+        if request is None or request.first_asker != robot.id or other not in self.fleet:
+            return False
+        if self._handed_back.get(robot.id, (None, ""))[0] == robot.last_action_id:
+            return False
+        if not self.doorways.hand_back(robot.id):
+            return False
+        request.since = request.renewed = now  # a fresh request: the other has its full time to make way
+        self._handed_back[robot.id] = (robot.last_action_id, other)
+        self.waits.gave_up(robot.id)  # its wait is over; the robots it waited on get ``give_up`` afresh
+        return True
+
+    def _lets_way_be_made(self, robot: Robot) -> bool:
+        """Whether the robot, having handed its doorway back (:meth:`_hand_doorway_back`), still waits
+        for the robot making way for it to get off its way before it takes the doorway again."""
+        handed = self._handed_back.get(robot.id)
+        if handed is None or handed[0] != robot.last_action_id:
+            return False
+        other = self.fleet.get(handed[1])
+        request = self.make_way.requests.get(handed[1])
+        if other is None or request is None or request.first_asker != robot.id:
+            return False
+        return not self.make_way.off_the_way(request, other.x, other.y)
 
     def _in_the_way(self, robot: Robot, request: Request) -> bool:
         """Whether the robot asked still stands in the asker's way: on the way's points, or off

@@ -314,6 +314,15 @@ def add_run_arguments(parser: argparse.ArgumentParser, kind: str) -> None:
         "--resume", action="store_true", help="continue the sweep in DIR: finished trials are kept, the others run"
     )
     run.add_argument(
+        "--rerun",
+        action="append",
+        default=[],
+        metavar="TRIAL",
+        help="with --resume: run this recorded trial again (its name as in the logs, e.g. "
+        "arroch-n3-o3-p0.5-w600-c0-t02; repeatable), as after a fix that concerns only some trials; "
+        "the report then names both code versions",
+    )
+    run.add_argument(
         "--jobs",
         type=int,
         default=os.cpu_count() or 1,
@@ -494,6 +503,7 @@ def run_options(args: argparse.Namespace, out: Path) -> Any:
         keep_events=args.keep_events,
         cluster=args.cluster,
         cluster_timeout=args.cluster_timeout,
+        rerun=tuple(args.rerun),
     )
 
 

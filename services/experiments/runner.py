@@ -73,6 +73,7 @@ class RunOptions:
     keep_events: bool = False  # DIR/events/<trial>.jsonl
     cluster: str | None = None  # a Dask scheduler's address: run the trials there instead of locally
     cluster_timeout: float = 20.0  # wall s to reach it
+    rerun: tuple[str, ...] = ()  # with resume: recorded trials (by ident) to run again, as if never run
 
     def check(self) -> None:
         if self.jobs < 1:
@@ -83,6 +84,8 @@ class RunOptions:
             raise SweepError(f"--trial-timeout must be > 0 (got {self.trial.timeout})")
         if not self.cluster_timeout > 0:
             raise SweepError(f"--cluster-timeout must be > 0 (got {self.cluster_timeout})")
+        if self.rerun and not self.resume:
+            raise SweepError("--rerun needs --resume (it runs recorded trials of a sweep folder again)")
 
 
 class Sweep:
@@ -133,12 +136,19 @@ class Sweep:
             self.options.trial.events_dir.mkdir(exist_ok=True)
         spec_path.write_text(json.dumps(self.spec.to_json(), indent=2, sort_keys=True) + "\n", encoding="utf-8")
         wanted = set(self.spec.keys())
+        unknown = sorted(set(self.options.rerun) - {key.ident() for key in wanted})
+        if unknown:
+            raise SweepError(f"--rerun: this sweep has no trial {', '.join(unknown)}")
         rows = self.trials.load()
-        kept = [row for row in rows if row["status"] in DONE and key_of(row) in wanted]
+        kept = [
+            row
+            for row in rows
+            if row["status"] in DONE and key_of(row) in wanted and key_of(row).ident() not in self.options.rerun
+        ]
         done = {key_of(row) for row in kept}
         dropped = len(rows) - len(kept)
         if dropped:
-            log.info("resume: %d recorded trial(s) that timed out or failed will run again", dropped)
+            log.info("resume: %d recorded trial(s) that timed out, failed or are to be rerun will run again", dropped)
         # Rewrite even when nothing was dropped: this also removes a line torn by a crash.
         self.trials.rewrite(kept)
         self.timing.rewrite([row for row in self.timing.load() if key_of(row) in done])

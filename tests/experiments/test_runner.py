@@ -309,6 +309,26 @@ def test_resume_refuses_another_sweep(reference: Path, tmp_path: Path, human: Pa
     assert code == 2 and "already holds a sweep: add --resume" in output
 
 
+def test_rerun_runs_the_named_trials_again_and_refuses_unknown_ones(
+    reference: Path, tmp_path: Path, human: Path
+) -> None:
+    out = tmp_path / "rerun"
+    shutil.copytree(reference, out)
+    args = ["robots", *TINY, "--methods", "arroch,no-comm", "--out", str(out), "--trial-timeout", "60", "--resume"]
+    proc = start([*args, "--rerun", "arroch-n2-o1-p0.5-w90-c9-t00"], human)
+    code, output = finish(proc, 30)
+    assert code == 2 and "--rerun: this sweep has no trial arroch-n2-o1-p0.5-w90-c9-t00" in output
+    assert (out / "trials.csv").read_bytes() == (reference / "trials.csv").read_bytes()  # nothing touched
+    proc = start([*args, "--rerun", "no-comm-n2-o1-p0.5-w90-c0-t01"], human)
+    code, output = finish(proc, 200)
+    assert code == 0, output
+    assert "resume: 3 of 4 trials already done" in output
+    assert (out / "trials.csv").read_bytes() == (reference / "trials.csv").read_bytes()  # the same code: the same row
+    timed = [r for r in rows(out, "timing.csv") if r["method"] == "no-comm" and r["trial"] == "1"]
+    before = [r for r in rows(reference, "timing.csv") if r["method"] == "no-comm" and r["trial"] == "1"]
+    assert len(timed) == 1 and timed != before  # run again: a new wall-clock record, once
+
+
 @pytest.mark.parametrize(
     ("changes", "message"),
     [
@@ -317,6 +337,7 @@ def test_resume_refuses_another_sweep(reference: Path, tmp_path: Path, human: Pa
         ({"trial": TrialConfig(timeout=0.0)}, "--trial-timeout must be > 0"),
         ({"cluster_timeout": float("nan")}, "--cluster-timeout must be > 0"),
         ({"cluster_timeout": -1.0}, "--cluster-timeout must be > 0"),
+        ({"rerun": ("arroch-n2-o1-p0.5-w90-c0-t00",)}, "--rerun needs --resume"),
     ],
 )
 def test_bad_run_options_are_refused_by_name(tmp_path: Path, changes: dict[str, Any], message: str) -> None:

@@ -284,3 +284,39 @@ def test_an_offered_request_survives_its_askers_traffic():
     assert request.way[0] == (4.0, 5.0) and math.isclose(request.way[-1][0], 4.6 + rules_.horizon)
     rules_.adopt("r0", {}, 0.5)
     assert rules_.requests["r1"] is request
+
+
+def test_a_doorway_holder_kept_back_by_a_robot_making_way_hands_the_doorway_back_once():
+    """The last resort of a robot holding a doorway it has not entered, kept back by a robot making
+    way for it: it hands the doorway back (the other may have no way out but through its lane),
+    takes it again once the other is off its way, and does so once per action. (Traced: the map
+    sweep, arroch, w300, trial 13: the robot making way stood 0.11 m outside the held lane, its only
+    way out through it, and the holder failed its gothrough after 120 s.)"""
+    e = crowd_engine({"r2": (4.2, 5.4)})
+    ex = e.executor
+    r0, r2 = e.robots["r0"], e.robots["r2"]
+    r0.x, r0.y, r0.theta = 4.9, 5.4, math.pi
+    e.apply_command(command("r0", 1, "gothrough", ["d_office"], [(4.9, 5.4), (3.0, 5.4), (3.0, 7.5)]))
+    e.step()
+    assert ex.doorways.holders.get("d_office") == "r0"  # granted at once, 1.9 m before the opening
+    way = [(4.9 - 0.1 * i, 5.4) for i in range(20)]
+    ex.make_way.requests["r2"] = Request("r0", way, 0.0, 0.0)
+    ex.waits.on("r0", "r2")
+    assert ex._hand_doorway_back(r0, 100.0)
+    assert "d_office" not in ex.doorways.holders and ex.make_way.requests["r2"].since == 100.0
+    assert ex._lets_way_be_made(r0)  # r2 still on its way: r0 does not take the doorway again
+    ex.waits.on("r0", "r2")
+    assert not ex._hand_doorway_back(r0, 101.0)  # once per action
+    r2.y = 4.6  # off r0's way
+    assert not ex._lets_way_be_made(r0)
+    e.step()
+    assert ex.doorways.holders.get("d_office") == "r0"  # taken again
+    # Not without a robot making way for it, nor for a doorway it is already in.
+    e.apply_command(command("r0", 2, "gothrough", ["d_office"], [(r0.x, r0.y), (3.0, 5.4), (3.0, 7.5)], now=e.time))
+    ex.make_way.requests.pop("r2")
+    ex.waits.on("r0", "r2")
+    assert not ex._hand_doorway_back(r0, 102.0)
+    ex.make_way.requests["r2"] = Request("r0", way, 102.0, 102.0)
+    ex.doorways._entered.add("d_office")
+    ex.doorways.holders["d_office"] = "r0"
+    assert not ex._hand_doorway_back(r0, 102.0) and ex.doorways.holders["d_office"] == "r0"

@@ -7,6 +7,13 @@ end by itself, and only for one: a robot behind a robot that waits for a door, l
 is in a queue, which moves on when the robot at its head does; giving up there only sends it back
 to its place in the queue, to give up again 12 s later.
 
+A failed action breaks no wait by itself: the replan leaves the robots where they stand. So before a
+robot's action fails, once per action, the executor tries what moves one of them
+(:mod:`.executor`): a robot in a waiting cycle makes way, unasked, for the robot of the cycle that
+waits on it (:meth:`.make_way.MakeWay.offer`); a robot holding a doorway it has not entered, kept
+back by a robot making way for it, hands the doorway back until that robot is off its way (the
+doorway's lane, which no other robot enters, may be that robot's only way out).
+
 Each step the executor notes which robot a robot waits for, if any (:meth:`Waits.on`): the robot it
 stops for (right of way, solid bodies) or the robot holding the doorway it is to cross. Following
 those notes from a robot kept back gives a chain of robots; the wait cannot end by itself when the

@@ -390,10 +390,11 @@ def _section_trials(results: Results) -> list[str]:
     elif codes:
         lines += [
             "",
-            f"**The trials ran on {len(codes)} versions of the services' code** (the sources changed during the sweep; "
-            "fingerprint: trials): "
+            f"**The trials ran on {len(codes)} versions of the services' code** (the sources changed during the sweep, "
+            "or trials were run again on later code with `--rerun`; fingerprint: trials): "
             + ", ".join(f"`{c}`: {n}" for c, n in codes.items())
-            + ". Trials of different versions are not strictly comparable.",
+            + ". Trials of different versions compare only as far as the change between them leaves them alone "
+            "(the reading should say how far).",
         ]
     failed = [t for t in results.trials if not t.ok]
     if failed:

@@ -216,6 +216,7 @@ class TagDetector:
         # Whether the last whole frame held enough well-seen tags: the next one then tries the first pass.
         self.close_view = False
         self._lock = threading.Lock()  # the pupil detector's decimation is per-call state
+        self._first_params: cv2.aruco.DetectorParameters | None = None  # the quick first pass's (OpenCV only)
         if method == "apriltag":
             self._pupil = apriltag_detector()
         else:
@@ -238,7 +239,6 @@ class TagDetector:
             }[opencv_refine]
             dictionary = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11)
             self._aruco = cv2.aruco.ArucoDetector(dictionary, params)
-            self._first_params = None
             if first_pass and skip_small_at is not None:  # it can only settle a frame the skip applies to
                 self._first_params = cv2.aruco.DetectorParameters()
                 for name in ("minDistanceToBorder", "cornerRefinementMethod"):
@@ -346,7 +346,7 @@ class TagDetector:
         gray = to_gray(image)
         h, w = gray.shape
         self.frames_searched += 1
-        reads = self._first_pass(gray, lens) if self.method == "opencv" and self.close_view else None
+        reads = self._first_pass(gray, lens) if self.close_view else None
         if reads is not None:
             self.first_pass_frames += 1
             self.small_tag_skips += 1  # settled without the full pass, so without small-tag reading
